@@ -1,0 +1,1 @@
+"""Algorithms of the ATO stack in plain Python/numpy; nothing here imports ROS."""

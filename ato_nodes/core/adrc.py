@@ -1,0 +1,210 @@
+"""Active disturbance rejection controllers (ROS-free).
+
+Han's second-order nonlinear ADRC (seed 000, eq. 6-13) and a linear,
+bandwidth-parametrised ADRC (Gao). Both map (target speed, measured speed)
+to a specific traction/braking force u in N/kN, one call per control period.
+
+Discretisation (the papers give continuous-time equations):
+
+* TD: Han's discrete form, v1 += h v2, v2 += h fhan(v1 - r, v2, r0, h0),
+  with h the control period.
+* ESO: linearly-implicit (backward) Euler with step h. Each fal() term is
+  written as g(e) * e with g frozen at the predicted error of the step, and
+  the resulting 3x3 linear system is solved in closed form. Backward Euler
+  maps every stable pole into the unit disc, so the observer is stable for
+  any step, while explicit Euler needs h < ~1/beta1 (0.8 ms for the seed's
+  beta1 = 1200) and would force a control period 60x shorter than the
+  default 50 ms. The observer is fed the command actually applied, i.e.
+  after the saturation of this controller.
+* NLSEF: the law u0 = mu1 fal(e1) + mu2 fal(e2) asks the observer's model
+  (z1' = z2, z2' = u0) for poles near -mu2 (thousands of rad/s), which no
+  sampled loop slower than ~0.3 ms can realise: taken literally it diverges
+  at any practical period (measured: also at 1 ms). The default is its
+  implicit discretisation: u0 is chosen so that the model's next state
+  satisfies the law, with fal gains frozen at the current errors,
+      u0 = (k1 (e1 - h z2) + k2 e2) / (1 + h^2 k1 + h k2),  ki = mu_i fal(ei)/ei,
+  which tends to the literal law as h -> 0 and is stable for any h
+  (`implicit_nlsef = False` gives the literal law).
+* b0 is not given by the paper. With an ideal observer the closed loop does
+  not depend on it; in the sampled loop b0 = xi / h makes the observer's
+  input model match the one-period effect of u on the acceleration, so the
+  seed scenarios use xi / 0.05 s = 0.1766.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+def sign(x: float) -> float:
+    return (x > 0.0) - (x < 0.0)
+
+
+def fal(e: float, alpha: float, delta: float) -> float:
+    """Han's fal(): linear inside |e| <= delta, |e|^alpha outside."""
+    if abs(e) <= delta:
+        return e / delta ** (1.0 - alpha)
+    return sign(e) * abs(e) ** alpha
+
+
+def fal_gain(e: float, alpha: float, delta: float) -> float:
+    """fal(e)/e, the local gain of fal (its limit delta^(alpha-1) at e = 0)."""
+    a = abs(e)
+    if a <= delta:
+        return delta ** (alpha - 1.0)
+    return a ** (alpha - 1.0)
+
+
+def fhan(x1: float, x2: float, r: float, h0: float) -> float:
+    """Han's time-optimal synthesis function (seed 000 eq. 7)."""
+    d = r * h0 * h0
+    a0 = h0 * x2
+    y = x1 + a0
+    a1 = math.sqrt(d * (d + 8.0 * abs(y)))
+    a2 = a0 + sign(y) * (a1 - d) / 2.0
+    sy = (sign(y + d) - sign(y - d)) / 2.0
+    a = (a0 + y - a2) * sy + a2
+    sa = (sign(a + d) - sign(a - d)) / 2.0
+    return -r * (a / d - sign(a)) * sa - r * sign(a)
+
+
+class TrackingDifferentiator:
+    """Han's discrete TD: v1 follows the input, v2 its derivative."""
+
+    def __init__(self, r0: float, h0: float, period: float, v1: float = 0.0, v2: float = 0.0):
+        self.r0, self.h0, self.h = r0, h0, period
+        self.v1, self.v2 = v1, v2
+
+    def update(self, target: float) -> tuple[float, float]:
+        fh = fhan(self.v1 - target, self.v2, self.r0, self.h0)
+        self.v1 += self.h * self.v2
+        self.v2 += self.h * fh
+        return self.v1, self.v2
+
+
+class NonlinearESO:
+    """Third-order nonlinear extended state observer (seed 000 eq. 10).
+
+    z1 -> output y (speed), z2 -> its derivative, z3 -> total disturbance.
+    Integrated by linearly-implicit Euler (see module docstring).
+    """
+
+    def __init__(self, beta1: float, beta2: float, beta3: float, b0: float,
+                 delta: float, period: float, z1: float = 0.0):
+        self.beta1, self.beta2, self.beta3 = beta1, beta2, beta3
+        self.b0, self.delta, self.h = b0, delta, period
+        self.z1, self.z2, self.z3 = z1, 0.0, 0.0
+
+    def update(self, y: float, u: float) -> tuple[float, float, float]:
+        h = self.h
+        z1, z2, z3 = self.z1, self.z2, self.z3
+        predicted = z1 + h * z2 - y
+        k1 = h * self.beta1
+        k2 = h * self.beta2 * fal_gain(predicted, 0.5, self.delta)
+        k3 = h * self.beta3 * fal_gain(predicted, 0.25, self.delta)
+        # Closed-form solution of (I - hA) z+ = z + h c for the error E = z1+ - y.
+        e = (z1 - y + h * z2 + h * h * (z3 + self.b0 * u)) / (1.0 + k1 + h * k2 + h * h * k3)
+        self.z3 = z3 - k3 * e
+        self.z2 = z2 + h * self.z3 - k2 * e + h * self.b0 * u
+        self.z1 = y + e
+        return self.z1, self.z2, self.z3
+
+
+def clamp(x: float, low: float, high: float) -> float:
+    return low if x < low else high if x > high else x
+
+
+@dataclass(frozen=True)
+class HanADRCGains:
+    """Seed 000's initial parameters (section 4); b0 and delta are not in the paper."""
+
+    mu1: float = 6000.0
+    mu2: float = 5500.0
+    alpha1: float = 0.75
+    alpha2: float = 1.5
+    r0: float = 5.0
+    h0: float = 0.001
+    beta1: float = 1200.0
+    beta2: float = 1700.0
+    beta3: float = 4500.0
+    b0: float = 0.1766
+    delta: float = 0.01
+    implicit_nlsef: bool = True
+
+
+@dataclass
+class ControllerOutput:
+    """One control step: the command and the internal states worth recording."""
+
+    u: float
+    z1: float
+    z2: float
+    z3: float
+    v1: float
+    v2: float
+
+
+class HanADRC:
+    """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
+
+    def __init__(self, gains: HanADRCGains, period: float, u_min: float, u_max: float,
+                 initial_target: float = 0.0, initial_speed: float = 0.0):
+        self.gains = gains
+        self.u_min, self.u_max = u_min, u_max
+        self.td = TrackingDifferentiator(gains.r0, gains.h0, period, v1=initial_target)
+        self.eso = NonlinearESO(gains.beta1, gains.beta2, gains.beta3, gains.b0,
+                                gains.delta, period, z1=initial_speed)
+        self.u_applied = 0.0
+
+    def step(self, target: float, measured: float) -> ControllerOutput:
+        g = self.gains
+        z1, z2, z3 = self.eso.update(measured, self.u_applied)
+        v1, v2 = self.td.update(target)
+        e1, e2 = v1 - z1, v2 - z2
+        if g.implicit_nlsef:
+            h = self.td.h
+            k1 = g.mu1 * fal_gain(e1, g.alpha1, g.delta)
+            k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
+            u0 = (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
+        else:
+            u0 = g.mu1 * fal(e1, g.alpha1, g.delta) + g.mu2 * fal(e2, g.alpha2, g.delta)
+        u = clamp((u0 - z3) / g.b0, self.u_min, self.u_max)
+        self.u_applied = u
+        return ControllerOutput(u, z1, z2, z3, v1, v2)
+
+
+@dataclass(frozen=True)
+class LinearADRCGains:
+    """Bandwidth parametrisation: observer bandwidth omega_o, controller omega_c."""
+
+    omega_o: float = 20.0
+    omega_c: float = 2.0
+    b0: float = 0.0098 / 1.11
+
+
+class LinearADRC:
+    """First-order linear ADRC for the speed loop (the plant's true relative degree).
+
+    ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by b0 u),
+    gains 2 omega_o and omega_o^2; law u = (omega_c (r - z1) - z2) / b0.
+    The ESO is integrated by backward Euler in closed form, stable for any step.
+    """
+
+    def __init__(self, gains: LinearADRCGains, period: float, u_min: float, u_max: float,
+                 initial_speed: float = 0.0):
+        self.gains, self.h = gains, period
+        self.u_min, self.u_max = u_min, u_max
+        self.l1, self.l2 = 2.0 * gains.omega_o, gains.omega_o ** 2
+        self.z1, self.z2 = initial_speed, 0.0
+        self.u_applied = 0.0
+
+    def step(self, target: float, measured: float) -> ControllerOutput:
+        g, h = self.gains, self.h
+        e = (self.z1 - measured + h * (self.z2 + g.b0 * self.u_applied)) / (
+            1.0 + h * self.l1 + h * h * self.l2)
+        self.z2 -= h * self.l2 * e
+        self.z1 = measured + e
+        u = clamp((g.omega_c * (target - self.z1) - self.z2) / g.b0, self.u_min, self.u_max)
+        self.u_applied = u
+        return ControllerOutput(u, self.z1, self.z2, 0.0, target, 0.0)

@@ -1,0 +1,55 @@
+"""Tracking performance indices from sampled time series (ROS-free).
+
+Integrals use the trapezoidal rule over the samples. The tracking error is
+e = target - true speed, in m/s; `*_kmh` fields are the same in km/h.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MS_TO_KMH = 3.6
+
+
+def _integral(t: np.ndarray, y: np.ndarray) -> float:
+    return float(np.trapezoid(y, t)) if len(t) > 1 else 0.0
+
+
+def itae(t: np.ndarray, error: np.ndarray) -> float:
+    """Integral of t |e(t)| dt (seed 000 eq. 24), m*s... i.e. (m/s) s^2."""
+    return _integral(t, t * np.abs(error))
+
+
+def iae(t: np.ndarray, error: np.ndarray) -> float:
+    return _integral(t, np.abs(error))
+
+
+def ise(t: np.ndarray, error: np.ndarray) -> float:
+    return _integral(t, error * error)
+
+
+def seed004_j(t: np.ndarray, error: np.ndarray, command: np.ndarray,
+              w1: float = 1.0, w2: float = 10.0) -> float:
+    """Seed 004's J = integral of (w1 |e| + w2 u^2) dt."""
+    return _integral(t, w1 * np.abs(error) + w2 * command * command)
+
+
+def tracking_indices(t: np.ndarray, target: np.ndarray, speed: np.ndarray,
+                     command: np.ndarray | None = None) -> dict[str, float]:
+    """Every tracking index the scorer knows, as a flat dict of floats."""
+    t, target, speed = (np.asarray(a, dtype=float) for a in (t, target, speed))
+    error = target - speed
+    finite = bool(np.all(np.isfinite(error)))
+    max_abs = float(np.max(np.abs(error))) if len(error) else 0.0
+    result = {
+        "steps": int(len(t)),
+        "finite": finite,
+        "itae": itae(t, error),
+        "iae": iae(t, error),
+        "ise": ise(t, error),
+        "max_abs_error": max_abs,
+        "max_abs_error_kmh": max_abs * MS_TO_KMH,
+    }
+    if command is not None:
+        result["j_seed004"] = seed004_j(t, error, np.asarray(command, dtype=float))
+    return result

@@ -1,0 +1,92 @@
+"""Target-speed profiles, ROS-free. Every profile maps (time, position) to m/s."""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+KMH = 1.0 / 3.6  # m/s per km/h
+
+
+@dataclass(frozen=True)
+class Seed000Profile:
+    """Seed 000 eq. 25 as reconstructed in SPEC.md (constants in SI).
+
+    Start - cruise - decelerate - cruise - accelerate - cruise - decelerate -
+    stop over 2T. The 200 km/h and 0 bounds of the second and fourth pieces
+    follow from continuity (the extracted text prints 350 for all four).
+    """
+
+    period: float = 1200.0             # T, s
+    v_inc: float = 368.34 * KMH        # m/s
+    t1: float = 125.2841               # s
+    cruise_high: float = 350.0 * KMH   # m/s
+    cruise_low: float = 200.0 * KMH    # m/s
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        T, v = self.period, self.v_inc
+        if t < T / 2:
+            return min(v * (1.0 - math.exp(-t / 120.0)), self.cruise_high)
+        if t < T:
+            return max(v * (1.0 - math.exp(-(T / 2 + 240.0 - t) / 80.0)), self.cruise_low)
+        if t < 3 * T / 2:
+            return min(v * (1.0 - math.exp(-(t - T + self.t1) / 160.0)), self.cruise_high)
+        return max(v * (1.0 - math.exp(-(3 * T / 2 + 480.0 - t) / 160.0)), 0.0)
+
+
+@dataclass(frozen=True)
+class StepProfile:
+    """Zero before `time`, `speed` from then on (seed 000's step-response test)."""
+
+    speed_after: float
+    time: float = 0.0
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        return self.speed_after if t >= self.time else 0.0
+
+
+class TableProfile:
+    """Piecewise-linear speed against time or position, read from a CSV table.
+
+    The CSV has a header naming its two columns: `time` (s) or `position` (m),
+    then `speed` (m/s). Beyond the table the end values hold.
+    """
+
+    def __init__(self, axis: str, points: np.ndarray, speeds: np.ndarray):
+        if axis not in ("time", "position"):
+            raise ValueError(f"profile axis must be 'time' or 'position', not {axis!r}")
+        if len(points) < 2 or np.any(np.diff(points) <= 0):
+            raise ValueError("profile table needs at least two rows with strictly increasing "
+                             f"{axis}")
+        if np.any(speeds < 0) or not np.all(np.isfinite(speeds)):
+            raise ValueError("profile table speeds must be finite and non-negative")
+        self.axis = axis
+        self.points = [float(x) for x in points]
+        self.speeds = [float(x) for x in speeds]
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> TableProfile:
+        path = Path(path)
+        try:
+            with path.open(newline="") as handle:
+                rows = [row for row in csv.reader(handle) if row and not row[0].startswith("#")]
+        except OSError as exc:
+            raise ValueError(f"cannot read profile table {path}: {exc.strerror}") from None
+        if not rows or len(rows[0]) != 2 or rows[0][1].strip() != "speed":
+            raise ValueError(f"{path}: header must be 'time,speed' or 'position,speed'")
+        try:
+            data = np.array([[float(a), float(b)] for a, b in rows[1:]])
+        except ValueError:
+            raise ValueError(f"{path}: every row after the header needs two numbers") from None
+        try:
+            return cls(rows[0][0].strip(), data[:, 0], data[:, 1])
+        except (ValueError, IndexError) as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        x = t if self.axis == "time" else position
+        return float(np.interp(x, self.points, self.speeds))

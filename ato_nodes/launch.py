@@ -1,0 +1,178 @@
+"""Launching the node graph: one process per node, in its own ROS domain.
+
+Used by scripts/run_stack.py and by the tuner. It writes the run's ROS
+parameter file, starts the five node processes, watches them, and stops
+every one of them on the way out, whatever happened (end of run, a node
+that died, Ctrl-C, a timeout).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ato_nodes.core.params import NODES, ros_parameter_file
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DOMAIN_LOCK_PORT = 47300   # TCP port base + domain id held while a run uses that domain
+DOMAIN_IDS = range(1, 102)  # 0 is left for the user's own ROS graph
+STOP_GRACE = 5.0           # s for nodes to exit after SIGINT before SIGTERM / SIGKILL
+POLL = 0.05                # s between checks of the children
+PR_SET_PDEATHSIG = 1
+
+
+class DomainLock:
+    """A ROS domain id reserved for one run by holding a localhost TCP port."""
+
+    def __init__(self, domain_id: int | None = None):
+        candidates = [domain_id] if domain_id is not None else list(DOMAIN_IDS)
+        for candidate in candidates:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            try:
+                sock.bind(("127.0.0.1", DOMAIN_LOCK_PORT + candidate))
+            except OSError:
+                sock.close()
+                continue
+            self.domain_id, self._socket = candidate, sock
+            return
+        if domain_id is not None:
+            raise RuntimeError(f"ROS domain {domain_id} is in use by another run")
+        raise RuntimeError("no free ROS domain id")
+
+    def release(self) -> None:
+        self._socket.close()
+
+
+def _die_with_parent() -> None:
+    """Child side of fork: get SIGTERM if the launcher itself is killed."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def node_environment(domain_id: int) -> dict[str, str]:
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated; conflicts with the discovery range
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO_ROOT), env.get("PYTHONPATH")]))
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+@dataclass
+class RunOutcome:
+    status: str                  # "completed", "failed", "interrupted", "timeout"
+    message: str = ""
+    failed_node: str | None = None
+    report: dict[str, Any] = field(default_factory=dict)
+    domain_id: int = 0
+    wall_time: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "completed"
+
+
+class Stack:
+    """One run of the node graph. Use as a context manager or call run()."""
+
+    def __init__(self, values: dict[str, Any], bag: Path, domain_id: int | None = None,
+                 quiet: bool = False, timeout: float | None = None):
+        self.values = dict(values)
+        self.bag = Path(bag)
+        self.quiet = quiet
+        self.timeout = timeout
+        self.lock = DomainLock(domain_id)
+        self.processes: dict[str, subprocess.Popen] = {}
+        self.workdir = Path(tempfile.mkdtemp(prefix="ato-run-"))
+        self.report_path = self.workdir / "report.json"
+        self.params_path = self.workdir / "params.yaml"
+        self.values["recorder.output"] = str(self.bag.resolve())
+        self.values["supervisor.report"] = str(self.report_path)
+
+    def _start(self) -> None:
+        self.params_path.write_text(yaml.safe_dump(ros_parameter_file(self.values),
+                                                   sort_keys=False))
+        env = node_environment(self.lock.domain_id)
+        output = subprocess.DEVNULL if self.quiet else None
+        for role in NODES:
+            command = [sys.executable, "-m", f"ato_nodes.nodes.{role}", "--ros-args",
+                       "--params-file", str(self.params_path)]
+            self.processes[role] = subprocess.Popen(
+                command, env=env, cwd=REPO_ROOT, stdin=subprocess.DEVNULL, stdout=output,
+                stderr=output, start_new_session=True, preexec_fn=_die_with_parent)
+
+    def stop(self) -> None:
+        """SIGINT every live node (the recorder closes its bag), then escalate."""
+        for process in self.processes.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + STOP_GRACE
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            for process in self.processes.values():
+                try:
+                    process.wait(max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    process.send_signal(sig)
+            deadline = time.monotonic() + 2.0
+        for process in self.processes.values():
+            process.wait()
+
+    def _watch(self) -> RunOutcome:
+        started = time.monotonic()
+        early_exit: dict[str, float] = {}
+        while True:
+            codes = {role: process.poll() for role, process in self.processes.items()}
+            if codes["supervisor"] == 0:
+                return self._finish()
+            for role, code in codes.items():
+                if code not in (None, 0):
+                    return RunOutcome("failed", f"node '{role}' exited with status {code}",
+                                      failed_node=role)
+                # A clean exit is normal only once the supervisor has ended the run.
+                if code == 0 and time.monotonic() - early_exit.setdefault(role, time.monotonic()) \
+                        > STOP_GRACE:
+                    return RunOutcome("failed", f"node '{role}' exited before the run ended",
+                                      failed_node=role)
+            if self.timeout is not None and time.monotonic() - started > self.timeout:
+                return RunOutcome("timeout", f"run did not finish within {self.timeout:g} s")
+            time.sleep(POLL)
+
+    def _finish(self) -> RunOutcome:
+        """The supervisor ended the run; the other nodes are exiting on 'shutdown'."""
+        if not self.report_path.exists():
+            return RunOutcome("failed", "the supervisor stopped the run before it completed "
+                              "(a node never became ready)", failed_node="supervisor")
+        report = json.loads(self.report_path.read_text())
+        return RunOutcome("completed", report=report)
+
+    def run(self) -> RunOutcome:
+        started = time.monotonic()
+        try:
+            self._start()
+            outcome = self._watch()
+        except KeyboardInterrupt:
+            outcome = RunOutcome("interrupted", "interrupted by the user")
+        finally:
+            self.stop()
+            self.lock.release()
+        outcome.domain_id = self.lock.domain_id
+        outcome.wall_time = time.monotonic() - started
+        if self.report_path.exists() and not outcome.report:
+            outcome.report = json.loads(self.report_path.read_text())
+        return outcome
+
+    def params_yaml(self) -> str:
+        return self.params_path.read_text()

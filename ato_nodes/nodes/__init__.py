@@ -1,0 +1,1 @@
+"""Thin rclpy wrappers, one process each, over the ROS-free core."""

@@ -1,0 +1,164 @@
+"""What every ATO node shares: parameters from the schema, the topic map's QoS,
+the readiness gate and the run-event protocol, and a clean life cycle."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from typing import Any, Callable
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+
+from ato_nodes.core.params import SPEC_BY_NAME, ParamSpec, ScenarioError, for_node
+from ato_nodes.core.topics import Topic, topic_map
+
+QOS = {
+    "data": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE),
+    "clock": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE),
+    "events": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL),
+}
+READINESS_POLL = 0.01  # s of wall time between checks of the graph
+
+
+def message_class(type_name: str) -> type:
+    package, _, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{package}.msg"), name)
+
+
+def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    descriptor = ParameterDescriptor(name=spec.name, description=spec.description)
+    if spec.low is not None and spec.kind is float:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(spec.low), to_value=float(spec.high))]
+    elif spec.low is not None and spec.kind is int:
+        descriptor.integer_range = [IntegerRange(
+            from_value=int(spec.low), to_value=int(spec.high), step=1)]
+    if spec.choices:
+        descriptor.additional_constraints = "one of: " + ", ".join(spec.choices)
+    return descriptor
+
+
+class AtoNode(Node):
+    """Base of the five nodes. Subclasses call `ready_when_matched()` once their
+    publishers and subscriptions exist, and override `on_event()`."""
+
+    role: str = ""
+
+    def __init__(self, use_sim_time: bool = True):
+        super().__init__(self.role)
+        self.values = self._declare_parameters()
+        self.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, use_sim_time)])
+        self.topics = topic_map()
+        self._outgoing: list[tuple[Any, Topic]] = []
+        self._incoming: list[tuple[Any, Topic]] = []
+        events = self.topics["events"]
+        self.events_out = self.create_publisher(String, events.name, QOS["events"])
+        self.events_in = self.create_subscription(String, events.name, self._on_event_message,
+                                                  QOS["events"])
+        self._ready_timer = None
+        self._wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
+
+    # Parameters -----------------------------------------------------------
+    def _declare_parameters(self) -> dict[str, Any]:
+        overrides = set(self._parameter_overrides)
+        unknown = sorted(name for name in overrides
+                         if name not in SPEC_BY_NAME and name != "use_sim_time")
+        if unknown:
+            raise ScenarioError(f"unknown parameter {unknown[0]!r}")
+        values = {}
+        for spec in for_node(self.role):
+            value = self.declare_parameter(spec.name, spec.default, _descriptor(spec)).value
+            values[spec.name] = spec.check(value, self.role)
+        return values
+
+    # Topics ---------------------------------------------------------------
+    def publisher(self, key: str):
+        topic = self.topics[key]
+        pub = self.create_publisher(message_class(topic.type), topic.name, QOS[topic.qos])
+        self._outgoing.append((pub, topic))
+        return pub
+
+    def subscription(self, key: str, callback: Callable, raw: bool = False):
+        topic = self.topics[key]
+        sub = self.create_subscription(message_class(topic.type), topic.name, callback,
+                                       QOS[topic.qos], raw=raw)
+        self._incoming.append((sub, topic))
+        return sub
+
+    # Readiness gate -------------------------------------------------------
+    def ready_when_matched(self) -> None:
+        """Announce 'ready' once every edge of this node is matched (wall-clock poll:
+        sim-time timers do not fire before the first /clock)."""
+        self._ready_timer = self.create_timer(READINESS_POLL, self._check_ready,
+                                              clock=self._wall_clock)
+
+    def unmatched_edges(self) -> list[str]:
+        missing = []
+        for pub, topic in self._outgoing:
+            if pub.get_subscription_count() < len(topic.subscribers):
+                missing.append(f"{topic.name} (subscribers)")
+        for sub, topic in self._incoming:
+            if sub.get_publisher_count() < 1:
+                missing.append(f"{topic.name} (publisher)")
+        return missing
+
+    def _check_ready(self) -> None:
+        if not self.unmatched_edges():
+            self._ready_timer.cancel()
+            self.destroy_timer(self._ready_timer)
+            self.announce(f"ready {self.role}")
+
+    # Run events -----------------------------------------------------------
+    def announce(self, text: str) -> None:
+        self.events_out.publish(String(data=text))
+
+    def _on_event_message(self, msg: String) -> None:
+        word, _, argument = msg.data.partition(" ")
+        if word == "shutdown":
+            self.context.try_shutdown()
+        else:
+            self.on_event(word, argument)
+
+    def on_event(self, word: str, argument: str) -> None:
+        """Run events other than 'shutdown' (which every node obeys by exiting)."""
+
+    def close(self) -> None:
+        """Release what must be released before exit (the recorder closes its bag)."""
+
+
+def run_node(factory: Callable[[], AtoNode]) -> None:
+    """Life cycle of a node process: init, spin until shutdown or signal, clean exit.
+
+    Bad parameters end the process with one line on stderr and exit status 2.
+    """
+    rclpy.init(args=sys.argv)
+    node = None
+    status = 0
+    try:
+        node = factory()
+        # rclpy.experimental.EventsExecutor (7.1.6) fires no timers and ignores SIGINT here.
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ScenarioError, rclpy.exceptions.ParameterException, ValueError) as exc:
+        role = node.role if node is not None else factory.__name__
+        print(f"{role}: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        status = 2
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    sys.exit(status)

@@ -1,0 +1,76 @@
+"""Train plant simulator node: owns simulated time and publishes /clock.
+
+Like a physics simulator it is the clock source: on 'start' it publishes step
+0, and every command it receives advances the train one period and
+publishes the next step, until run.duration is reached.
+"""
+
+from __future__ import annotations
+
+import time
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Twist
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64
+
+from ato_nodes.core.loop import PlantStage
+from ato_nodes.core.params import steps
+from ato_nodes.nodes.base import AtoNode, run_node
+
+
+class PlantNode(AtoNode):
+    role = "plant"
+
+    def __init__(self):
+        super().__init__(use_sim_time=False)
+        self.stage = PlantStage(self.values)
+        self.period = self.values["run.period"]
+        self.total_steps = steps(self.values)
+        self.real_time = self.values["run.real_time"]
+        self.step_index = 0
+        self.started_at = 0.0
+        self.clock_pub = self.publisher("clock")
+        self.position_pub = self.publisher("position")
+        self.speed_pub = self.publisher("measured_speed")
+        self.state_pub = self.publisher("state")
+        self.subscription("command", self.on_command)
+        self.ready_when_matched()
+
+    def on_event(self, word: str, argument: str) -> None:
+        if word == "start" and self.step_index == 0:
+            self.started_at = time.monotonic()
+            self.publish_step()
+
+    def publish_step(self) -> None:
+        k = self.step_index
+        nanoseconds = round(k * self.period * 1e9)
+        self.clock_pub.publish(Clock(clock=Time(sec=nanoseconds // 1_000_000_000,
+                                                nanosec=nanoseconds % 1_000_000_000)))
+        out = self.stage.outputs()
+        self.position_pub.publish(Float64(data=out.position))
+        self.speed_pub.publish(Float64(data=out.measured_speed))
+        state = Twist()
+        state.linear.x, state.linear.y, state.linear.z = out.speed, out.acceleration, out.disturbance
+        state.angular.x, state.angular.y = out.force, out.resistance
+        self.state_pub.publish(state)
+
+    def on_command(self, msg: Float64) -> None:
+        self.stage.apply(msg.data)
+        self.step_index += 1
+        if self.step_index >= self.total_steps:
+            self.announce(f"finished {self.step_index}")
+            return
+        if self.real_time:
+            delay = self.started_at + self.step_index * self.period - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+        self.publish_step()
+
+
+def main() -> None:
+    run_node(PlantNode)
+
+
+if __name__ == "__main__":
+    main()

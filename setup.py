@@ -1,0 +1,38 @@
+"""ament_python package: `colcon build` in a ROS 2 workspace, or `pip install -e .`."""
+
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ato_nodes"
+NODES = ("profile", "plant", "controller", "supervisor", "recorder")
+
+
+def config_files():
+    """msg_config/ installed under share/ato_nodes/msg_config, tree preserved."""
+    grouped = {}
+    for path in sorted(Path("msg_config").rglob("*")):
+        if path.is_file():
+            grouped.setdefault(str(Path("share") / PACKAGE / path.parent), []).append(str(path))
+    return sorted(grouped.items())
+
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        *config_files(),
+    ],
+    install_requires=["setuptools", "numpy", "PyYAML", "rosbags", "mcap", "mcap-ros2-support"],
+    zip_safe=True,
+    maintainer="ATO stack maintainers",
+    description="ROS 2 automatic train operation stack: nodes, lockstep runs, MCAP scoring",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [f"{node} = {PACKAGE}.nodes.{node}:main" for node in NODES],
+    },
+)
