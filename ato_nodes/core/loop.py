@@ -1,17 +1,24 @@
 """The lockstep loop's three stages, built from parameters, ROS-free.
 
-Step k (t_k = k * period) runs, in this order and in every runner:
-  1. plant.outputs()            -> position, measured and true speed, ... at t_k
-  2. profile.target(k, position) -> target speed r_k
-  3. controller.step(r_k, y_k)  -> command u_k (N/kN) and observer states
-  4. plant.apply(u_k)           -> integrate [t_k, t_k+1] with u_k held
+Step k (t_k = k * period), in every runner:
+  plant.outputs()           -> position s_k, measured and true speed, ... at t_k
+  profile.on_position(s_k)  -> the target of the NEXT step, r_k+1 (and r_0 at k = 0)
+  controller.step(r_k, y_k) -> command u_k (N/kN) and observer states
+  plant.apply(u_k)          -> integrate [t_k, t_k+1] with u_k held
+The profile works one step ahead, from the position extrapolated to t_k+1
+(2 s_k - s_k-1; error ~ a dt^2, millimetres), so it runs beside the
+controller instead of in front of it: the critical path of a step is two
+message hops (plant -> controller -> plant), not three. For time-indexed
+curves the targets are exactly r(t_k).
+
 The ROS nodes run one stage each and pass the values as float64 messages,
-bit for bit; `simulate()` runs the same calls in one process, so both give
+bit for bit; `simulate()` makes the same calls in one process, so both give
 identical numbers.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,6 +33,9 @@ from .profiles import Seed000Profile, StepProfile, TableProfile
 class ProfileStage:
     def __init__(self, values: dict[str, Any]):
         self.period = values["run.period"]
+        self.total_steps = steps(values)
+        self.received = 0
+        self.last_position = 0.0
         kind = values["profile.kind"]
         if kind == "seed000":
             self.curve = Seed000Profile(
@@ -37,8 +47,16 @@ class ProfileStage:
         else:
             self.curve = TableProfile.from_csv(values["profile.table.file"])
 
-    def target(self, step: int, position: float) -> float:
-        return self.curve.speed(step * self.period, position)
+    def on_position(self, position: float) -> list[float]:
+        """Position s_k of step k in; the targets to publish now out, in step order."""
+        k = self.received
+        self.received += 1
+        targets = [self.curve.speed(0.0, position)] if k == 0 else []
+        if k + 1 < self.total_steps:
+            predicted = 2.0 * position - self.last_position if k > 0 else position
+            targets.append(self.curve.speed((k + 1) * self.period, predicted))
+        self.last_position = position
+        return targets
 
 
 @dataclass
@@ -111,10 +129,12 @@ def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
     period = values["run.period"]
     profile, plant = ProfileStage(values), PlantStage(values)
     controller = None
+    targets: deque[float] = deque()
     rows = []
     for k in range(steps(values)):
         out = plant.outputs()
-        target = profile.target(k, out.position)
+        targets.extend(profile.on_position(out.position))
+        target = targets.popleft()
         if controller is None:
             controller = ControllerStage(values, target, out.measured_speed)
         c = controller.step(target, out.measured_speed)

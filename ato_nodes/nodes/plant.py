@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import time
 
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
@@ -34,6 +33,8 @@ class PlantNode(AtoNode):
         self.position_pub = self.publisher("position")
         self.speed_pub = self.publisher("measured_speed")
         self.state_pub = self.publisher("state")
+        self.speed_msg, self.position_msg = Float64(), Float64()
+        self.clock_msg, self.state_msg = Clock(), Twist()
         self.subscription("command", self.on_command)
         self.ready_when_matched()
 
@@ -43,14 +44,17 @@ class PlantNode(AtoNode):
             self.publish_step()
 
     def publish_step(self) -> None:
-        k = self.step_index
-        nanoseconds = round(k * self.period * 1e9)
-        self.clock_pub.publish(Clock(clock=Time(sec=nanoseconds // 1_000_000_000,
-                                                nanosec=nanoseconds % 1_000_000_000)))
+        """Publish step k: the profile's and the controller's inputs first (a
+        publish costs ~50 us per subscriber), then the rest."""
         out = self.stage.outputs()
-        self.position_pub.publish(Float64(data=out.position))
-        self.speed_pub.publish(Float64(data=out.measured_speed))
-        state = Twist()
+        self.position_msg.data = out.position
+        self.position_pub.publish(self.position_msg)
+        self.speed_msg.data = out.measured_speed
+        self.speed_pub.publish(self.speed_msg)
+        nanoseconds = round(self.step_index * self.period * 1e9)
+        self.clock_msg.clock.sec, self.clock_msg.clock.nanosec = divmod(nanoseconds, 1_000_000_000)
+        self.clock_pub.publish(self.clock_msg)
+        state = self.state_msg
         state.linear.x, state.linear.y, state.linear.z = out.speed, out.acceleration, out.disturbance
         state.angular.x, state.angular.y = out.force, out.resistance
         self.state_pub.publish(state)

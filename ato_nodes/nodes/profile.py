@@ -1,4 +1,5 @@
-"""Target-speed profile node: one target per step, for the train's position."""
+"""Target-speed profile node: on step k's position, the target of step k+1
+(see ato_nodes.core.loop for why one step ahead)."""
 
 from __future__ import annotations
 
@@ -14,14 +15,15 @@ class ProfileNode(AtoNode):
     def __init__(self):
         super().__init__()
         self.stage = ProfileStage(self.values)
-        self.step_index = 0
+        self.target_msg = Float64()
         self.target_pub = self.publisher("target_speed")
         self.subscription("position", self.on_position)
         self.ready_when_matched()
 
     def on_position(self, msg: Float64) -> None:
-        self.target_pub.publish(Float64(data=self.stage.target(self.step_index, msg.data)))
-        self.step_index += 1
+        for target in self.stage.on_position(msg.data):
+            self.target_msg.data = target
+            self.target_pub.publish(self.target_msg)
 
 
 def main() -> None:
