@@ -157,19 +157,22 @@ class HanADRC:
                                 gains.delta, period, z1=initial_speed)
         self.u_applied = 0.0
 
-    def step(self, target: float, measured: float) -> ControllerOutput:
+    def control_law(self, e1: float, e2: float, z2: float) -> float:
+        """NLSEF (eq. 12), implicit or literal (see module docstring): u0 from the
+        errors e1 = v1 - z1, e2 = v2 - z2."""
         g = self.gains
+        if not g.implicit_nlsef:
+            return g.mu1 * fal(e1, g.alpha1, g.delta) + g.mu2 * fal(e2, g.alpha2, g.delta)
+        h = self.td.h
+        k1 = g.mu1 * fal_gain(e1, g.alpha1, g.delta)
+        k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
+        return (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
+
+    def step(self, target: float, measured: float) -> ControllerOutput:
         z1, z2, z3 = self.eso.update(measured, self.u_applied)
         v1, v2 = self.td.update(target)
-        e1, e2 = v1 - z1, v2 - z2
-        if g.implicit_nlsef:
-            h = self.td.h
-            k1 = g.mu1 * fal_gain(e1, g.alpha1, g.delta)
-            k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
-            u0 = (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
-        else:
-            u0 = g.mu1 * fal(e1, g.alpha1, g.delta) + g.mu2 * fal(e2, g.alpha2, g.delta)
-        u = clamp((u0 - z3) / g.b0, self.u_min, self.u_max)
+        u0 = self.control_law(v1 - z1, v2 - z2, z2)
+        u = clamp((u0 - z3) / self.gains.b0, self.u_min, self.u_max)
         self.u_applied = u
         return ControllerOutput(u, z1, z2, z3, v1, v2)
 

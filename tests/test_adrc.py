@@ -1,0 +1,162 @@
+"""Han's ADRC pieces against values worked out by hand or closed forms."""
+
+import math
+
+import pytest
+
+from ato_nodes.core.adrc import (HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
+                                 NonlinearESO, TrackingDifferentiator, fal, fal_gain, fhan)
+
+
+class TestFal:
+    def test_power_law_outside_the_linear_zone(self):
+        assert fal(0.5, 0.5, 0.01) == pytest.approx(math.sqrt(0.5))
+        assert fal(-4.0, 0.25, 0.01) == pytest.approx(-math.sqrt(2.0))
+        assert fal(2.0, 1.5, 0.01) == pytest.approx(2.0 ** 1.5)
+
+    def test_linear_inside_the_zone(self):
+        # e / delta^(1 - alpha): 0.005 / 0.1 = 0.05
+        assert fal(0.005, 0.5, 0.01) == pytest.approx(0.05)
+        assert fal(-0.005, 0.5, 0.01) == pytest.approx(-0.05)
+
+    def test_continuous_at_the_zone_edge(self):
+        delta = 0.01
+        for alpha in (0.25, 0.5, 0.75, 1.5):
+            inside, outside = fal(delta, alpha, delta), fal(delta * (1 + 1e-12), alpha, delta)
+            assert inside == pytest.approx(outside, rel=1e-9)
+            assert inside == pytest.approx(delta ** alpha)
+
+    def test_gain_is_fal_over_e(self):
+        for e in (-3.0, -0.004, 0.002, 0.7):
+            assert fal_gain(e, 0.5, 0.01) * e == pytest.approx(fal(e, 0.5, 0.01))
+        assert fal_gain(0.0, 0.5, 0.01) == pytest.approx(0.01 ** -0.5)
+
+
+class TestFhan:
+    def test_bang_bang_far_from_the_origin(self):
+        assert fhan(10.0, 0.0, 5.0, 0.01) == -5.0
+        assert fhan(-10.0, 0.0, 5.0, 0.01) == 5.0
+
+    def test_zero_at_the_origin(self):
+        assert fhan(0.0, 0.0, 5.0, 0.01) == 0.0
+
+    def test_linear_zone_by_hand(self):
+        # r = 5, h0 = 0.01: d = 5e-4; x1 = 1e-4, x2 = 0 -> y = a = 1e-4, |a| < d
+        # fhan = -r (a/d - sign a) - r sign a = -5 (0.2 - 1) - 5 = -1
+        assert fhan(1e-4, 0.0, 5.0, 0.01) == pytest.approx(-1.0)
+
+    def test_odd_symmetry(self):
+        for x1, x2 in ((0.3, -0.2), (1e-4, 2e-3), (-2.0, 5.0)):
+            assert fhan(-x1, -x2, 5.0, 0.01) == pytest.approx(-fhan(x1, x2, 5.0, 0.01))
+
+
+class TestTrackingDifferentiator:
+    def test_time_optimal_step_response(self):
+        # Bounded acceleration r: the fastest transition 0 -> 1 takes 2 sqrt(1/r) = 0.894 s.
+        td = TrackingDifferentiator(r0=5.0, h0=0.01, period=0.01)
+        trajectory = [td.update(1.0) for _ in range(300)]
+        reach = next(k for k, (v1, _) in enumerate(trajectory) if v1 > 0.999) * 0.01
+        assert 0.8 < reach < 0.95
+        assert max(v1 for v1, _ in trajectory) < 1.001
+        assert max(abs(v2) for _, v2 in trajectory) <= 5.0 * 0.894 / 2 + 0.05  # r * T/2
+        assert trajectory[-1][0] == pytest.approx(1.0, abs=1e-9)
+        assert trajectory[-1][1] == pytest.approx(0.0, abs=1e-9)
+
+    def test_tracks_a_ramp_and_its_slope(self):
+        td = TrackingDifferentiator(r0=5.0, h0=0.01, period=0.01)
+        for k in range(1000):
+            v1, v2 = td.update(0.5 * k * 0.01)
+        assert v2 == pytest.approx(0.5, abs=1e-6)
+        # steady lag of a time-optimal tracker on a ramp: about slope^2 / (2 r)
+        assert 0.0 < 0.5 * 999 * 0.01 - v1 < 0.05
+
+
+class TestExtendedStateObserver:
+    # The fal() gains fall as |e|^(alpha - 1) outside the linear zone, so z3 keeps
+    # an error of ~0.1-0.2 on a unit sine with the seed's gains (measured).
+    @pytest.mark.parametrize("period, z2_tolerance, z3_tolerance",
+                             [(0.001, 0.02, 0.15), (0.05, 0.05, 0.2)])
+    def test_converges_on_a_known_signal(self, period, z2_tolerance, z3_tolerance):
+        # y = sin t with u = 0: a double integrator y'' = f has f = -sin t, so
+        # z1 -> sin t, z2 -> cos t, z3 -> -sin t.
+        eso = NonlinearESO(1200.0, 1700.0, 4500.0, b0=0.2, delta=0.01, period=period)
+        errors = []
+        for k in range(int(20.0 / period)):
+            t = k * period
+            z1, z2, z3 = eso.update(math.sin(t), 0.0)
+            if t > 5.0:
+                errors.append((abs(z1 - math.sin(t)), abs(z2 - math.cos(t)), abs(z3 + math.sin(t))))
+        assert max(e[0] for e in errors) < 1e-4
+        assert max(e[1] for e in errors) < z2_tolerance
+        assert max(e[2] for e in errors) < z3_tolerance
+
+    def test_estimates_a_constant_disturbance(self):
+        # Plant y'' = f + b0 u with f = 0.3 and u = 1, b0 = 2: z3 -> 0.3.
+        period, b0, f, u = 0.001, 2.0, 0.3, 1.0
+        eso = NonlinearESO(300.0, 3000.0, 10000.0, b0=b0, delta=0.01, period=period)
+        y = dy = 0.0
+        for _ in range(int(10.0 / period)):
+            z1, z2, z3 = eso.update(y, u)
+            dy += period * (f + b0 * u)
+            y += period * dy
+        assert z3 == pytest.approx(f, abs=0.01)
+        assert z2 == pytest.approx(dy, rel=1e-3)
+
+    def test_stable_for_the_seed_gains_at_a_long_step(self):
+        # Explicit Euler would need beta1 * h < ~1; backward Euler does not.
+        eso = NonlinearESO(1200.0, 1700.0, 4500.0, b0=0.2, delta=0.01, period=0.1)
+        for k in range(2000):
+            z = eso.update(1.0, 0.0)
+        assert z[0] == pytest.approx(1.0, abs=1e-9)
+        assert abs(z[1]) < 1e-6 and abs(z[2]) < 1e-6
+
+
+class TestNLSEF:
+    def controller(self, implicit, period=0.05):
+        gains = HanADRCGains(implicit_nlsef=implicit)
+        return HanADRC(gains, period, -1e9, 1e9)
+
+    def test_literal_law_by_hand(self):
+        law = self.controller(implicit=False).control_law
+        # e1 = 0.5 (outside delta): 6000 * 0.5^0.75; e2 = 0.005 (inside): 5500 * 0.005 / 0.01^-0.5
+        expected = 6000 * 0.5 ** 0.75 + 5500 * 0.005 * 0.01 ** 0.5
+        assert law(0.5, 0.005, 0.0) == pytest.approx(expected)
+
+    def test_implicit_law_tends_to_the_literal_one(self):
+        literal = self.controller(implicit=False).control_law(0.02, 0.01, 0.0)
+        for period, tolerance in ((1e-4, 0.5), (1e-6, 0.01)):
+            implicit = self.controller(implicit=True, period=period).control_law(0.02, 0.01, 0.0)
+            assert abs(implicit - literal) / abs(literal) < tolerance
+
+    def test_implicit_law_solves_its_defining_equation(self):
+        # Z = z2 + h (k1 (e1 - h Z + h z2 ... )): next model state satisfies the law.
+        period = 0.05
+        adrc = self.controller(implicit=True, period=period)
+        g = adrc.gains
+        e1, e2, z2 = 0.2, -0.03, 0.1
+        u0 = adrc.control_law(e1, e2, z2)
+        next_z2 = z2 + period * u0
+        k1 = g.mu1 * fal_gain(e1, g.alpha1, g.delta)
+        k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
+        # e1, e2 at the end of the step under the model z1' = z2, z2' = u0:
+        e1_next = e1 - period * next_z2
+        e2_next = e2 + z2 - next_z2
+        assert u0 == pytest.approx(k1 * e1_next + k2 * e2_next)
+
+    def test_command_saturates_and_observer_sees_the_saturated_value(self):
+        adrc = HanADRC(HanADRCGains(), 0.05, -5.0, 5.0)
+        out = adrc.step(100.0, 0.0)
+        assert out.u == 5.0
+        assert adrc.u_applied == 5.0
+
+
+class TestLinearADRC:
+    def test_tracks_a_first_order_plant_with_constant_disturbance(self):
+        period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
+        adrc = LinearADRC(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b), period, -1e6, 1e6)
+        v = 0.0
+        for _ in range(400):
+            out = adrc.step(10.0, v)
+            v += period * (b * out.u + disturbance)
+        assert v == pytest.approx(10.0, abs=1e-3)
+        assert out.z2 == pytest.approx(disturbance, abs=1e-3)
