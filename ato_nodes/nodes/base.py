@@ -213,7 +213,7 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ScenarioError, rclpy.exceptions.ParameterException, ValueError) as exc:
-        role = node.role if node is not None else factory.__name__
+        role = getattr(factory, "role", "node")
         print(f"{role}: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         status = 2
     finally:

@@ -1,0 +1,234 @@
+"""The real multi-process graph: recorded bags, faults, bad input, isolation, echo.
+
+Each test launches scripts/run_stack.py as a user would.
+"""
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from ato_nodes.bagio import read_series
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.params import apply_overrides, load_scenario
+from ato_nodes.core.scoring import score_series
+from ato_nodes.core.topics import step_topics
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN_STACK = [sys.executable, str(ROOT / "scripts" / "run_stack.py")]
+SCORE_BAG = [sys.executable, str(ROOT / "scripts" / "score_bag.py")]
+STEP_TOPICS = {topic.name for topic in step_topics()}
+
+
+def run_stack(*args, timeout=180):
+    return subprocess.run([*RUN_STACK, *args], capture_output=True, text=True, timeout=timeout,
+                          cwd=ROOT)
+
+
+def start_stack(*args):
+    return subprocess.Popen([*RUN_STACK, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT)
+
+
+def children(pid):
+    """Node processes started by a run_stack.py process: {role: pid}."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        ppid = int(stat.rsplit(")", 1)[1].split()[1])
+        module = next((a.decode() for a in cmdline if a.startswith(b"ato_nodes.nodes.")), None)
+        if ppid == pid and module:
+            found[module.rsplit(".", 1)[1]] = int(entry.name)
+    return found
+
+
+def alive(pid):
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def wait_for_children(process, roles=("plant", "controller", "recorder"), timeout=30.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        found = children(process.pid)
+        if all(role in found for role in roles):
+            return found
+        time.sleep(0.05)
+    raise AssertionError(f"node processes did not start: {children(process.pid)}")
+
+
+def wait_for_stepping(process):
+    """Read the run's stderr until the supervisor's first progress line: stepping began.
+    Returns the lines read (the first is the banner with the domain id)."""
+    lines = []
+    for line in process.stderr:
+        lines.append(line)
+        if "steps/s" in line:
+            return lines
+    raise AssertionError("the run never started stepping: " + "".join(lines))
+
+
+def message_counts(bag):
+    with AnyReader([Path(bag)]) as reader:
+        counts = {c.topic: 0 for c in reader.connections}
+        for connection, _, _ in reader.messages():
+            counts[connection.topic] += 1
+    return counts
+
+
+def mcap_message_count(bag):
+    (mcap_file,) = Path(bag).glob("*.mcap")
+    with mcap_file.open("rb") as handle:
+        return sum(1 for _ in make_reader(handle).iter_messages())
+
+
+def in_process(duration, *overrides):
+    values = apply_overrides(load_scenario("seed000"), [f"run.duration={duration}", *overrides])
+    return simulate(values)
+
+
+def test_short_run_records_every_step_and_scores_like_the_in_process_simulation(tmp_path):
+    bag = tmp_path / "run"
+    result = run_stack("--duration", "5", "--out", str(bag), "--quiet")
+    assert result.returncode == 0, result.stderr
+    counts = message_counts(bag)
+    assert set(counts) == STEP_TOPICS
+    assert set(counts.values()) == {100}
+    assert mcap_message_count(bag) == 100 * len(STEP_TOPICS)
+
+    scored = subprocess.run([*SCORE_BAG, str(bag), "--json"], capture_output=True, text=True)
+    assert scored.returncode == 0, scored.stderr
+    from_bag = json.loads(scored.stdout)
+    expected = score_series(in_process(5))
+    assert from_bag["steps"] == expected["steps"] == 100
+    for index in ("itae", "iae", "ise", "max_abs_error", "j_seed004"):
+        assert from_bag[index] == pytest.approx(expected[index], rel=1e-9), index
+    summary = json.loads((bag / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["steps"] == 100
+    assert summary["indices"]["itae"] == pytest.approx(expected["itae"], rel=1e-9)
+
+
+def test_two_simultaneous_runs_are_isolated_and_identical(tmp_path):
+    bags = [tmp_path / "a", tmp_path / "b"]
+    processes = [start_stack("--duration", "10", "--out", str(bag), "--quiet") for bag in bags]
+    for process in processes:
+        _, stderr = process.communicate(timeout=180)
+        assert process.returncode == 0, stderr
+    domains = {json.loads((bag / "summary.json").read_text())["domain_id"] for bag in bags}
+    assert len(domains) == 2
+    expected = in_process(10)
+    series = [read_series(bag) for bag in bags]
+    for run in series:
+        assert len(run["target"]) == 200  # cross-talk would double or scramble the counts
+        for name in ("target", "speed", "command", "z3"):
+            np.testing.assert_array_equal(run[name], expected[name])
+    # Same data: every topic's (timestamp, CDR bytes) sequence. Messages of one step
+    # on different topics interleave in arrival order, which varies.
+    with AnyReader([bags[0]]) as first, AnyReader([bags[1]]) as second:
+        assert sorted((c.topic, t, bytes(d)) for c, t, d in first.messages()) == \
+               sorted((c.topic, t, bytes(d)) for c, t, d in second.messages())
+
+
+def test_ctrl_c_leaves_a_readable_bag_with_every_step_so_far(tmp_path):
+    bag = tmp_path / "interrupted"
+    process = start_stack("--duration", "60", "--real-time", "--out", str(bag))
+    wait_for_stepping(process)
+    time.sleep(3.0)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert "Traceback" not in stderr
+    counts = message_counts(bag)
+    assert set(counts) == STEP_TOPICS
+    recorded = min(counts.values())
+    assert recorded >= 40  # at least 3 s at 20 steps/s
+    assert max(counts.values()) - recorded <= 1  # a step cut in its middle at most
+    assert mcap_message_count(bag) == sum(counts.values())
+    series = read_series(bag)
+    expected = in_process(60)
+    np.testing.assert_array_equal(series["speed"][:recorded], expected["speed"][:recorded])
+
+
+def test_a_crashing_node_stops_the_stack_and_is_named(tmp_path):
+    bag = tmp_path / "crash"
+    process = start_stack("--duration", "60", "--real-time", "--out", str(bag))
+    nodes = wait_for_children(process, roles=("profile", "plant", "controller", "supervisor",
+                                               "recorder"))
+    wait_for_stepping(process)
+    time.sleep(1.0)
+    os.kill(nodes["controller"], signal.SIGKILL)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 1
+    assert "node 'controller' exited" in stderr
+    assert "Traceback" not in stderr
+    assert not [role for role, pid in nodes.items() if alive(pid)]
+    assert min(message_counts(bag).values()) > 0  # what was recorded is still readable
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["--scenario", "no-such-scenario"], "unknown scenario 'no-such-scenario'"),
+    (["--set", "adrc.r0=-1"], "adrc.r0 = -1.0 is out of range"),
+    (["--set", "adrc.mu11=5"], "unknown parameter 'adrc.mu11'"),
+    (["--set", "controller.kind=pid"], "must be one of"),
+    (["--duration", "-3"], "out of range"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, problem):
+    result = run_stack(*args, timeout=60)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and problem in lines[0]
+
+
+def test_malformed_scenario_file_is_one_line_and_exit_2(tmp_path):
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("plant:\n  ros__parameters: {plant.mass: 3\n")
+    result = run_stack("--scenario", str(broken), timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.strip().count("\n") == 0 and "malformed YAML" in result.stderr
+
+
+def test_a_node_rejects_a_bad_parameter_alone(tmp_path):
+    """`ros2 run ato_nodes controller --ros-args -p adrc.r0:=-1` fails cleanly too."""
+    result = subprocess.run([sys.executable, "-m", "ato_nodes.nodes.controller", "--ros-args",
+                             "-p", "adrc.r0:=-1.0"], capture_output=True, text=True, timeout=60,
+                            cwd=ROOT, env={**os.environ, "ROS_DOMAIN_ID": "199"})
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    assert "controller: error:" in result.stderr and "adrc.r0" in result.stderr
+
+
+def test_a_separate_process_echoes_every_topic_at_the_configured_rate(tmp_path):
+    bag = tmp_path / "watched"
+    process = start_stack("--duration", "30", "--real-time", "--out", str(bag))
+    banner = wait_for_stepping(process)[0]
+    domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
+    env = {**os.environ, "ROS_DOMAIN_ID": domain, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    probe = subprocess.run([sys.executable, str(ROOT / "tests" / "echo_probe.py"), "6"],
+                           capture_output=True, text=True, timeout=60, env=env)
+    process.send_signal(signal.SIGINT)
+    process.communicate(timeout=60)
+    assert probe.returncode == 0, probe.stderr
+    received = json.loads(probe.stdout)
+    for name in STEP_TOPICS:
+        count, span = received[name]["count"], received[name]["span"]
+        assert count >= 40, (name, count)
+        rate = (count - 1) / span
+        assert 0.5 * 20 < rate < 1.5 * 20, (name, rate)  # configured: run.period 0.05 s
