@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
+import yaml
 from rosbags.highlevel import AnyReader
 
 from ato_nodes.core.topics import topic_map
+
+PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
 
 # series name -> (topic key, field path in the message)
 FIELDS = {
@@ -66,3 +70,13 @@ def read_series(bag: str | Path) -> dict[str, np.ndarray]:
         if values[key]:
             series[name] = np.array([_field(m, path) for m in values[key]], dtype=float)
     return series
+
+
+def read_parameters(bag: str | Path) -> dict | None:
+    """The run parameters the recorder stored in the bag's metadata, if any."""
+    try:
+        metadata = yaml.safe_load((Path(bag) / "metadata.yaml").read_text())
+        text = (metadata["rosbag2_bagfile_information"].get("custom_data") or {})[PARAMETERS_KEY]
+        return json.loads(text)
+    except (OSError, yaml.YAMLError, KeyError, TypeError, json.JSONDecodeError):
+        return None  # someone else's bag, or one without metadata: no parameters

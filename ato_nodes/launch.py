@@ -101,6 +101,9 @@ class Stack:
         self.params_path = self.workdir / "params.yaml"
         self.values["recorder.output"] = str(self.bag.resolve())
         self.values["supervisor.report"] = str(self.report_path)
+        self.values["recorder.run_parameters"] = json.dumps(
+            {name: value for name, value in self.values.items()
+             if not name.startswith(("recorder.", "supervisor."))})
 
     def _start(self) -> None:
         self.params_path.write_text(yaml.safe_dump(ros_parameter_file(self.values),

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.bagio import BagError, read_series
+from ato_nodes.bagio import BagError, read_parameters, read_series
 from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario, steps
 from ato_nodes.core.scoring import format_indices, score_series
 
@@ -75,7 +75,7 @@ def main() -> None:
     if bag.exists():
         (bag / "params.yaml").write_text(stack.params_yaml())
         try:
-            summary["indices"] = score_series(read_series(bag))
+            summary["indices"] = score_series(read_series(bag), read_parameters(bag))
         except BagError as exc:
             summary["message"] += f"; bag not scored: {exc}"
         (bag / "summary.json").write_text(json.dumps(summary, indent=2))

@@ -11,7 +11,7 @@ import json
 
 import _cli
 
-from ato_nodes.bagio import BagError, read_series
+from ato_nodes.bagio import BagError, read_parameters, read_series
 from ato_nodes.core.scoring import format_indices, score_series
 
 
@@ -21,7 +21,7 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print the indices as JSON")
     args = parser.parse_args()
     try:
-        indices = score_series(read_series(args.bag))
+        indices = score_series(read_series(args.bag), read_parameters(args.bag))
     except BagError as exc:
         _cli.fail(str(exc))
     print(json.dumps(indices, indent=2) if args.json else format_indices(indices))

@@ -20,7 +20,6 @@ import yaml
 
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 ALL = NODES
-XI_PER_50MS = 0.0098 / 1.11 / 0.05  # seed 000's xi / 50 ms, the default ADRC b0
 
 
 class ScenarioError(ValueError):
@@ -129,7 +128,7 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("adrc.beta1", 1200.0, "ESO gain beta1", "controller", 0.0, 1e9),
     _p("adrc.beta2", 1700.0, "ESO gain beta2", "controller", 0.0, 1e9),
     _p("adrc.beta3", 4500.0, "ESO gain beta3", "controller", 0.0, 1e9),
-    _p("adrc.b0", XI_PER_50MS, "compensation factor b0 (not in the paper; see docs)",
+    _p("adrc.b0", 0.1766, "compensation factor b0 (not in the paper; ~xi / 50 ms, see README)",
        "controller", 1e-9, 1e9),
     _p("adrc.delta", 0.01, "fal linear-zone half width", "controller", 1e-9, 100.0),
     _p("adrc.implicit_nlsef", True, "implicit NLSEF discretisation (false: literal law)",
@@ -144,6 +143,8 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("supervisor.report", "", "path of the JSON run report the supervisor writes",
        "supervisor"),
     _p("recorder.output", "", "bag directory to create (must not exist)", "recorder"),
+    _p("recorder.run_parameters", "", "JSON of the whole run's parameters, kept in the bag's "
+       "metadata (custom_data) so a bag explains itself", "recorder"),
 )
 
 SPEC_BY_NAME = {spec.name: spec for spec in SPECS}

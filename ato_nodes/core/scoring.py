@@ -7,12 +7,48 @@ import numpy as np
 from .indices import tracking_indices
 
 
-def score_series(series: dict[str, np.ndarray]) -> dict[str, float]:
+def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
+                 ) -> dict[str, float]:
     """Indices of a run. Series of unequal length (an interrupted run) are cut to
-    the steps every one of them holds."""
-    names = ["t", "target", "speed"] + (["command"] if "command" in series else [])
-    length = min(len(series[name]) for name in names)
-    return tracking_indices(*(series[name][:length] for name in names))
+    the steps every one of them holds. With the run's parameters, the observer's
+    accuracy and the step-response overshoot are added where they apply."""
+    length = min(len(values) for values in series.values())
+    series = {name: values[:length] for name, values in series.items()}
+    indices = tracking_indices(series["t"], series["target"], series["speed"],
+                               series.get("command"))
+    if parameters and parameters.get("controller.kind") == "han_adrc" and "z3" in series:
+        indices.update(observer_accuracy(series, parameters["adrc.b0"]))
+    if parameters and parameters.get("profile.kind") == "step":
+        indices["overshoot_percent"] = step_overshoot(series["speed"], series["target"])
+    return indices
+
+
+def total_disturbance(series: dict[str, np.ndarray], b0: float) -> np.ndarray:
+    """What z3 estimates in the second-order model dv/dt = a, da/dt = f + b0 u:
+    f_k = (a_k - a_k-1) / h - b0 u_k-1 from the true acceleration (NaN at k = 0)."""
+    t, a, u = series["t"], series["acceleration"], series["command"]
+    f = np.full_like(a, np.nan)
+    f[1:] = np.diff(a) / np.diff(t) - b0 * u[:-1]
+    return f
+
+
+def observer_accuracy(series: dict[str, np.ndarray], b0: float) -> dict[str, float]:
+    """Largest deviations of the ESO's z1, z2, z3 from true speed, acceleration and
+    total disturbance."""
+    f = total_disturbance(series, b0)
+    return {
+        "eso_speed_max_dev": float(np.max(np.abs(series["z1"] - series["speed"]))),
+        "eso_acceleration_max_dev": float(np.max(np.abs(series["z2"] - series["acceleration"]))),
+        "eso_disturbance_max_dev": float(np.nanmax(np.abs(series["z3"] - f))),
+    }
+
+
+def step_overshoot(speed: np.ndarray, target: np.ndarray) -> float:
+    """Peak beyond the final target, in percent of the step height."""
+    height = target[-1] - speed[0]
+    if height == 0:
+        return 0.0
+    return float(max(0.0, np.max((speed - target[-1]) * np.sign(height))) / abs(height) * 100.0)
 
 
 def format_indices(indices: dict) -> str:
@@ -24,4 +60,10 @@ def format_indices(indices: dict) -> str:
         f"max |e|          {indices['max_abs_error_kmh']:.4f} km/h"
         f"  ({indices['max_abs_error']:.5f} m/s)",
         f"J (seed 004)     {indices.get('j_seed004', float('nan')):.6g}",
+        *([f"ESO max |z1 - v| {indices['eso_speed_max_dev']:.3g} m/s, |z2 - a| "
+           f"{indices['eso_acceleration_max_dev']:.3g} m/s^2, |z3 - f| "
+           f"{indices['eso_disturbance_max_dev']:.3g} m/s^3"]
+          if "eso_speed_max_dev" in indices else []),
+        *([f"overshoot        {indices['overshoot_percent']:.3f} %"]
+          if "overshoot_percent" in indices else []),
     ])

@@ -17,6 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.params import ScenarioError
 from ato_nodes.core.topics import step_topics
+from ato_nodes.bagio import PARAMETERS_KEY
 from ato_nodes.nodes.base import AtoNode, run_node
 
 
@@ -34,6 +35,8 @@ class RecorderNode(AtoNode):
         self.expected = None
         self.writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
+        if self.values["recorder.run_parameters"]:
+            self.writer.set_custom_data(PARAMETERS_KEY, self.values["recorder.run_parameters"])
         typestore = get_typestore(Stores.ROS2_JAZZY)
         self.counts: dict[str, int] = {}
         for topic in step_topics():

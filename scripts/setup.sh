@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Creates .venv (CPython 3.11: the ROS 2 Jazzy wheels exist for it only) and installs
+# requirements.txt into it. Safe to run again: an existing .venv is reused.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python=${PYTHON:-}
+if [ -z "$python" ]; then
+  for candidate in python3.11 python3; do
+    if command -v "$candidate" >/dev/null &&
+       "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
+      python=$candidate
+      break
+    fi
+  done
+fi
+if [ -z "$python" ]; then
+  echo "error: CPython 3.11 is needed (the ros-jazzy-* wheels are built for it); set PYTHON=" >&2
+  exit 2
+fi
+[ -x .venv/bin/python ] || "$python" -m venv .venv
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt
