@@ -135,7 +135,8 @@ class Run:
         return np.clip(x, self.lower, self.upper)
 
     def uniform(self, n: int) -> np.ndarray:
-        return self.lower + self.rng.random((n, self.dim)) * self.span
+        # clip: lower + r * span can round to one ulp past upper
+        return self.clip(self.lower + self.rng.random((n, self.dim)) * self.span)
 
     def with_start_point(self, population: np.ndarray) -> np.ndarray:
         """The population with x0, if given, as its row 0."""
@@ -194,6 +195,17 @@ class _StallWatch:
     @property
     def stalled(self) -> bool:
         return self.iterations is not None and self.count >= self.iterations
+
+
+def _stop_reason(run: Run, started: float, max_time: float | None,
+                 stall: _StallWatch) -> StopReason | None:
+    if run.remaining == 0:
+        return StopReason.BUDGET
+    if max_time is not None and time.monotonic() - started >= max_time:
+        return StopReason.WALL_TIME
+    if stall.stalled:
+        return StopReason.STALL
+    return None
 
 
 def _as_generator(seed: Seed) -> np.random.Generator:
@@ -255,19 +267,10 @@ class Optimizer(ABC):
         state = self._start(run)
         history = [run.close_iteration()]
         stall = _StallWatch(stall_iterations, stall_tolerance, run.best_f)
-        while True:
-            if run.remaining == 0:
-                reason = StopReason.BUDGET
-            elif max_time is not None and time.monotonic() - started >= max_time:
-                reason = StopReason.WALL_TIME
-            elif stall.stalled:
-                reason = StopReason.STALL
-            else:
-                run.iteration += 1
-                self._step(run, state)
-                history.append(run.close_iteration())
-                stall.update(run.best_f)
-                continue
-            break
+        while (reason := _stop_reason(run, started, max_time, stall)) is None:
+            run.iteration += 1
+            self._step(run, state)
+            history.append(run.close_iteration())
+            stall.update(run.best_f)
         return Result(self.name, run.best_x.copy(), run.best_f, run.evaluations, len(history),
                       reason, history)
