@@ -18,4 +18,6 @@ if [ -z "$python" ]; then
   exit 2
 fi
 [ -x .venv/bin/python ] || "$python" -m venv .venv
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt
+# (pip's notes about configured local index folders that do not exist are noise)
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt \
+  2> >(grep -v "^WARNING: Location .* is ignored" >&2)

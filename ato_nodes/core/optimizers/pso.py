@@ -27,6 +27,7 @@ Choices where seed 000 is silent:
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,22 +61,20 @@ class Swarm:
         self.best_f[rows[better]] = f[better]
 
 
-def _check_population(size: int, minimum: int) -> int:
+def check_population(size: int, minimum: int) -> int:
     if int(size) != size or size < minimum:
         raise ValueError(f"population_size must be a whole number >= {minimum}")
     return int(size)
 
 
-class ParticleSwarm(Optimizer):
-    name = "pso"
+class SwarmOptimizer(Optimizer):
+    """A PSO-family algorithm: the PSO move with coefficients chosen by the
+    subclass, velocity clamping and absorbing walls."""
 
-    def __init__(self, population_size: int = 40, w_start: float = 0.9, w_end: float = 0.4,
-                 c1: float = 2.0, c2: float = 2.0, velocity_limit: float = 0.2):
-        self.population_size = _check_population(population_size, 2)
+    def __init__(self, population_size: int, velocity_limit: float):
+        self.population_size = check_population(population_size, 2)
         if velocity_limit <= 0:
             raise ValueError("velocity_limit must be positive")
-        self.w_start, self.w_end = w_start, w_end
-        self.c1, self.c2 = c1, c2
         self.velocity_limit = velocity_limit
 
     def initial_evaluations(self) -> int:
@@ -92,9 +91,9 @@ class ParticleSwarm(Optimizer):
         limit = self.velocity_limit * run.span
         return run.rng.uniform(-limit, limit, (self.population_size, run.dim))
 
+    @abstractmethod
     def _coefficients(self, run: Run, swarm: Swarm) -> tuple[float, float, float]:
         """(w, c1, c2) of this iteration."""
-        return self.w_start - (self.w_start - self.w_end) * run.progress, self.c1, self.c2
 
     def _step(self, run: Run, swarm: Swarm) -> None:
         self._fly(run, swarm, *self._coefficients(run, swarm))
@@ -112,3 +111,16 @@ class ParticleSwarm(Optimizer):
         x = run.clip(x)
         swarm.v = velocity
         swarm.place(np.arange(swarm.size), x, run.evaluate(x))
+
+
+class ParticleSwarm(SwarmOptimizer):
+    name = "pso"
+
+    def __init__(self, population_size: int = 40, w_start: float = 0.9, w_end: float = 0.4,
+                 c1: float = 2.0, c2: float = 2.0, velocity_limit: float = 0.2):
+        super().__init__(population_size, velocity_limit)
+        self.w_start, self.w_end = w_start, w_end
+        self.c1, self.c2 = c1, c2
+
+    def _coefficients(self, run: Run, swarm: Swarm) -> tuple[float, float, float]:
+        return self.w_start - (self.w_start - self.w_end) * run.progress, self.c1, self.c2
