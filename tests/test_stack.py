@@ -160,7 +160,7 @@ def test_ctrl_c_leaves_a_readable_bag_with_every_step_so_far(tmp_path):
     assert set(counts) == STEP_TOPICS
     recorded = min(counts.values())
     assert recorded >= 40  # at least 3 s at 20 steps/s
-    assert max(counts.values()) - recorded <= 1  # a step cut in its middle at most
+    assert max(counts.values()) - recorded <= 2  # a step cut in its middle; targets run 2 ahead
     assert mcap_message_count(bag) == sum(counts.values())
     series = read_series(bag)
     expected = in_process(60)

@@ -1,15 +1,18 @@
 """The lockstep loop's three stages, built from parameters, ROS-free.
 
 Step k (t_k = k * period), in every runner:
-  plant.outputs()           -> position s_k, measured and true speed, ... at t_k
-  profile.on_position(s_k)  -> the target of the NEXT step, r_k+1 (and r_0 at k = 0)
-  controller.step(r_k, y_k) -> command u_k (N/kN) and observer states
-  plant.apply(u_k)          -> integrate [t_k, t_k+1] with u_k held
-The profile works one step ahead, from the position extrapolated to t_k+1
-(2 s_k - s_k-1; error ~ a dt^2, millimetres), so it runs beside the
-controller instead of in front of it: the critical path of a step is two
-message hops (plant -> controller -> plant), not three. For time-indexed
-curves the targets are exactly r(t_k).
+  plant.outputs()            -> position s_k, measured and true speed, ... at t_k
+  profile.on_position(s_k)   -> target r_k+2 (and r_0, r_1, r_2 at k = 0)
+  controller.step(r, y_k)    -> command u_k (N/kN); r = r_k+p with p = controller.preview
+  plant.apply(u_k)           -> integrate [t_k, t_k+1] with u_k held
+The target topic carries r_k as its k-th message, whatever the runner, so the
+recorded target of step k is always r(t_k). The profile sends targets two
+steps ahead, from the position extrapolated to t_k+2 (s_k + 2 (s_k - s_k-1);
+error ~ a (2 dt)^2, centimetres; exact for time-indexed curves), so it runs
+beside the controller instead of in front of it: the critical path of a step
+is two message hops (plant -> controller -> plant), and the controller can
+look one step ahead (preview = 1: its reference is the target for the end
+of the interval its command acts over, as the ATO knows its planned curve).
 
 The ROS nodes run one stage each and pass the values as float64 messages,
 bit for bit; `simulate()` makes the same calls in one process, so both give
@@ -28,6 +31,9 @@ from .adrc import ControllerOutput, HanADRC, HanADRCGains, LinearADRC, LinearADR
 from .params import steps
 from .plant import PointMassTrain, TrainParameters, TrainState
 from .profiles import Seed000Profile, StepProfile, TableProfile
+
+
+LOOKAHEAD = 2  # steps the profile runs ahead of the plant
 
 
 class ProfileStage:
@@ -51,12 +57,14 @@ class ProfileStage:
         """Position s_k of step k in; the targets to publish now out, in step order."""
         k = self.received
         self.received += 1
-        targets = [self.curve.speed(0.0, position)] if k == 0 else []
-        if k + 1 < self.total_steps:
-            predicted = 2.0 * position - self.last_position if k > 0 else position
-            targets.append(self.curve.speed((k + 1) * self.period, predicted))
+        if k == 0:
+            wanted = [(step, position) for step in range(LOOKAHEAD + 1)]
+        else:
+            velocity_step = position - self.last_position
+            wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * velocity_step)]
         self.last_position = position
-        return targets
+        return [self.curve.speed(step * self.period, predicted)
+                for step, predicted in wanted if step < self.total_steps]
 
 
 @dataclass
@@ -102,22 +110,47 @@ class PlantStage:
 
 
 class ControllerStage:
-    def __init__(self, values: dict[str, Any], initial_target: float, initial_speed: float):
+    """The controller and its pairing rule: step k needs the measured speed y_k and
+    the targets up to r_k+preview (r_N-1 at most)."""
+
+    def __init__(self, values: dict[str, Any]):
+        self.values = values
+        self.preview = values["controller.preview"]
+        self.total_steps = steps(values)
+        self.targets: deque[float] = deque()
+        self.speeds: deque[float] = deque()
+        self.step_index = 0
+        self.controller: HanADRC | LinearADRC | None = None
+
+    def _build(self, initial_target: float, initial_speed: float) -> HanADRC | LinearADRC:
+        values = self.values
         period = values["run.period"]
         limits = values["controller.u_min"], values["controller.u_max"]
         if values["controller.kind"] == "han_adrc":
             gains = HanADRCGains(**{name: values[f"adrc.{name}"] for name in (
                 "mu1", "mu2", "alpha1", "alpha2", "r0", "h0", "beta1", "beta2", "beta3", "b0",
                 "delta", "implicit_nlsef")})
-            self.controller = HanADRC(gains, period, *limits, initial_target=initial_target,
-                                      initial_speed=initial_speed)
-        else:
-            gains = LinearADRCGains(values["ladrc.omega_o"], values["ladrc.omega_c"],
-                                    values["ladrc.b0"])
-            self.controller = LinearADRC(gains, period, *limits, initial_speed=initial_speed)
+            return HanADRC(gains, period, *limits, initial_target=initial_target,
+                           initial_speed=initial_speed)
+        gains = LinearADRCGains(values["ladrc.omega_o"], values["ladrc.omega_c"],
+                                values["ladrc.b0"])
+        return LinearADRC(gains, period, *limits, initial_speed=initial_speed)
 
-    def step(self, target: float, measured_speed: float) -> ControllerOutput:
-        return self.controller.step(target, measured_speed)
+    def ready(self) -> list[ControllerOutput]:
+        """Run every step whose inputs have all arrived; their outputs in order."""
+        outputs = []
+        while self.speeds:
+            lead = min(self.preview, self.total_steps - 1 - self.step_index)
+            if len(self.targets) <= lead:
+                break
+            reference = self.targets[lead]
+            speed = self.speeds.popleft()
+            self.targets.popleft()
+            if self.controller is None:
+                self.controller = self._build(reference, speed)
+            outputs.append(self.controller.step(reference, speed))
+            self.step_index += 1
+        return outputs
 
 
 SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
@@ -127,17 +160,14 @@ SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", 
 def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
     """Run the loop in this process; one array per SERIES name, one entry per step."""
     period = values["run.period"]
-    profile, plant = ProfileStage(values), PlantStage(values)
-    controller = None
-    targets: deque[float] = deque()
+    profile, plant, controller = ProfileStage(values), PlantStage(values), ControllerStage(values)
     rows = []
     for k in range(steps(values)):
         out = plant.outputs()
-        targets.extend(profile.on_position(out.position))
-        target = targets.popleft()
-        if controller is None:
-            controller = ControllerStage(values, target, out.measured_speed)
-        c = controller.step(target, out.measured_speed)
+        controller.targets.extend(profile.on_position(out.position))
+        target = controller.targets[0]
+        controller.speeds.append(out.measured_speed)
+        (c,) = controller.ready()
         plant.apply(c.u)
         rows.append((k * period, target, out.position, out.measured_speed, out.speed,
                      out.acceleration, out.disturbance, out.force, out.resistance,

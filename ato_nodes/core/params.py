@@ -117,6 +117,9 @@ SPECS: tuple[ParamSpec, ...] = (
     # Controller.
     _p("controller.kind", "han_adrc", "han_adrc (seed 000) or linear_adrc", "controller",
        choices=("han_adrc", "linear_adrc")),
+    _p("controller.preview", 0, "steps of target preview: 0 = the TD tracks r_k (paper), "
+       "1 = r_k+1, the target at the end of the interval the command acts over",
+       "controller", 0, 1),
     _p("controller.u_min", -1e6, "lowest command (braking), N/kN", "controller", -1e9, 0.0),
     _p("controller.u_max", 1e6, "highest command (traction), N/kN", "controller", 0.0, 1e9),
     _p("adrc.mu1", 6000.0, "NLSEF gain on e1", "controller", 0.0, 1e9),

@@ -1,9 +1,7 @@
-"""Speed-tracking controller node: pairs step k's target and measured speed
+"""Speed-tracking controller node: pairs step k's measured speed with its targets
 (by arrival order; Float64 carries no stamp) and publishes the command."""
 
 from __future__ import annotations
-
-from collections import deque
 
 from geometry_msgs.msg import Twist
 from std_msgs.msg import Float64
@@ -17,31 +15,27 @@ class ControllerNode(AtoNode):
 
     def __init__(self):
         super().__init__()
-        self.stage: ControllerStage | None = None
-        self.targets: deque[float] = deque()
-        self.speeds: deque[float] = deque()
+        self.stage = ControllerStage(self.values)
         self.command_pub = self.publisher("command")
         self.state_pub = self.publisher("controller_state")
+        self.command_msg, self.state_msg = Float64(), Twist()
         self.subscription("target_speed", self.on_target)
         self.subscription("measured_speed", self.on_speed)
         self.ready_when_matched()
 
     def on_target(self, msg: Float64) -> None:
-        self.targets.append(msg.data)
-        self.try_step()
+        self.stage.targets.append(msg.data)
+        self.publish(self.stage.ready())
 
     def on_speed(self, msg: Float64) -> None:
-        self.speeds.append(msg.data)
-        self.try_step()
+        self.stage.speeds.append(msg.data)
+        self.publish(self.stage.ready())
 
-    def try_step(self) -> None:
-        while self.targets and self.speeds:
-            target, speed = self.targets.popleft(), self.speeds.popleft()
-            if self.stage is None:
-                self.stage = ControllerStage(self.values, target, speed)
-            out = self.stage.step(target, speed)
-            self.command_pub.publish(Float64(data=out.u))
-            state = Twist()
+    def publish(self, outputs) -> None:
+        for out in outputs:
+            self.command_msg.data = out.u
+            self.command_pub.publish(self.command_msg)
+            state = self.state_msg
             state.linear.x, state.linear.y, state.linear.z = out.z1, out.z2, out.z3
             state.angular.x, state.angular.y = out.v1, out.v2
             self.state_pub.publish(state)

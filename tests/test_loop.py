@@ -1,0 +1,55 @@
+"""The loop's pairing and look-ahead rules (what the nodes and the simulation share)."""
+
+import pytest
+
+from ato_nodes.core.loop import ControllerStage, ProfileStage, simulate
+from ato_nodes.core.params import apply_overrides, load_scenario
+
+
+def values(*overrides):
+    return apply_overrides(load_scenario("seed000"), ["run.duration=0.2", *overrides])
+
+
+def test_profile_sends_targets_two_steps_ahead_from_extrapolated_position(tmp_path):
+    table = tmp_path / "by_position.csv"
+    table.write_text("position,speed\n0,0\n1000,100\n")
+    profile = ProfileStage(values("profile.kind=table", f"profile.table.file={table}",
+                                  "run.duration=1"))
+    # constant 5 m per step: s_k = 5 k, so the target of step j is V(5 j) = 0.5 j.
+    # At k = 0 no motion is known yet: r_0..r_2 are taken at s_0 (a standing start).
+    sent = [profile.on_position(5.0 * k) for k in range(4)]
+    assert sent[0] == pytest.approx([0.0, 0.0, 0.0])
+    assert sent[1] == pytest.approx([1.5]) and sent[3] == pytest.approx([2.5])
+
+
+def test_profile_stops_at_the_last_step():
+    profile = ProfileStage(values())  # 4 steps
+    sent = [target for k in range(4) for target in profile.on_position(0.0)]
+    assert len(sent) == 4
+
+
+def test_controller_waits_for_its_preview_target_except_at_the_last_step():
+    stage = ControllerStage(values("controller.preview=1"))  # 4 steps
+    stage.speeds.append(0.0)
+    stage.targets.append(1.0)
+    assert stage.ready() == []  # r_1 not there yet
+    stage.targets.extend([2.0, 3.0, 4.0])
+    stage.speeds.extend([0.0, 0.0, 0.0])
+    outputs = stage.ready()
+    assert len(outputs) == 4 and stage.step_index == 4
+    # the TD was started on r_1, the preview of step 0
+    assert outputs[0].v1 == pytest.approx(2.0)
+
+
+def test_without_preview_each_step_needs_only_its_own_target():
+    stage = ControllerStage(values())
+    stage.speeds.append(0.0)
+    stage.targets.append(1.0)
+    assert len(stage.ready()) == 1
+
+
+def test_simulation_records_the_target_of_each_step_whatever_the_preview():
+    base = simulate(values("run.duration=5"))
+    preview = simulate(values("run.duration=5", "controller.preview=1"))
+    assert list(base["target"]) == list(preview["target"])
+    assert list(base["command"]) != list(preview["command"])
