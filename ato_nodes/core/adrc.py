@@ -57,16 +57,18 @@ def fal_gain(e: float, alpha: float, delta: float) -> float:
 
 
 def fhan(x1: float, x2: float, r: float, h0: float) -> float:
-    """Han's time-optimal synthesis function (seed 000 eq. 7)."""
+    """Han's time-optimal synthesis function (seed 000 eq. 7); sign() is written
+    out as comparisons because this runs every step of every candidate."""
     d = r * h0 * h0
     a0 = h0 * x2
     y = x1 + a0
     a1 = math.sqrt(d * (d + 8.0 * abs(y)))
-    a2 = a0 + sign(y) * (a1 - d) / 2.0
-    sy = (sign(y + d) - sign(y - d)) / 2.0
+    a2 = a0 + ((y > 0.0) - (y < 0.0)) * (a1 - d) / 2.0
+    sy = (((y + d) > 0.0) - ((y + d) < 0.0) - ((y - d) > 0.0) + ((y - d) < 0.0)) / 2.0
     a = (a0 + y - a2) * sy + a2
-    sa = (sign(a + d) - sign(a - d)) / 2.0
-    return -r * (a / d - sign(a)) * sa - r * sign(a)
+    sa = (((a + d) > 0.0) - ((a + d) < 0.0) - ((a - d) > 0.0) + ((a - d) < 0.0)) / 2.0
+    sign_a = (a > 0.0) - (a < 0.0)
+    return -r * (a / d - sign_a) * sa - r * sign_a
 
 
 class TrackingDifferentiator:
@@ -133,7 +135,7 @@ class HanADRCGains:
     implicit_nlsef: bool = True
 
 
-@dataclass
+@dataclass(slots=True)
 class ControllerOutput:
     """One control step: the command and the internal states worth recording."""
 

@@ -98,6 +98,13 @@ class PlantStage:
             TrainState(position=values["plant.initial_position"],
                        speed=values["plant.initial_speed"]))
         self.last_command = 0.0
+        self.max_speed = values["plant.max_speed"]
+
+    @property
+    def diverged(self) -> bool:
+        """Speed not finite or beyond plant.max_speed: a run that can only get worse."""
+        speed = self.train.state.speed
+        return not (abs(speed) <= self.max_speed)  # also true for NaN
 
     def outputs(self) -> PlantOutputs:
         s, p = self.train.state, self.params
@@ -158,7 +165,8 @@ SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", 
 
 
 def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
-    """Run the loop in this process; one array per SERIES name, one entry per step."""
+    """Run the loop in this process; one array per SERIES name, one entry per step.
+    A diverged run (see PlantStage.diverged) ends early, as it does in the stack."""
     period = values["run.period"]
     profile, plant, controller = ProfileStage(values), PlantStage(values), ControllerStage(values)
     rows = []
@@ -172,5 +180,7 @@ def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
         rows.append((k * period, target, out.position, out.measured_speed, out.speed,
                      out.acceleration, out.disturbance, out.force, out.resistance,
                      c.u, c.z1, c.z2, c.z3, c.v1, c.v2))
+        if plant.diverged:
+            break
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES))
     return {name: table[:, i] for i, name in enumerate(SERIES)}

@@ -112,6 +112,8 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("plant.actuator_lag", 0.0, "first-order traction/brake lag, s (0 = none)", "plant",
        0.0, 10.0),
     _p("plant.substeps", 1, "RK4 sub-steps per control period", "plant", 1, 10000),
+    _p("plant.max_speed", 200.0, "speed beyond which a run counts as diverged and ends, m/s",
+       "plant", 1.0, 1e4),
     _p("plant.initial_speed", 0.0, "speed at t = 0, m/s", "plant", 0.0, 300.0),
     _p("plant.initial_position", 0.0, "position at t = 0, m", "plant", -1e7, 1e7),
     # Controller.

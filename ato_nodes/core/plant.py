@@ -80,50 +80,64 @@ class PointMassTrain:
         self.substeps = substeps
         self.state = state or TrainState()
         self.steps = round(self.state.time / period)
+        self.lagged = params.actuator_lag > 0.0
         self.limited = math.isfinite(params.max_traction_force + params.max_traction_power
                                      + params.max_brake_force + params.max_brake_power)
+        self.rates = self._make_rates()
 
-    def applied_force(self, command: float, v: float, force: float) -> float:
-        """Force envelope, then lag: returns dF/dt when lagged, else F itself."""
-        if self.limited:
-            low, high = self.p.force_limits(v)
-            command = min(max(command, low), high)
-        if self.p.actuator_lag > 0.0:
-            return (command - force) / self.p.actuator_lag
-        return command
-
-    def derivatives(self, t: float, v: float, force: float, command: float
-                    ) -> tuple[float, float, float]:
-        """(ds/dt, dv/dt, dF/dt)."""
+    def _make_rates(self):
+        """rates(t, v, F, command) -> (dv/dt, dF/dt) with every constant bound once:
+        this runs four times per sub-step, in every node and every tuning candidate."""
         p = self.p
-        if p.actuator_lag > 0.0:
-            dforce = self.applied_force(command, v, force)
-        else:
-            force, dforce = self.applied_force(command, v, force), 0.0
-        return v, p.xi * (force - p.resistance(v)) + p.disturbance(t), dforce
+        xi, a, b, c = p.xi, p.davis_a, p.davis_b, p.davis_c
+        amplitude, omega, phase = (p.disturbance_amplitude, p.disturbance_frequency,
+                                   p.disturbance_phase)
+        sin, copysign = math.sin, math.copysign
+        limits, limited, tau = p.force_limits, self.limited, p.actuator_lag
+
+        def achievable(command: float, v: float) -> float:
+            if limited:
+                low, high = limits(v)
+                return low if command < low else high if command > high else command
+            return command
+
+        def rates(t: float, v: float, force: float, command: float) -> tuple[float, float]:
+            speed = v if v >= 0.0 else -v
+            resistance = copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
+            if tau > 0.0:
+                dforce = (achievable(command, v) - force) / tau
+            else:
+                force, dforce = achievable(command, v), 0.0
+            return xi * (force - resistance) + amplitude * sin(omega * t + phase), dforce
+
+        self.achievable = achievable
+        return rates
 
     def acceleration(self, command: float) -> float:
         """True acceleration at the current state under `command`."""
         s = self.state
-        return self.derivatives(s.time, s.speed, s.force, command)[1]
+        return self.rates(s.time, s.speed, s.force, command)[0]
 
     def step(self, command: float) -> TrainState:
-        s = self.state
+        """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
+        s, rates = self.state, self.rates
         h = self.period / self.substeps
         start = s.time
         x, v, f = s.position, s.speed, s.force
         for i in range(self.substeps):
             t = start + i * h
-            d = self.derivatives
-            k1 = d(t, v, f, command)
-            k2 = d(t + h / 2, v + h / 2 * k1[1], f + h / 2 * k1[2], command)
-            k3 = d(t + h / 2, v + h / 2 * k2[1], f + h / 2 * k2[2], command)
-            k4 = d(t + h, v + h * k3[1], f + h * k3[2], command)
-            x += h / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
-            v += h / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
-            f += h / 6 * (k1[2] + 2 * k2[2] + 2 * k3[2] + k4[2])
-        if self.p.actuator_lag <= 0.0:
-            f = self.applied_force(command, v, f)
+            a1, g1 = rates(t, v, f, command)
+            v2 = v + h / 2 * a1
+            a2, g2 = rates(t + h / 2, v2, f + h / 2 * g1, command)
+            v3 = v + h / 2 * a2
+            a3, g3 = rates(t + h / 2, v3, f + h / 2 * g2, command)
+            v4 = v + h * a3
+            a4, g4 = rates(t + h, v4, f + h * g3, command)
+            x += h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+            v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+            f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
+        if not self.lagged:
+            f = self.achievable(command, v)
         self.steps += 1
         s.time, s.position, s.speed, s.force = self.steps * self.period, x, v, f
         return s

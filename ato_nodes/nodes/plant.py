@@ -62,6 +62,9 @@ class PlantNode(AtoNode):
     def on_command(self, msg: Float64) -> None:
         self.stage.apply(msg.data)
         self.step_index += 1
+        if self.stage.diverged:
+            self.announce(f"finished {self.step_index} diverged")
+            return
         if self.step_index >= self.total_steps:
             self.announce(f"finished {self.step_index}")
             return

@@ -60,7 +60,7 @@ class RecorderNode(AtoNode):
 
     def on_event(self, word: str, argument: str) -> None:
         if word == "finished":
-            self.expected = int(argument)
+            self.expected = int(argument.split()[0])
             self._check_complete()
 
     def _check_complete(self) -> None:

@@ -30,6 +30,7 @@ class SupervisorNode(AtoNode):
         self.created = time.monotonic()
         self.started = self.finished = None
         self.finished_steps = 0
+        self.diverged = False
         self.failed = False
         self.interactive = sys.stderr.isatty()
         self.last_line = 0.0
@@ -43,7 +44,8 @@ class SupervisorNode(AtoNode):
                 self.announce("start")
         elif word == "finished":
             self.finished = time.monotonic()
-            self.finished_steps = int(argument)
+            count, _, reason = argument.partition(" ")
+            self.finished_steps, self.diverged = int(count), reason == "diverged"
         elif word == "recorded":
             self.report(int(argument))
             self.announce("shutdown")
@@ -80,6 +82,7 @@ class SupervisorNode(AtoNode):
         sim_time = self.finished_steps * self.period
         report = {
             "steps": self.finished_steps,
+            "diverged": self.diverged,
             "recorded_steps": recorded_steps,
             "sim_time": sim_time,
             "loop_wall_time": loop_wall,
