@@ -81,6 +81,8 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("run.duration", 2400.0, "simulated run length, s", ALL, 1e-3, 1e7),
     _p("run.real_time", False, "pace /clock at wall speed instead of as fast as possible",
        "plant"),
+    _p("run.fault", "", "fault injection for testing supervision: NODE:crash:STEP or "
+       "NODE:hang:STEP (NODE one of profile, plant, controller, recorder)", ALL),
     # Target-speed profile.
     _p("profile.kind", "seed000", "target curve: seed000 (eq. 25), step, or table (CSV)",
        "profile", choices=("seed000", "step", "table")),
@@ -278,7 +280,26 @@ def check_consistency(values: dict[str, Any], where: str) -> dict[str, Any]:
         raise ScenarioError(f"{where}: run.duration must be at least one run.period")
     if values["profile.kind"] == "table" and not values["profile.table.file"]:
         raise ScenarioError(f"{where}: profile.kind is table but profile.table.file is empty")
+    try:
+        parse_fault(values["run.fault"])
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
     return values
+
+
+FAULT_NODES = ("profile", "plant", "controller", "recorder")
+
+
+def parse_fault(text: str) -> tuple[str, str, int] | None:
+    """run.fault as (node, 'crash' | 'hang', step), or None when empty."""
+    if not text:
+        return None
+    parts = text.split(":")
+    if (len(parts) != 3 or parts[0] not in FAULT_NODES or parts[1] not in ("crash", "hang")
+            or not parts[2].isdigit()):
+        raise ScenarioError(f"run.fault must be NODE:crash|hang:STEP with NODE one of "
+                            f"{', '.join(FAULT_NODES)}; got {text!r}")
+    return parts[0], parts[1], int(parts[2])
 
 
 def steps(values: dict[str, Any]) -> int:

@@ -4,6 +4,7 @@ the readiness gate and the run-event protocol, and a clean life cycle."""
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
 import time
 from typing import Any, Callable
@@ -18,7 +19,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from ato_nodes.core.params import SPEC_BY_NAME, ParamSpec, ScenarioError, for_node
+from ato_nodes.core.params import SPEC_BY_NAME, ParamSpec, ScenarioError, for_node, parse_fault
 from ato_nodes.core.topics import Topic, topic_map
 
 QOS = {
@@ -75,6 +76,8 @@ class AtoNode(Node):
                                                   QOS["events"])
         self._ready_timer = None
         self._wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        fault = parse_fault(self.values["run.fault"])
+        self._fault = fault[1:] if fault and fault[0] == self.role else None
 
     # Parameters -----------------------------------------------------------
     def _declare_parameters(self) -> dict[str, Any]:
@@ -127,6 +130,18 @@ class AtoNode(Node):
             self._ready_timer.cancel()
             self.destroy_timer(self._ready_timer)
             self.announce(f"ready {self.role}")
+
+    def inject_fault(self, step: int) -> None:
+        """run.fault: from the given step on, crash (an uncaught exception) or hang
+        (deaf to SIGINT and SIGTERM, so the launcher has to escalate to SIGKILL)."""
+        if self._fault is None or step < self._fault[1]:
+            return
+        if self._fault[0] == "crash":
+            raise RuntimeError(f"{self.role}: injected crash at step {step} (run.fault)")
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        while True:
+            time.sleep(1.0)
 
     # Run events -----------------------------------------------------------
     def announce(self, text: str) -> None:

@@ -33,6 +33,7 @@ class ControllerNode(AtoNode):
 
     def publish(self, outputs) -> None:
         for out in outputs:
+            self.inject_fault(self.stage.step_index)
             self.command_msg.data = out.u
             self.command_pub.publish(self.command_msg)
             state = self.state_msg

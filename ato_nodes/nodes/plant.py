@@ -60,6 +60,7 @@ class PlantNode(AtoNode):
         self.state_pub.publish(state)
 
     def on_command(self, msg: Float64) -> None:
+        self.inject_fault(self.step_index)
         self.stage.apply(msg.data)
         self.step_index += 1
         if self.stage.diverged:

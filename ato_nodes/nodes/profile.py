@@ -21,6 +21,7 @@ class ProfileNode(AtoNode):
         self.ready_when_matched()
 
     def on_position(self, msg: Float64) -> None:
+        self.inject_fault(self.stage.received)
         for target in self.stage.on_position(msg.data):
             self.target_msg.data = target
             self.target_pub.publish(self.target_msg)

@@ -52,6 +52,7 @@ class RecorderNode(AtoNode):
             if self.writer is None:  # closed: the run is complete or ending
                 return
             k = counts[name]
+            self.inject_fault(k)
             self.writer.write(connection, round(k * period_ns), data)
             counts[name] = k + 1
             if self.expected is not None:

@@ -1,0 +1,337 @@
+"""Tuning controller parameters with the swarm optimizers.
+
+Every candidate is a set of parameter overrides. In stack mode it is run by
+relaunching the whole node graph (ato_nodes.launch.Stack) in a ROS domain of
+its own and scored from its bag; in in-process mode by the same core code in
+a worker process. A candidate that crashes, hangs, diverges or is invalid gets
+PENALTY and is logged; tuning goes on. Every evaluation is appended to
+evaluations.jsonl as it finishes, so an interrupted run loses nothing, and
+--resume replays the optimizer (deterministic for a given seed and fitness
+values) against the log, running only what the log lacks.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import sys
+import threading
+import time
+from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import yaml
+
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.optimizers import ALGORITHMS, Result, optimize
+from ato_nodes.core.params import (SPEC_BY_NAME, ScenarioError, apply_overrides,
+                                   ros_parameter_file, steps)
+from ato_nodes.core.scoring import score_series
+
+PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
+FITNESS = {"itae": "itae", "j": "j_seed004"}
+
+
+@dataclass(frozen=True)
+class SearchSpace:
+    """The tuned parameters and their bounds."""
+
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def parse(cls, items: list[str]) -> SearchSpace:
+        """`name=low:high` items (or comma-separated lists of them)."""
+        names, lower, upper = [], [], []
+        for item in (part.strip() for text in items for part in text.split(",")):
+            if not item:
+                continue
+            name, sep, bounds = item.partition("=")
+            low, colon, high = bounds.partition(":")
+            spec = SPEC_BY_NAME.get(name.strip())
+            if not sep or not colon:
+                raise ScenarioError(f"--params expects name=low:high, got {item!r}")
+            if spec is None or spec.kind not in (int, float):
+                raise ScenarioError(f"--params: {name.strip()!r} is not a numeric parameter")
+            try:
+                low_value, high_value = float(low), float(high)
+            except ValueError:
+                raise ScenarioError(f"--params: bounds of {spec.name} must be numbers") from None
+            if not low_value < high_value:
+                raise ScenarioError(f"--params: {spec.name} needs low < high")
+            for value in (low_value, high_value):
+                spec.check(spec.kind(value), "--params")
+            if spec.name in names:
+                raise ScenarioError(f"--params: {spec.name} is given twice")
+            names.append(spec.name)
+            lower.append(low_value)
+            upper.append(high_value)
+        if not names:
+            raise ScenarioError("--params names no parameter to tune")
+        return cls(tuple(names), np.array(lower), np.array(upper))
+
+    def overrides(self, x: np.ndarray) -> dict[str, Any]:
+        return {name: (int(round(value)) if SPEC_BY_NAME[name].kind is int else float(value))
+                for name, value in zip(self.names, x)}
+
+    def start(self, values: dict[str, Any]) -> np.ndarray:
+        """The scenario's own values, clipped into the box: the starting region."""
+        return np.clip([float(values[name]) for name in self.names], self.lower, self.upper)
+
+
+@dataclass
+class Evaluation:
+    index: int
+    params: dict[str, Any]
+    fitness: float
+    status: str                 # ok, diverged, failed, timeout, invalid
+    wall_time: float
+    indices: dict[str, Any] = field(default_factory=dict)
+    message: str = ""
+
+
+def fitness_of(indices: dict[str, Any], fitness: str) -> float:
+    value = indices.get(FITNESS[fitness], math.nan)
+    return float(value) if math.isfinite(value) else PENALTY
+
+
+def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any], fitness: str,
+                        index: int) -> Evaluation:
+    """One candidate with the core code in this process (a worker of the pool)."""
+    started = time.perf_counter()
+    try:
+        run_values = apply_overrides(values, overrides)
+    except ScenarioError as exc:
+        return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
+    series = simulate(run_values)
+    indices = score_series(series, run_values)
+    diverged = len(series["t"]) < steps(run_values) or not indices["finite"]
+    return Evaluation(index, overrides, PENALTY if diverged else fitness_of(indices, fitness),
+                      "diverged" if diverged else "ok", time.perf_counter() - started, indices)
+
+
+def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any], fitness: str,
+                      index: int, bag: Path, timeout: float) -> Evaluation:
+    """One candidate through the real node graph, scored from its bag."""
+    from ato_nodes.bagio import BagError, read_parameters, read_series
+    from ato_nodes.launch import Stack
+
+    started = time.perf_counter()
+    try:
+        run_values = apply_overrides(values, overrides)
+    except ScenarioError as exc:
+        return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
+    outcome = Stack(run_values, bag, quiet=True, timeout=timeout).run()
+    indices = {}
+    if bag.exists():
+        try:
+            indices = score_series(read_series(bag), read_parameters(bag))
+        except BagError as exc:
+            outcome.message += f"; {exc}"
+    status = {"completed": "ok"}.get(outcome.status, outcome.status)
+    value = fitness_of(indices, fitness) if status == "ok" else PENALTY
+    return Evaluation(index, overrides, value, status, time.perf_counter() - started, indices,
+                      outcome.message)
+
+
+class EvaluationLog:
+    """evaluations.jsonl: one line per finished evaluation, flushed at once."""
+
+    def __init__(self, path: Path, resume: bool):
+        self.path = path
+        self.done: dict[int, Evaluation] = {}
+        if resume and path.exists():
+            for line in path.read_text().splitlines():
+                if line.strip():
+                    record = Evaluation(**json.loads(line))
+                    self.done[record.index] = record
+        elif path.exists():
+            path.unlink()
+        self.lock = threading.Lock()
+
+    def cached(self, index: int, params: dict[str, Any]) -> Evaluation | None:
+        record = self.done.get(index)
+        if record is None:
+            return None
+        if record.params.keys() != params.keys() or not np.allclose(
+                list(record.params.values()), list(params.values()), rtol=1e-12, atol=0.0):
+            raise ScenarioError(f"{self.path}: evaluation {index} was made with other settings; "
+                                "resume with the same algorithm, seed and --params")
+        return record
+
+    def append(self, record: Evaluation) -> None:
+        with self.lock, self.path.open("a") as handle:
+            handle.write(json.dumps(asdict(record)) + "\n")
+            handle.flush()
+        self.done[record.index] = record
+
+
+@dataclass
+class TuningSettings:
+    algorithm: str
+    scenario: str
+    space: SearchSpace
+    evaluations: int
+    seed: int
+    workers: int = 1
+    in_process: bool = False
+    fitness: str = "itae"
+    timeout: float = 300.0     # s of wall time per stack candidate
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def describe(self) -> dict[str, Any]:
+        return {"algorithm": self.algorithm, "scenario": self.scenario,
+                "params": {n: [lo, hi] for n, lo, hi in zip(self.space.names, self.space.lower,
+                                                            self.space.upper)},
+                "evaluations": self.evaluations, "seed": self.seed, "fitness": self.fitness,
+                "in_process": self.in_process, "options": self.options}
+
+
+class Tuner:
+    """Runs one tuning and writes its output directory."""
+
+    def __init__(self, values: dict[str, Any], settings: TuningSettings, out: Path,
+                 resume: bool = False, evaluate: Callable[..., Evaluation] | None = None,
+                 progress: bool = True):
+        if settings.algorithm not in ALGORITHMS:
+            raise ScenarioError(f"unknown algorithm {settings.algorithm!r}; known: "
+                                f"{', '.join(ALGORITHMS)}")
+        if settings.fitness not in FITNESS:
+            raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
+                                f"{', '.join(FITNESS)}")
+        self.values, self.settings, self.out = values, settings, out
+        self.progress = progress
+        out.mkdir(parents=True, exist_ok=True)
+        settings_file = out / "tuning.json"
+        if resume and settings_file.exists():
+            if json.loads(settings_file.read_text()) != json.loads(
+                    json.dumps(settings.describe())):
+                raise ScenarioError(f"{out} holds a tuning with other settings; "
+                                    "resume it with the same options")
+        settings_file.write_text(json.dumps(settings.describe(), indent=2))
+        self.log = EvaluationLog(out / "evaluations.jsonl", resume)
+        self.evaluate = evaluate or (evaluate_in_process if settings.in_process
+                                     else self._evaluate_in_stack)
+        self.next_index = 0
+        self.fresh = 0  # evaluations run by this process (not replayed from the log)
+        self.started = time.monotonic()
+        self.best = math.inf
+
+    def _evaluate_in_stack(self, values, overrides, fitness, index) -> Evaluation:
+        bag = self.out / "runs" / f"candidate-{index:05d}"
+        if bag.exists():  # a candidate interrupted before it was logged: run it again
+            for path in sorted(bag.rglob("*"), reverse=True):
+                path.unlink() if path.is_file() else path.rmdir()
+            bag.rmdir()
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        return evaluate_in_stack(values, overrides, fitness, index, bag, self.settings.timeout)
+
+    def _pool(self) -> Executor:
+        if self.settings.in_process and self.evaluate is evaluate_in_process:
+            return ProcessPoolExecutor(self.settings.workers)
+        return ThreadPoolExecutor(self.settings.workers)  # stack runs are processes already
+
+    def _batch_fitness(self, pool: Executor, population: np.ndarray) -> np.ndarray:
+        requests = []
+        for x in population:
+            overrides = self.settings.space.overrides(x)
+            requests.append((self.next_index, overrides))
+            self.next_index += 1
+        results: dict[int, Evaluation] = {}
+        pending = {}
+        for index, overrides in requests:
+            record = self.log.cached(index, overrides)
+            if record is not None:
+                results[index] = record
+            else:
+                pending[pool.submit(self.evaluate, self.values, overrides, self.settings.fitness,
+                                    index)] = index
+        for future in as_completed(pending):
+            record = future.result()
+            self.fresh += 1
+            self.log.append(record)
+            results[record.index] = record
+            self._report(record)
+        fitness = np.array([results[index].fitness for index, _ in requests])
+        self.best = min(self.best, float(fitness.min()))
+        return fitness
+
+    def _report(self, record: Evaluation) -> None:
+        self.best = min(self.best, record.fitness)
+        if not self.progress:
+            return
+        done = len(self.log.done)
+        total = self.settings.evaluations
+        eta = (time.monotonic() - self.started) / max(self.fresh, 1) * (total - done)
+        status = "" if record.status == "ok" else f" ({record.status}: candidate {record.index})"
+        print(f"evaluations {done:5d}/{total}  best {self.best:.6g}  ETA {eta:6.0f} s{status}",
+              file=sys.stderr, flush=True)
+
+    def run(self) -> Result:
+        s = self.settings
+        with self._pool() as pool:
+            result = optimize(s.algorithm, lambda population: self._batch_fitness(pool, population),
+                              s.space.lower, s.space.upper, s.evaluations, s.seed,
+                              x0=s.space.start(self.values), **s.options)
+        self._write_outputs(result)
+        return result
+
+    def _write_outputs(self, result: Result) -> None:
+        best_overrides = self.settings.space.overrides(result.best_x)
+        best_values = apply_overrides(self.values, best_overrides)
+        header = (f"# Best parameters found by {self.settings.algorithm} "
+                  f"(fitness {self.settings.fitness} = {result.best_f:.9g}) on "
+                  f"{self.settings.scenario}, seed {self.settings.seed}.\n"
+                  "# Run it with: python scripts/run_stack.py --scenario THIS_FILE\n")
+        (self.out / "best.yaml").write_text(header + yaml.safe_dump(
+            ros_parameter_file(best_values), sort_keys=False))
+        with (self.out / "history.csv").open("w", newline="") as handle:
+            writer = csv.writer(handle)
+            writer.writerow(["iteration", "evaluations", "best_fitness", "mean_fitness",
+                             *self.settings.space.names])
+            for record in result.history:
+                writer.writerow([record.iteration, record.evaluations, repr(record.best_f),
+                                 repr(record.mean_f), *map(repr, record.best_x)])
+        failures = {}
+        for record in self.log.done.values():
+            if record.status != "ok":
+                failures[record.status] = failures.get(record.status, 0) + 1
+        summary = {**self.settings.describe(), "best_fitness": result.best_f,
+                   "best_params": best_overrides, "evaluations_used": result.evaluations,
+                   "iterations": result.iterations, "stop_reason": str(result.stop_reason.value),
+                   "failed_evaluations": failures,
+                   "best_indices": _best_indices(self.log, best_overrides),
+                   "wall_time": time.monotonic() - self.started}
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
+        plot_convergence(result, self.out / "convergence.png", self.settings)
+
+
+def _best_indices(log: EvaluationLog, best: dict[str, Any]) -> dict[str, Any]:
+    for record in log.done.values():
+        if record.params == best:
+            return record.indices
+    return {}
+
+
+def plot_convergence(result: Result, path: Path, settings: TuningSettings) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    evaluations, best = result.trace("evaluations"), result.trace("best_f")
+    figure, axes = plt.subplots(figsize=(7, 4))
+    axes.step(evaluations, best, where="post", label=f"{settings.algorithm}, best so far")
+    axes.set_yscale("log")
+    axes.set_xlabel("fitness evaluations")
+    axes.set_ylabel(settings.fitness.upper())
+    axes.set_title(f"Convergence on {settings.scenario} (seed {settings.seed})")
+    axes.grid(True, which="both", alpha=0.3)
+    axes.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
