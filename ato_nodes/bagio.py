@@ -1,39 +1,128 @@
-"""Reading recorded runs back into time series (rosbags; no rclpy needed)."""
+"""Reading recorded runs back into time series (rosbags and mcap; no rclpy needed).
+
+Reads any rosbag2 bag directory (MCAP or SQLite storage) and a lone .mcap
+file without metadata.yaml. Topics are found by role (target speed, true
+state, measured speed, command, controller state, position) under the names
+of the topic map, or under other names given as a role -> topic mapping.
+Every series is sampled at the time stamps of the speed source (the true
+state, else the measured speed), holding the latest value at or before each
+stamp: for the stack's own bags, whose topics share one stamp per step, that
+is exact pairing by step.
+"""
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 import yaml
 from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
 
-# series name -> (topic key, field path in the message)
-FIELDS = {
-    "target": ("target_speed", "data"),
-    "position": ("position", "data"),
-    "measured_speed": ("measured_speed", "data"),
-    "command": ("command", "data"),
-    "speed": ("state", "linear.x"),
-    "acceleration": ("state", "linear.y"),
-    "disturbance": ("state", "linear.z"),
-    "force": ("state", "angular.x"),
-    "resistance": ("state", "angular.y"),
-    "z1": ("controller_state", "linear.x"),
-    "z2": ("controller_state", "linear.y"),
-    "z3": ("controller_state", "linear.z"),
-    "v1": ("controller_state", "angular.x"),
-    "v2": ("controller_state", "angular.y"),
+# role -> (message type, [(series name, field path)])
+ROLES: dict[str, tuple[str, list[tuple[str, str]]]] = {
+    "target_speed": ("std_msgs/msg/Float64", [("target", "data")]),
+    "state": ("geometry_msgs/msg/Twist", [
+        ("speed", "linear.x"), ("acceleration", "linear.y"), ("disturbance", "linear.z"),
+        ("force", "angular.x"), ("resistance", "angular.y")]),
+    "measured_speed": ("std_msgs/msg/Float64", [("measured_speed", "data")]),
+    "command": ("std_msgs/msg/Float64", [("command", "data")]),
+    "controller_state": ("geometry_msgs/msg/Twist", [
+        ("z1", "linear.x"), ("z2", "linear.y"), ("z3", "linear.z"), ("v1", "angular.x"),
+        ("v2", "angular.y")]),
+    "position": ("std_msgs/msg/Float64", [("position", "data")]),
 }
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
 class BagError(ValueError):
     """A bag that cannot be read or lacks what is asked of it (one-line message)."""
+
+
+@dataclass
+class Run:
+    """What a bag holds, as per-step series."""
+
+    path: Path
+    series: dict[str, np.ndarray]
+    parameters: dict | None
+    roles: dict[str, str]                       # role -> topic found
+    missing: list[str] = field(default_factory=list)  # roles not in the bag
+    notes: list[str] = field(default_factory=list)
+
+
+def parse_mapping(items: list[str]) -> dict[str, str]:
+    """`role=topic` items, e.g. target_speed=/my/target."""
+    mapping = {}
+    for item in items:
+        role, sep, topic = item.partition("=")
+        if not sep or role not in ROLES or not topic.startswith("/"):
+            raise BagError(f"--map expects role=/topic with role one of {', '.join(ROLES)}; "
+                           f"got {item!r}")
+        mapping[role] = topic
+    return mapping
+
+
+def _messages(path: Path, wanted: dict[str, str] | None
+              ) -> tuple[dict[str, str], Iterator[tuple[str, int, bytes]]]:
+    """(topic -> type of every topic in the bag, iterator of (topic, stamp ns, CDR))."""
+    if path.is_dir():
+        if not (path / "metadata.yaml").exists():
+            lone = sorted(path.glob("*.mcap"))
+            if len(lone) == 1:
+                return _mcap_messages(lone[0], wanted)
+            raise BagError(f"{path}: no rosbag2 metadata.yaml and no single .mcap file in it")
+        reader = AnyReader([path])
+        reader.open()
+        types = {c.topic: c.msgtype for c in reader.connections}
+
+        def generate():
+            try:
+                selected = [c for c in reader.connections if wanted is None or c.topic in wanted]
+                for connection, stamp, raw in reader.messages(connections=selected):
+                    yield connection.topic, stamp, bytes(raw)
+            finally:
+                reader.close()
+        return types, generate()
+    if path.suffix == ".mcap" or path.is_file():
+        return _mcap_messages(path, wanted)
+    raise BagError(f"{path} does not exist")
+
+
+def _mcap_messages(path: Path, wanted: dict[str, str] | None):
+    from mcap.reader import make_reader
+
+    handle = path.open("rb")
+    try:
+        reader = make_reader(handle)
+        summary = reader.get_summary()
+    except Exception:
+        handle.close()
+        raise
+    if summary is None:  # no summary section (e.g. cut short): read the channels as we go
+        types = None
+    else:
+        schemas = summary.schemas
+        types = {channel.topic: schemas[channel.schema_id].name
+                 for channel in summary.channels.values()}
+
+    def generate():
+        try:
+            topics = None if wanted is None else list(wanted)
+            for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=False):
+                yield channel.topic, message.log_time, message.data
+        finally:
+            handle.close()
+    if types is None:
+        raise BagError(f"{path}: MCAP file without a summary (truncated or still being written)")
+    return types, generate()
 
 
 def _field(message, path: str) -> float:
@@ -42,34 +131,82 @@ def _field(message, path: str) -> float:
     return float(message)
 
 
-def read_series(bag: str | Path) -> dict[str, np.ndarray]:
-    """Per-step series of a run: one array per FIELDS name present, plus `t`
-    (the target topic's timestamps, s). Messages are paired by order."""
-    bag = Path(bag)
-    if not bag.exists():
-        raise BagError(f"{bag} does not exist")
-    topics = topic_map()
-    by_name = {topics[key].name: key for key, _ in FIELDS.values()}
-    values: dict[str, list] = {key: [] for key in by_name.values()}
-    stamps: dict[str, list] = {key: [] for key in by_name.values()}
+def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
+    """Every series a bag can give, sampled on the speed source's stamps."""
+    path = Path(bag)
+    if not path.exists():
+        raise BagError(f"{path} does not exist")
+    names = {key: topic.name for key, topic in topic_map().items()}
+    topics_by_role = {role: (mapping or {}).get(role, names[role]) for role in ROLES}
     try:
-        with AnyReader([bag]) as reader:
-            connections = [c for c in reader.connections if c.topic in by_name]
-            for connection, timestamp, raw in reader.messages(connections=connections):
-                key = by_name[connection.topic]
-                values[key].append(reader.deserialize(raw, connection.msgtype))
-                stamps[key].append(timestamp)
+        types, messages = _messages(path, None)
+        found = {role: topic for role, topic in topics_by_role.items() if topic in types}
+        for role, topic in found.items():
+            expected = ROLES[role][0]
+            if types[topic] != expected:
+                raise BagError(f"{path}: {topic} is {types[topic]}, but {role} needs {expected}")
+        role_of = {topic: role for role, topic in found.items()}
+        stamps: dict[str, list[int]] = {role: [] for role in found}
+        raws: dict[str, list[bytes]] = {role: [] for role in found}
+        for topic, stamp, raw in messages:
+            role = role_of.get(topic)
+            if role is not None:
+                stamps[role].append(stamp)
+                raws[role].append(raw)
     except BagError:
         raise
-    except Exception as exc:  # rosbags raises several unrelated types for unreadable bags
-        raise BagError(f"{bag}: not a readable rosbag2 bag ({exc})") from None
-    if not stamps["target_speed"]:
-        raise BagError(f"{bag}: no messages on {topics['target_speed'].name}")
-    series = {"t": np.array(stamps["target_speed"], dtype=np.int64) * 1e-9}
-    for name, (key, path) in FIELDS.items():
-        if values[key]:
-            series[name] = np.array([_field(m, path) for m in values[key]], dtype=float)
-    return series
+    except Exception as exc:  # rosbags and mcap raise many unrelated types for bad files
+        problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BagError(f"{path}: not a readable rosbag2 bag or MCAP file ({problem})") from None
+    return _assemble(path, found, stamps, raws, types)
+
+
+def _assemble(path, found, stamps, raws, types) -> Run:
+    missing = [role for role in ROLES if role not in found or not raws[role]]
+    usable = {role for role in found if raws[role]}
+    if "target_speed" not in usable or not usable & {"state", "measured_speed"}:
+        names = ", ".join(sorted(types)) or "none"
+        raise BagError(f"{path}: needs a target speed and a speed topic; topics in the bag: "
+                       f"{names} (map others with --map role=/topic)")
+    notes = []
+    clock_role = "state" if "state" in usable else "measured_speed"
+    if clock_role == "measured_speed":
+        notes.append("no true state: the speed is the measured speed")
+    base = np.array(stamps[clock_role], dtype=np.int64)
+    order = np.argsort(base, kind="stable")
+    base = base[order]
+    series: dict[str, np.ndarray] = {"t": base * 1e-9}
+    for role in sorted(usable, key=lambda r: r != clock_role):  # the stamps' source first
+        msgtype, fields = ROLES[role]
+        decoded = [TYPESTORE.deserialize_cdr(raw, msgtype) for raw in raws[role]]
+        role_stamps = np.array(stamps[role], dtype=np.int64)
+        role_order = np.argsort(role_stamps, kind="stable")
+        # latest value at or before each base stamp (same stamps: same step)
+        if role == clock_role:
+            pick = role_order
+        else:
+            positions = np.searchsorted(role_stamps[role_order], base, side="right") - 1
+            valid = positions >= 0
+            base, series = _trim(base, series, valid)
+            pick = role_order[positions[valid]]
+        for name, field_path in fields:
+            series[name] = np.array([_field(decoded[i], field_path) for i in pick], dtype=float)
+    if "speed" not in series:
+        series["speed"] = series["measured_speed"]
+    length = min(len(values) for values in series.values())
+    series = {name: values[:length] for name, values in series.items()}
+    return Run(path, series, read_parameters(path), {r: found[r] for r in usable}, missing, notes)
+
+
+def _trim(base, series, valid):
+    """Drop the leading base stamps before a role's first message."""
+    if valid.all():
+        return base, series
+    return base[valid], {name: values[valid] for name, values in series.items()}
+
+
+def read_series(bag: str | Path, mapping: dict[str, str] | None = None) -> dict[str, np.ndarray]:
+    return read_run(bag, mapping).series
 
 
 def read_parameters(bag: str | Path) -> dict | None:

@@ -33,7 +33,7 @@ from ato_nodes.core.params import (SPEC_BY_NAME, ScenarioError, apply_overrides,
 from ato_nodes.core.scoring import score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
-FITNESS = {"itae": "itae", "j": "j_seed004"}
+FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error"}
 
 
 @dataclass(frozen=True)

@@ -67,7 +67,7 @@ class ProfileStage:
                 for step, predicted in wanted if step < self.total_steps]
 
 
-@dataclass
+@dataclass(slots=True)
 class PlantOutputs:
     position: float      # m
     measured_speed: float  # m/s, what the speed sensor reports

@@ -20,8 +20,8 @@ and evaluate the initial population, returning the algorithm's state) and
   well defined. Algorithms that do arithmetic on fitness values (entropy, krill
   herd's normalised differences) use `finite_or_worst`.
 * Bounds: every evaluated candidate lies in [lower, upper]; `Run.evaluate`
-  rejects one that does not, as an optimizer bug. Each algorithm documents how
-  it brings its moves back into the box (mostly by clipping).
+  rejects one that does not (or is NaN), as an optimizer bug. Each algorithm
+  documents how it brings its moves back into the box (mostly by clipping).
 * Best so far: over every evaluated candidate, whatever its role in the
   algorithm (an antenna probe that happens to be better than every particle is
   a point the caller paid for, so it is reported). Particle-swarm algorithms use
@@ -36,7 +36,8 @@ and evaluate the initial population, returning the algorithm's state) and
   the history has one record per iteration and `Result.iterations` is their
   number. A record holds the best fitness and position so far, the
   evaluations used so far and the mean of the finite values evaluated during
-  that iteration (+inf if there were none).
+  that iteration (+inf if there were none; values beyond +-1e300 clipped so
+  the sum cannot overflow).
 * Stops, checked between iterations: budget exhausted ("budget"); optional wall
   time in seconds ("wall_time"; the initialisation always completes); optional
   stall ("stall"): the best value has not dropped by more than
@@ -91,13 +92,18 @@ class Result:
         return np.array([getattr(record, field) for record in self.history])
 
 
+ARITHMETIC_LIMIT = 1e300  # |differences| of values within it cannot overflow
+
+
 def finite_or_worst(values: np.ndarray) -> np.ndarray:
     """Fitness values fit for arithmetic: +inf replaced by the worst finite value
-    (all zeros if none is finite), so non-finite candidates rank as tied worst."""
+    (all zeros if none is finite), so non-finite candidates rank as tied worst,
+    and everything clipped to +-ARITHMETIC_LIMIT."""
     finite = np.isfinite(values)
     if not finite.any():
         return np.zeros_like(values)
-    return np.where(finite, values, values[finite].max())
+    worst = np.where(finite, values, values[finite].max())
+    return np.clip(worst, -ARITHMETIC_LIMIT, ARITHMETIC_LIMIT)
 
 
 class Run:
@@ -154,8 +160,8 @@ class Run:
         candidates = np.asarray(candidates, dtype=float)
         if candidates.ndim != 2 or candidates.shape[1] != self.dim:
             raise ValueError(f"a batch must have shape (n, {self.dim}), got {candidates.shape}")
-        if np.any(candidates < self.lower) or np.any(candidates > self.upper):
-            raise ValueError("optimizer bug: a candidate lies outside the bounds")
+        if not (np.all(candidates >= self.lower) and np.all(candidates <= self.upper)):
+            raise ValueError("optimizer bug: a candidate is NaN or outside the bounds")
         values = np.full(len(candidates), np.inf)
         count = min(len(candidates), self.remaining)
         if count == 0:
@@ -169,7 +175,7 @@ class Run:
         if self.best_x is None or values[best] < self.best_f:
             self.best_x, self.best_f = candidates[best].copy(), float(values[best])
         finite = values[:count][np.isfinite(values[:count])]
-        self._iteration_sum += float(finite.sum())
+        self._iteration_sum += float(np.clip(finite, -ARITHMETIC_LIMIT, ARITHMETIC_LIMIT).sum())
         self._iteration_count += len(finite)
         return values
 

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Optimizer, Run, finite_or_worst
+from .base import ARITHMETIC_LIMIT, Optimizer, Run, finite_or_worst
 from .pso import Swarm, check_population
 
 _EPS = 1e-12  # in unit-cube lengths: keeps unit vectors of coincident krill finite
@@ -94,7 +94,7 @@ def _local_attraction(u: np.ndarray, values: np.ndarray, scale: float) -> np.nda
 
 def _food_centre(u: np.ndarray, values: np.ndarray) -> np.ndarray:
     low = values.min()
-    shift = low if low > 0 else 1e-12 * (1.0 + values.max() - low)
+    shift = low if low > 0 else 1e-12 * (1.0 + (values.max() - low))
     weights = 1.0 / (values - low + shift)
     return weights @ u / weights.sum()
 
@@ -125,7 +125,7 @@ class KrillHerd(Optimizer):
     def _step(self, run: Run, herd: Herd) -> None:
         n, rng, progress = herd.size, run.rng, run.progress
         u, values = _unit(run, herd.x), finite_or_worst(herd.f)
-        best_value = min(run.best_f, values.min())
+        best_value = max(min(run.best_f, values.min()), -ARITHMETIC_LIMIT)
         scale = values.max() - best_value
         inertia = self.inertia_start + (self.inertia_end - self.inertia_start) * progress
 

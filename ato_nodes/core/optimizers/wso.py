@@ -88,7 +88,8 @@ class WhiteShark(Optimizer):
         sharks.v = self.constriction * (sharks.v + p1 * c1 * (run.best_x - sharks.x)
                                         + p2 * c2 * (sharks.best_x[neighbour] - sharks.x))
 
-        movement_chance = 1.0 / (self.a0 + math.exp((total / 2.0 - k) / self.a1))
+        exponent = min((total / 2.0 - k) / self.a1, 700.0)  # long runs: e^x would overflow
+        movement_chance = 1.0 / (self.a0 + math.exp(exponent))
         wavy = rng.random(n) >= movement_chance
         x = np.where(wavy[:, None], sharks.x + sharks.v / self.wave_frequency, sharks.x)
 
