@@ -205,6 +205,31 @@ def _trim(base, series, valid):
     return base[valid], {name: values[valid] for name, values in series.items()}
 
 
+def read_messages(bag: str | Path, topics: list[str] | None = None
+                  ) -> tuple[dict[str, str], list[tuple[str, int, bytes]]]:
+    """(topic -> type, [(topic, stamp ns, CDR bytes)] in recorded order) of a bag,
+    restricted to `topics` if given."""
+    path = Path(bag)
+    if not path.exists():
+        raise BagError(f"{path} does not exist")
+    try:
+        types, messages = _messages(path, None)
+        if topics is not None:
+            unknown = sorted(set(topics) - set(types))
+            if unknown:
+                raise BagError(f"{path}: no topic {', '.join(unknown)}; the bag has "
+                               f"{', '.join(sorted(types))}")
+            types = {topic: types[topic] for topic in topics}
+        selected = [(topic, stamp, raw) for topic, stamp, raw in messages if topic in types]
+    except BagError:
+        raise
+    except Exception as exc:
+        problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BagError(f"{path}: not a readable rosbag2 bag or MCAP file ({problem})") from None
+    selected.sort(key=lambda message: message[1])  # stable: ties keep the recorded order
+    return types, selected
+
+
 def read_series(bag: str | Path, mapping: dict[str, str] | None = None) -> dict[str, np.ndarray]:
     return read_run(bag, mapping).series
 

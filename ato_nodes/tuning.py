@@ -26,6 +26,7 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
+from ato_nodes.analysis import plot_convergence
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, optimize
 from ato_nodes.core.params import (SPEC_BY_NAME, ScenarioError, apply_overrides,
@@ -308,7 +309,7 @@ class Tuner:
                    "best_indices": _best_indices(self.log, best_overrides),
                    "wall_time": time.monotonic() - self.started}
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
-        plot_convergence(result, self.out / "convergence.png", self.settings)
+        plot_convergence([self.out], self.out / "convergence.png")
 
 
 def _best_indices(log: EvaluationLog, best: dict[str, Any]) -> dict[str, Any]:
@@ -316,22 +317,3 @@ def _best_indices(log: EvaluationLog, best: dict[str, Any]) -> dict[str, Any]:
         if record.params == best:
             return record.indices
     return {}
-
-
-def plot_convergence(result: Result, path: Path, settings: TuningSettings) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    evaluations, best = result.trace("evaluations"), result.trace("best_f")
-    figure, axes = plt.subplots(figsize=(7, 4))
-    axes.step(evaluations, best, where="post", label=f"{settings.algorithm}, best so far")
-    axes.set_yscale("log")
-    axes.set_xlabel("fitness evaluations")
-    axes.set_ylabel(settings.fitness.upper())
-    axes.set_title(f"Convergence on {settings.scenario} (seed {settings.seed})")
-    axes.grid(True, which="both", alpha=0.3)
-    axes.legend()
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)

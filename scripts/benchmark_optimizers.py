@@ -157,6 +157,55 @@ def mann_whitney(ours: np.ndarray, theirs: np.ndarray) -> tuple[str, float]:
     return ("win" if u < len(ours) * len(theirs) / 2 else "loss"), float(p)
 
 
+Table = tuple[str, list[str], list[list[str]]]  # title, header, rows
+Results = dict[tuple[str, int, str], np.ndarray]  # (function, dim, algorithm): best values
+
+
+def run_all(cases: list[tuple[str, int]], names: list[str], seeds: range,
+            budget_per_dim: int) -> tuple[Results, dict[str, float]]:
+    results, seconds = {}, dict.fromkeys(names, 0.0)
+    for function, dim in cases:
+        batch, bound = FUNCTIONS[function]
+        for name in names:
+            values = []
+            for seed in seeds:
+                problem = Problem(batch, dim, bound, budget_per_dim * dim, seed)
+                started = time.perf_counter()
+                values.append(RUNNERS[name](problem))
+                seconds[name] += time.perf_counter() - started
+                if problem.evaluations > problem.budget:
+                    raise SystemExit(f"{name} used {problem.evaluations} evaluations "
+                                     f"of {problem.budget}")
+            results[function, dim, name] = np.array(values)
+        print(f"done {function} {dim}-D", flush=True)
+    return results, seconds
+
+
+def median_table(results: Results, cases: list[tuple[str, int]], names: list[str]) -> Table:
+    rows = []
+    for function, dim in cases:
+        medians = [np.median(results[function, dim, name]) for name in names]
+        rows.append([function, str(dim), *(f"{m:.3g}" for m in medians),
+                     names[int(np.argmin(medians))]])
+    return "Median best value", ["function", "d", *names, "lowest"], rows
+
+
+def test_table(results: Results, cases: list[tuple[str, int]], names: list[str]) -> Table:
+    pairs = [pair for pair in PAIRS if set(pair) <= set(names)]
+    totals = {pair: {"win": 0, "tie": 0, "loss": 0} for pair in pairs}
+    rows = []
+    for function, dim in cases:
+        cells = []
+        for ours, theirs in pairs:
+            outcome, p = mann_whitney(results[function, dim, ours], results[function, dim, theirs])
+            totals[ours, theirs][outcome] += 1
+            cells.append(f"{outcome} (p={p:.2g})")
+        rows.append([function, str(dim), *cells])
+    rows.append(["total", "", *(f"{t['win']}/{t['tie']}/{t['loss']}" for t in totals.values())])
+    return ("Two-sided Mann-Whitney U at p < 0.05: win/tie/loss of the first named",
+            ["function", "d", *(f"{ours} vs {theirs}" for ours, theirs in pairs)], rows)
+
+
 def markdown_table(header: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
@@ -178,7 +227,7 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--budget-per-dim", type=int, default=500,
                         help="evaluations per dimension (niapy's KH needs ~0.5 ms per "
-                             "evaluation, so 10000 x d would take hours)")
+                             "evaluation: 10000 x d would take hours)")
     parser.add_argument("--algorithms", nargs="+", choices=list(RUNNERS), default=list(RUNNERS))
     parser.add_argument("--out", help="also write the tables as Markdown to this file")
     args = parser.parse_args()
@@ -186,55 +235,26 @@ def main() -> None:
         args.seeds, args.budget_per_dim, args.dims = 3, 100, [10]
     logging.disable(logging.WARNING)  # mealpy and niapy log every run
 
+    cases = [(function, dim) for dim in args.dims for function in FUNCTIONS]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    names = args.algorithms
-    cases = [(f, d) for d in args.dims for f in FUNCTIONS]
-    results: dict[tuple[str, int, str], np.ndarray] = {}
-    seconds = dict.fromkeys(names, 0.0)
-    for function, dim in cases:
-        batch, bound = FUNCTIONS[function]
-        for name in names:
-            values = []
-            for seed in seeds:
-                problem = Problem(batch, dim, bound, args.budget_per_dim * dim, seed)
-                started = time.perf_counter()
-                values.append(RUNNERS[name](problem))
-                seconds[name] += time.perf_counter() - started
-                if problem.evaluations > problem.budget:
-                    raise SystemExit(f"{name} used {problem.evaluations} evaluations "
-                                     f"of {problem.budget}")
-            results[function, dim, name] = np.array(values)
-        print(f"done {function} {dim}-D", flush=True)
+    results, seconds = run_all(cases, args.algorithms, seeds, args.budget_per_dim)
+    setting = (f"{args.seeds} seeds from {args.first_seed}, budget {args.budget_per_dim} x d "
+               f"evaluations")
+    tables = [median_table(results, cases, args.algorithms)]
+    if any(set(pair) <= set(args.algorithms) for pair in PAIRS):
+        tables.append(test_table(results, cases, args.algorithms))
+    timing = "Seconds per algorithm, all runs: " + ", ".join(
+        f"{name} {seconds[name]:.0f}" for name in args.algorithms)
 
-    title = (f"Median best value over {args.seeds} seeds; budget {args.budget_per_dim} x d "
-             f"evaluations")
-    header = ["function", "d", *names]
-    rows = [[function, str(dim), *(f"{np.median(results[function, dim, n]):.3g}" for n in names)]
-            for function, dim in cases]
-    pairs = [pair for pair in PAIRS if set(pair) <= set(names)]
-    test_header = ["function", "d", *(f"{a} vs {b}" for a, b in pairs)]
-    test_rows, totals = [], {pair: {"win": 0, "tie": 0, "loss": 0} for pair in pairs}
-    for function, dim in cases:
-        cells = []
-        for pair in pairs:
-            outcome, p = mann_whitney(results[function, dim, pair[0]], results[function, dim, pair[1]])
-            totals[pair][outcome] += 1
-            cells.append(f"{outcome} (p={p:.2g})")
-        test_rows.append([function, str(dim), *cells])
-    total_row = ["total", "", *(f"{t['win']}/{t['tie']}/{t['loss']}" for t in totals.values())]
-    timing = "Seconds per algorithm (all runs): " + ", ".join(
-        f"{n} {seconds[n]:.0f}" for n in names)
-    test_title = "Two-sided Mann-Whitney U, p < 0.05: win/tie/loss of the first named"
-
-    print(f"\n{title}\n{plain_table(header, rows)}")
-    if pairs:
-        print(f"\n{test_title}\n{plain_table(test_header, [*test_rows, total_row])}")
+    print(f"\n{setting}")
+    for title, header, rows in tables:
+        print(f"\n{title}\n{plain_table(header, rows)}")
     print(f"\n{timing}")
     if args.out:
         with open(args.out, "w") as out:
-            out.write(f"{title}\n\n{markdown_table(header, rows)}\n")
-            if pairs:
-                out.write(f"\n{test_title}\n\n{markdown_table(test_header, [*test_rows, total_row])}\n")
+            out.write(f"{setting}\n")
+            for title, header, rows in tables:
+                out.write(f"\n{title}\n\n{markdown_table(header, rows)}\n")
             out.write(f"\n{timing}\n")
 
 

@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Score a recorded run from its bag alone: ITAE, IAE, ISE, max |e|, seed 004's J.
 
-    python scripts/score_bag.py bags/seed000-20261122-120000 [--json]
+    python scripts/score_bag.py BAG [--json] [--map role=/topic]
+
+BAG is a rosbag2 directory or a lone .mcap file.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import json
 
 import _cli
 
-from ato_nodes.bagio import BagError, read_parameters, read_series
+from ato_nodes.bagio import BagError, parse_mapping, read_run
 from ato_nodes.core.scoring import format_indices, score_series
 
 
@@ -19,11 +21,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("bag", help="rosbag2 directory (metadata.yaml + .mcap)")
     parser.add_argument("--json", action="store_true", help="print the indices as JSON")
+    parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC",
+                        help="read a role from another topic (see analyze.py --help)")
     args = parser.parse_args()
     try:
-        indices = score_series(read_series(args.bag), read_parameters(args.bag))
+        run = read_run(args.bag, parse_mapping(args.map))
     except BagError as exc:
         _cli.fail(str(exc))
+    indices = score_series(run.series, run.parameters)
     print(json.dumps(indices, indent=2) if args.json else format_indices(indices))
 
 

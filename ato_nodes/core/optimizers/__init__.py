@@ -13,7 +13,8 @@ One interface for every algorithm (see base.py for the details):
   exceeded; seed (int or numpy Generator) makes the run reproducible, and the
   same seed with the same fitness values requests the same batches.
 * Algorithm options (population_size, coefficients) go as keyword arguments;
-  each algorithm's defaults are its paper's, documented in its module.
+  each algorithm's module documents its defaults (its paper's where the paper
+  gives them) and every choice the paper leaves open.
 
 Algorithms: "pso" (seed 000), "bas" and "bas-pso" (seed 000), "apso"
 (seed 003), "ga-pso" (seed 004), "wso" (white shark, the improved shark

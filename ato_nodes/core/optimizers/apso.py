@@ -44,12 +44,12 @@ import numpy as np
 
 from .base import Run, finite_or_worst
 from .pso import Swarm, SwarmOptimizer
+from .sampling import chaotic_opposition_start
 
 
 @dataclass
 class AdaptiveSwarm(Swarm):
     entropy_edges: np.ndarray | None = None  # set by AdaptivePSO._start
-from .sampling import chaotic_opposition_start
 
 
 def entropy_bin_edges(values: np.ndarray, bins: int) -> np.ndarray:

@@ -66,7 +66,8 @@ class Antennae:
         step = self.step(run.progress)
         directions = random_unit_vectors(run.rng, len(centres), run.dim) * run.span
         half_d0 = 0.5 * step / self.step_to_d0 * directions
-        values = run.evaluate(np.vstack([run.clip(centres + half_d0), run.clip(centres - half_d0)]))
+        antennae = np.vstack([run.clip(centres + half_d0), run.clip(centres - half_d0)])
+        values = run.evaluate(antennae)
         left, right = values[:len(centres)], values[len(centres):]
         sign = (left > right).astype(float) - (left < right)  # no NaN from inf - inf
         return -step * directions * sign[:, None]

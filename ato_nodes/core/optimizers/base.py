@@ -18,7 +18,8 @@ and evaluate the initial population, returning the algorithm's state) and
 * Non-finite fitness values (NaN, +-inf: e.g. a diverged simulation) become
   +inf, the worst value: they never beat a finite value, and comparisons stay
   well defined. Algorithms that do arithmetic on fitness values (entropy, krill
-  herd's normalised differences) use `finite_or_worst`.
+  herd's normalised differences) use `finite_or_worst`. Finite values are
+  clipped to +-1e300, so sums and differences of them cannot overflow.
 * Bounds: every evaluated candidate lies in [lower, upper]; `Run.evaluate`
   rejects one that does not (or is NaN), as an optimizer bug. Each algorithm
   documents how it brings its moves back into the box (mostly by clipping).
@@ -36,8 +37,7 @@ and evaluate the initial population, returning the algorithm's state) and
   the history has one record per iteration and `Result.iterations` is their
   number. A record holds the best fitness and position so far, the
   evaluations used so far and the mean of the finite values evaluated during
-  that iteration (+inf if there were none; values beyond +-1e300 clipped so
-  the sum cannot overflow).
+  that iteration (+inf if there were none).
 * Stops, checked between iterations: budget exhausted ("budget"); optional wall
   time in seconds ("wall_time"; the initialisation always completes); optional
   stall ("stall"): the best value has not dropped by more than
@@ -51,9 +51,10 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -92,18 +93,16 @@ class Result:
         return np.array([getattr(record, field) for record in self.history])
 
 
-ARITHMETIC_LIMIT = 1e300  # |differences| of values within it cannot overflow
+LARGEST_VALUE = 1e300  # finite values are clipped to +-this: their differences cannot overflow
 
 
 def finite_or_worst(values: np.ndarray) -> np.ndarray:
     """Fitness values fit for arithmetic: +inf replaced by the worst finite value
-    (all zeros if none is finite), so non-finite candidates rank as tied worst,
-    and everything clipped to +-ARITHMETIC_LIMIT."""
+    (all zeros if none is finite), so non-finite candidates rank as tied worst."""
     finite = np.isfinite(values)
     if not finite.any():
         return np.zeros_like(values)
-    worst = np.where(finite, values, values[finite].max())
-    return np.clip(worst, -ARITHMETIC_LIMIT, ARITHMETIC_LIMIT)
+    return np.where(finite, values, values[finite].max())
 
 
 class Run:
@@ -169,13 +168,14 @@ class Run:
         raw = np.asarray(self._fitness(candidates[:count].copy()), dtype=float)
         if raw.shape != (count,):
             raise ValueError(f"the fitness must return shape ({count},), got {raw.shape}")
-        values[:count] = np.where(np.isfinite(raw), raw, np.inf)
+        values[:count] = np.where(np.isfinite(raw), np.clip(raw, -LARGEST_VALUE, LARGEST_VALUE),
+                                  np.inf)
         self.evaluations += count
         best = int(np.argmin(values[:count]))
         if self.best_x is None or values[best] < self.best_f:
             self.best_x, self.best_f = candidates[best].copy(), float(values[best])
         finite = values[:count][np.isfinite(values[:count])]
-        self._iteration_sum += float(np.clip(finite, -ARITHMETIC_LIMIT, ARITHMETIC_LIMIT).sum())
+        self._iteration_sum += float(finite.sum())
         self._iteration_count += len(finite)
         return values
 
@@ -261,6 +261,7 @@ class Optimizer(ABC):
     def minimize(self, fitness: Fitness, lower: Any, upper: Any, budget: int, seed: Seed, *,
                  x0: Any = None, max_time: float | None = None,
                  stall_iterations: int | None = None, stall_tolerance: float = 0.0) -> Result:
+        """Minimise `fitness` over [lower, upper]; see the module docstring."""
         lower, upper, x0 = _box(lower, upper, x0)
         if int(budget) != budget or budget < 1:
             raise ValueError("budget must be a positive whole number of evaluations")

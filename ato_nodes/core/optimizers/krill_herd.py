@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import ARITHMETIC_LIMIT, Optimizer, Run, finite_or_worst
+from .base import Optimizer, Run, finite_or_worst
 from .pso import Swarm, check_population
 
 _EPS = 1e-12  # in unit-cube lengths: keeps unit vectors of coincident krill finite
@@ -125,7 +125,7 @@ class KrillHerd(Optimizer):
     def _step(self, run: Run, herd: Herd) -> None:
         n, rng, progress = herd.size, run.rng, run.progress
         u, values = _unit(run, herd.x), finite_or_worst(herd.f)
-        best_value = max(min(run.best_f, values.min()), -ARITHMETIC_LIMIT)
+        best_value = min(run.best_f, values.min())
         scale = values.max() - best_value
         inertia = self.inertia_start + (self.inertia_end - self.inertia_start) * progress
 
@@ -133,7 +133,8 @@ class KrillHerd(Optimizer):
         induced = (self.n_max * (_local_attraction(u, values, scale)
                                  + 2.0 * (rng.random((n, 1)) + progress) * to_best)
                    + inertia * herd.v)
-        beta = _attraction(u, values, _unit(run, herd.best_x), np.minimum(values, herd.best_f), scale)
+        own_best = np.minimum(values, herd.best_f)  # = values while no finite value is known
+        beta = _attraction(u, values, _unit(run, herd.best_x), own_best, scale)
         if herd.food_x is not None:
             food_value = min(herd.food_f, values.max())  # a non-finite food ranks worst
             beta += 2.0 * (1.0 - progress) * _attraction(u, values, _unit(run, herd.food_x),
