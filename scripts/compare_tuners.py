@@ -1,0 +1,113 @@
+#!/usr/bin/env python3
+"""Compare optimizers tuning the same controller: equal budgets, several seeds.
+
+    python scripts/compare_tuners.py --algorithms bas-pso pso wso --seeds 1 2 3 4 5 \\
+        --evaluations 900 --params adrc.mu1=600:60000,... --out bags/compare-seed000
+
+Each (algorithm, seed) is a tune.py run (in-process; an existing finished one in
+--out is reused), then the best parameters of each algorithm are re-run through
+the real stack and the bag's ITAE is set beside the tuner's. Prints and writes
+(comparison.md) a table of ITAE and max |e| per algorithm, with seed 000's
+figures beside them, and a convergence plot of every run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+from pathlib import Path
+
+import _cli
+
+from ato_nodes.analysis import plot_convergence
+from ato_nodes.bagio import read_run
+from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario
+from ato_nodes.core.scoring import score_series
+from ato_nodes.launch import Stack
+from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
+
+PAPER_MAX_ERROR = {  # seed 000's reported tracking errors, km/h
+    "bas-pso": "±0.05 (body), ±0.4 (abstract)",
+    "wso": "about ±0.2 (improved shark)",
+    "pso": "up to ±4",
+}
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("--algorithms", nargs="+", default=["bas-pso", "pso", "wso"])
+    parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5])
+    parser.add_argument("--evaluations", type=int, default=900)
+    parser.add_argument("--population", type=int, default=30)
+    parser.add_argument("--scenario", default="seed000")
+    parser.add_argument("--params", action="append", required=True)
+    parser.add_argument("--set", action="append", default=[])
+    parser.add_argument("--fitness", default="itae")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, required=True)
+    return parser.parse_args()
+
+
+def tune(args, values, space, algorithm: str, seed: int) -> dict:
+    out = args.out / f"{algorithm}-seed{seed}"
+    if (out / "summary.json").exists():
+        return json.loads((out / "summary.json").read_text())
+    settings = TuningSettings(algorithm, args.scenario, space, args.evaluations, seed,
+                              args.workers, True, args.fitness,
+                              options={"population_size": args.population})
+    Tuner(values, settings, out, resume=True, progress=False).run()
+    return json.loads((out / "summary.json").read_text())
+
+
+def stack_check(values, best: dict, bag: Path) -> float:
+    """ITAE of the best parameters re-run through the real node graph."""
+    if not bag.exists():
+        outcome = Stack(apply_overrides(values, best), bag, quiet=True).run()
+        if not outcome.ok:
+            _cli.fail(f"stack re-run of {bag.name} failed: {outcome.message}", 1)
+    run = read_run(bag)
+    return score_series(run.series, run.parameters)["itae"]
+
+
+def main() -> None:
+    args = parse_args()
+    try:
+        values = apply_overrides(load_scenario(args.scenario), args.set)
+        space = SearchSpace.parse(args.params)
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = ["| algorithm | runs | ITAE median | ITAE best | max abs(e) km/h median | "
+            "max abs(e) km/h best | stack re-run ITAE (best) | paper's max error |",
+            "|---|---|---|---|---|---|---|---|"]
+    for algorithm in args.algorithms:
+        summaries = []
+        for seed in args.seeds:
+            summary = tune(args, values, space, algorithm, seed)
+            summaries.append(summary)
+            print(f"{algorithm} seed {seed}: ITAE {summary['best_indices']['itae']:.6g}, "
+                  f"max |e| {summary['best_indices']['max_abs_error_kmh']:.4f} km/h", flush=True)
+        itae = [s["best_indices"]["itae"] for s in summaries]
+        max_error = [s["best_indices"]["max_abs_error_kmh"] for s in summaries]
+        best = min(summaries, key=lambda s: s["best_fitness"])
+        stack_itae = stack_check(values, best["best_params"], args.out / f"{algorithm}-best-stack")
+        agreement = abs(stack_itae - best["best_indices"]["itae"]) / best["best_indices"]["itae"]
+        rows.append(f"| {algorithm} | {len(summaries)} | {statistics.median(itae):.6g} | "
+                    f"{min(itae):.6g} | {statistics.median(max_error):.4f} | {min(max_error):.4f} | "
+                    f"{stack_itae:.6g} (rel. diff {agreement:.1e}) | "
+                    f"{PAPER_MAX_ERROR.get(algorithm, '-')} |")
+    table = "\n".join(rows)
+    (args.out / "comparison.md").write_text(
+        f"Budget {args.evaluations} evaluations each, population {args.population}, seeds "
+        f"{' '.join(map(str, args.seeds))}, fitness {args.fitness}, scenario {args.scenario} "
+        f"{' '.join(args.set)}\n\n{table}\n")
+    plot_convergence(sorted(p for p in args.out.iterdir() if (p / "history.csv").exists()),
+                     args.out / "convergence.png")
+    print(table)
+
+
+if __name__ == "__main__":
+    main()
