@@ -232,3 +232,15 @@ def test_a_separate_process_echoes_every_topic_at_the_configured_rate(tmp_path):
         assert count >= 40, (name, count)
         rate = (count - 1) / span
         assert 0.5 * 20 < rate < 1.5 * 20, (name, rate)  # configured: run.period 0.05 s
+
+
+def test_a_diverging_run_ends_early_the_same_way_in_both_runners(tmp_path):
+    bag = tmp_path / "diverged"
+    result = run_stack("--duration", "20", "--set", "adrc.b0=0.001", "--out", str(bag), "--quiet")
+    assert result.returncode == 1
+    assert "diverged at step" in result.stderr
+    summary = json.loads((bag / "summary.json").read_text())
+    assert summary["status"] == "diverged"
+    expected = in_process(20, "adrc.b0=0.001")
+    assert summary["steps"] == len(expected["t"]) < 400
+    np.testing.assert_array_equal(read_series(bag)["speed"], expected["speed"])
