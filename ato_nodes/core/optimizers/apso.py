@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import Run, finite_or_worst
-from .pso import Swarm, SwarmOptimizer
+from .pso import VELOCITY_LIMIT, Swarm, SwarmOptimizer
 from .sampling import chaotic_opposition_start
 
 
@@ -80,7 +80,7 @@ class AdaptivePSO(SwarmOptimizer):
     def __init__(self, population_size: int = 50, w_first: float = 1.0,
                  c1_start: float = 2.0, c1_end: float = 2.5,
                  c2_start: float = 2.0, c2_end: float = 1.5, delta: float = 0.05,
-                 entropy_bins: int = 10, velocity_limit: float = 0.2):
+                 entropy_bins: int = 10, velocity_limit: float = VELOCITY_LIMIT):
         super().__init__(population_size, velocity_limit)
         if entropy_bins < 2 or delta <= 0:
             raise ValueError("entropy_bins must be >= 2 and delta positive")

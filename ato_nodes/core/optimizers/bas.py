@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import Optimizer, Run
-from .pso import ParticleSwarm, Swarm
+from .pso import VELOCITY_LIMIT, ParticleSwarm, Swarm
 from .sampling import random_unit_vectors
 
 
@@ -98,7 +98,8 @@ class BeetleSwarm(ParticleSwarm):
     name = "bas-pso"
 
     def __init__(self, population_size: int = 40, w_start: float = 0.8, w_end: float = 0.4,
-                 c1: float = 2.0, c2: float = 2.0, c3: float = 1.0, velocity_limit: float = 0.2,
+                 c1: float = 2.0, c2: float = 2.0, c3: float = 1.0,
+                 velocity_limit: float = VELOCITY_LIMIT,
                  step_start: float = 0.1, step_end: float = 1e-5, step_to_d0: float = 5.0):
         super().__init__(population_size, w_start, w_end, c1, c2, velocity_limit)
         self.c3 = c3

@@ -27,14 +27,14 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Run
-from .pso import ParticleSwarm, Swarm, check_population
+from .pso import VELOCITY_LIMIT, ParticleSwarm, Swarm, check_population
 
 
 class GeneticPSO(ParticleSwarm):
     name = "ga-pso"
 
     def __init__(self, population_size: int = 70, w_start: float = 0.93, w_end: float = 0.31,
-                 c1: float = 2.0, c2: float = 2.0, velocity_limit: float = 0.2,
+                 c1: float = 2.0, c2: float = 2.0, velocity_limit: float = VELOCITY_LIMIT,
                  mutation_scale: float = 0.1, redraw_probability: float = 0.5):
         check_population(population_size, 3)
         super().__init__(population_size, w_start, w_end, c1, c2, velocity_limit)
