@@ -1,0 +1,68 @@
+#!/usr/bin/env python3
+"""Speed of bag replay on this machine (prints figures; asserts nothing).
+
+    python scripts/benchmark_replay.py [--bag BAG]
+
+Records (or takes) a full 2400 s seed-000 bag, replays it at maximum rate and
+reports messages per second, then replays 10 s of it at --rate 1 and --rate 2
+and reports both wall times (the second should be about half the first).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import _cli
+
+from ato_nodes.bagio import read_messages
+from ato_nodes.launch import DomainLock
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def replay(bag: Path, *args: str) -> float:
+    """Wall seconds of one replay_bag.py run (process start included)."""
+    lock = DomainLock()
+    try:
+        started = time.monotonic()
+        result = subprocess.run([sys.executable, str(ROOT / "scripts" / "replay_bag.py"), str(bag),
+                                 "--domain-id", str(lock.domain_id), "--quiet", *args],
+                                capture_output=True, text=True)
+        wall = time.monotonic() - started
+    finally:
+        lock.release()
+    if result.returncode != 0:
+        _cli.fail(f"replay failed: {result.stderr.strip()}", 1)
+    return wall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--bag", type=Path, help="a full seed-000 bag (default: record one)")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = args.bag
+        if bag is None:
+            bag = Path(tmp) / "seed000"
+            subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--out",
+                            str(bag), "--quiet"], check=True, capture_output=True)
+        count = len(read_messages(bag)[1])
+        baseline = replay(bag, "--rate", "0", "--end", "0.05")  # start-up and reading alone
+        full = replay(bag, "--rate", "0")
+        print(f"replay at maximum rate: {count} messages in {full - baseline:.2f} s of "
+              f"publishing = {count / (full - baseline):,.0f} messages/s ({full:.2f} s wall "
+              "with start-up and reading the bag; no subscriber)")
+        normal = replay(bag, "--rate", "1", "--end", "10")
+        double = replay(bag, "--rate", "2", "--end", "10")
+        print(f"10 s of the bag: --rate 1 {normal - baseline:.2f} s, --rate 2 "
+              f"{double - baseline:.2f} s (ratio {(double - baseline) / (normal - baseline):.3f}, "
+              "expected 0.5; start-up subtracted)")
+
+
+if __name__ == "__main__":
+    main()
