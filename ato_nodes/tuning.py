@@ -28,7 +28,7 @@ import yaml
 
 from ato_nodes.analysis import plot_convergence
 from ato_nodes.core.loop import simulate
-from ato_nodes.core.optimizers import ALGORITHMS, Result, optimize
+from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.params import (SPEC_BY_NAME, ScenarioError, apply_overrides,
                                    ros_parameter_file, steps)
 from ato_nodes.core.scoring import score_series
@@ -218,6 +218,9 @@ class Tuner:
         self.log = EvaluationLog(out / "evaluations.jsonl", resume)
         self.evaluate = evaluate or (evaluate_in_process if settings.in_process
                                      else self._evaluate_in_stack)
+        algorithm = create(settings.algorithm, **settings.options)
+        self.initial_evaluations = algorithm.initial_evaluations()
+        self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
         self.next_index = 0
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
         self.started = time.monotonic()
@@ -269,9 +272,10 @@ class Tuner:
         done = len(self.log.done)
         total = self.settings.evaluations
         eta = (time.monotonic() - self.started) / max(self.fresh, 1) * (total - done)
+        iteration = max(0, done - self.initial_evaluations) // self.evaluations_per_iteration
         status = "" if record.status == "ok" else f" ({record.status}: candidate {record.index})"
-        print(f"evaluations {done:5d}/{total}  best {self.best:.6g}  ETA {eta:6.0f} s{status}",
-              file=sys.stderr, flush=True)
+        print(f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}  "
+              f"ETA {eta:6.0f} s{status}", file=sys.stderr, flush=True)
 
     def run(self) -> Result:
         s = self.settings
