@@ -66,58 +66,55 @@ def _save(figure, path: Path) -> Path:
     return path
 
 
+def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
+             target=None, bands: bool = False) -> Path:
+    """One line per run of y(series) against x(series); optionally the first run's
+    target as a dashed line and seed 000's error bands."""
+    plt = _pyplot()
+    figure, axes = plt.subplots(figsize=(9, 4.5))
+    if target is not None:
+        axes.plot(x(runs[0].series), target(runs[0].series), "k--", lw=1, label="target")
+    for run in runs:
+        axes.plot(x(run.series), y(run.series), lw=0.9, label=label(run))
+    if bands:
+        for band, style in zip(SEED000_BANDS_KMH, (":", "-.")):
+            for sign in (1, -1):
+                axes.axhline(sign * band, color="grey", ls=style, lw=1,
+                             label=f"±{band} km/h (seed 000)" if sign > 0 else None)
+    axes.set(xlabel=labels[0], ylabel=labels[1], title=labels[2])
+    axes.grid(alpha=0.3)
+    axes.legend()
+    return _save(figure, path)
+
+
 def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
     """Speed against time and distance, error with seed 000's bands, force, observer."""
-    plt = _pyplot()
-    figures = []
-    reference = runs[0].series
+    def time(s):
+        return s["t"]
 
-    figure, axes = plt.subplots(figsize=(9, 4.5))
-    axes.plot(reference["t"], reference["target"] * MS_TO_KMH, "k--", lw=1, label="target")
-    for run in runs:
-        axes.plot(run.series["t"], run.series["speed"] * MS_TO_KMH, lw=1, label=label(run))
-    axes.set(xlabel="time (s)", ylabel="speed (km/h)", title="Speed tracking")
-    axes.grid(alpha=0.3)
-    axes.legend()
-    figures.append(Figure("Speed against time", _save(figure, out / "speed_time.png")))
+    def speed(s):
+        return s["speed"] * MS_TO_KMH
 
+    def target(s):
+        return s["target"] * MS_TO_KMH
+
+    figures = [Figure("Speed against time", _overlay(
+        runs, time, speed, ("time (s)", "speed (km/h)", "Speed tracking"),
+        out / "speed_time.png", target=target))]
     with_position = [run for run in runs if "position" in run.series]
     if with_position:
-        figure, axes = plt.subplots(figsize=(9, 4.5))
-        first = with_position[0].series
-        axes.plot(first["position"] / 1000, first["target"] * MS_TO_KMH, "k--", lw=1,
-                  label="target")
-        for run in with_position:
-            axes.plot(run.series["position"] / 1000, run.series["speed"] * MS_TO_KMH, lw=1,
-                      label=label(run))
-        axes.set(xlabel="distance (km)", ylabel="speed (km/h)", title="Speed against distance")
-        axes.grid(alpha=0.3)
-        axes.legend()
-        figures.append(Figure("Speed against distance", _save(figure, out / "speed_distance.png")))
-
-    figure, axes = plt.subplots(figsize=(9, 4.5))
-    for run in runs:
-        error = (run.series["target"] - run.series["speed"]) * MS_TO_KMH
-        axes.plot(run.series["t"], error, lw=0.8, label=label(run))
-    for band, style in zip(SEED000_BANDS_KMH, (":", "-.")):
-        for sign in (1, -1):
-            axes.axhline(sign * band, color="grey", ls=style, lw=1,
-                         label=f"±{band} km/h (seed 000)" if sign > 0 else None)
-    axes.set(xlabel="time (s)", ylabel="target - speed (km/h)", title="Tracking error")
-    axes.grid(alpha=0.3)
-    axes.legend()
-    figures.append(Figure("Tracking error", _save(figure, out / "error.png")))
-
+        figures.append(Figure("Speed against distance", _overlay(
+            with_position, lambda s: s["position"] / 1000, speed,
+            ("distance (km)", "speed (km/h)", "Speed against distance"),
+            out / "speed_distance.png", target=target)))
+    figures.append(Figure("Tracking error", _overlay(
+        runs, time, lambda s: (s["target"] - s["speed"]) * MS_TO_KMH,
+        ("time (s)", "target - speed (km/h)", "Tracking error"), out / "error.png", bands=True)))
     with_command = [run for run in runs if "command" in run.series]
     if with_command:
-        figure, axes = plt.subplots(figsize=(9, 4.5))
-        for run in with_command:
-            axes.plot(run.series["t"], run.series["command"], lw=0.8, label=label(run))
-        axes.set(xlabel="time (s)", ylabel="u (N/kN)", title="Control force (specific)")
-        axes.grid(alpha=0.3)
-        axes.legend()
-        figures.append(Figure("Control force", _save(figure, out / "command.png")))
-
+        figures.append(Figure("Control force", _overlay(
+            with_command, time, lambda s: s["command"],
+            ("time (s)", "u (N/kN)", "Control force (specific)"), out / "command.png")))
     for index, run in enumerate(runs):
         figure = plot_observer(run, out / f"observer_{index + 1}.png")
         if figure:
