@@ -1,0 +1,75 @@
+"""Line files: validation with file and line, and mass-belt additional resistance."""
+
+import pytest
+
+from ato_nodes.core.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
+from ato_nodes.core.params import ScenarioError, config_dir
+
+GOOD = """\
+name: test line
+length: 1000
+gradients:
+  - {start: 0, end: 400, grade: 10}
+  - {start: 400, end: 1000, grade: -5}
+curves:
+  - {start: 500, end: 600, radius: 600}
+tunnels:
+  - {start: 700, end: 900}
+speed_limits:
+  - {start: 0, end: 1000, limit: 20}
+"""
+
+
+def write(tmp_path, text):
+    path = tmp_path / "line.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_shipped_lines_load():
+    lines = sorted((config_dir() / "lines").glob("*.yaml"))
+    assert lines
+    for path in lines:
+        line = load_line(path)
+        assert line.length > 0 and line.speed_limit(0.0) > 0
+
+
+def test_resistance_on_one_section_is_the_point_value(tmp_path):
+    line = load_line(write(tmp_path, GOOD))
+    assert line.additional_resistance(300.0, 200.0) == pytest.approx(10.0)  # wholly on +10
+    assert line.additional_resistance(600.0, 100.0) == pytest.approx(-5.0 + CURVE_CONSTANT / 600)
+    assert line.additional_resistance(900.0, 200.0) == pytest.approx(-5.0 + TUNNEL_CONSTANT * 200)
+
+
+def test_resistance_varies_linearly_while_straddling_a_change(tmp_path):
+    line = load_line(write(tmp_path, GOOD))
+    length = 100.0  # the head goes from 400 m (all on +10) to 500 m (all on -5)
+    values = [line.additional_resistance(400.0 + d, length) for d in (0, 25, 50, 75, 100)]
+    assert values[0] == pytest.approx(10.0) and values[-1] == pytest.approx(-5.0)
+    steps = [b - a for a, b in zip(values, values[1:])]
+    assert steps == pytest.approx([-3.75] * 4)  # (-5 - 10) / 100 m * 25 m
+
+
+@pytest.mark.parametrize("change, problem", [
+    ("  - {start: 400, end: 1000, grade: -5}", "gradients: section starting at 300 m overlaps"),
+    ("  - {start: 0, end: 400, grade: 10}", "no positive length"),
+    ("  - {start: 0, end: 1000, limit: 20}", "limit must be positive, not 0"),
+    ("  - {start: 700, end: 900}", "tunnels: unknown key 'lenght'"),
+    ("length: 1000", "unknown key 'lenght'"),
+    ("  - {start: 0, end: 1000, limit: 20}", "no limit from 800 m to the end"),
+])
+def test_bad_line_files_name_the_file_and_line(tmp_path, change, problem):
+    replacement = {
+        "gradients: section starting at 300 m overlaps": "  - {start: 300, end: 1000, grade: -5}",
+        "no positive length": "  - {start: 0, end: 0, grade: 10}",
+        "limit must be positive, not 0": "  - {start: 0, end: 1000, limit: 0}",
+        "tunnels: unknown key 'lenght'": "  - {start: 700, end: 900, lenght: 3}",
+        "unknown key 'lenght'": "lenght: 1000",
+        "no limit from 800 m to the end": "  - {start: 0, end: 800, limit: 20}",
+    }[problem]
+    path = write(tmp_path, GOOD.replace(change, replacement, 1))
+    with pytest.raises(ScenarioError) as failure:
+        load_line(path)
+    message = str(failure.value)
+    assert str(path) in message and " line " in message and problem in message
+    assert "\n" not in message
