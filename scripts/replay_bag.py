@@ -83,7 +83,7 @@ def main() -> None:
                 _cli.fail(f"{args.bag}: message type {type_name} of {topic} is not installed")
         clock = None if "/clock" in types else node.create_publisher(Clock, "/clock", QOS["data"])
         wait_for_subscribers(publishers, args.wait_subscribers)
-        played = 0
+        played, started = 0, time.monotonic()
         while True:
             played += play(messages, publishers, clock, args.rate, Clock, Time)
             if not args.loop:
@@ -91,7 +91,9 @@ def main() -> None:
         for publisher in publishers.values():
             publisher.wait_for_all_acked(rclpy.duration.Duration(seconds=10))
         if not args.quiet:
-            print(f"replayed {played} messages", file=sys.stderr)
+            elapsed = time.monotonic() - started
+            print(f"replayed {played} messages in {elapsed:.3f} s "
+                  f"({played / max(elapsed, 1e-9):,.0f} messages/s)", file=sys.stderr)
     except KeyboardInterrupt:
         pass
     finally:
