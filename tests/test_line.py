@@ -73,3 +73,13 @@ def test_bad_line_files_name_the_file_and_line(tmp_path, change, problem):
     message = str(failure.value)
     assert str(path) in message and " line " in message and problem in message
     assert "\n" not in message
+
+
+def test_speed_limit_and_neutral_sections_by_position(tmp_path):
+    text = GOOD.replace("speed_limits:\n  - {start: 0, end: 1000, limit: 20}",
+                        "speed_limits:\n  - {start: 0, end: 500, limit: 20}\n"
+                        "  - {start: 500, end: 1000, limit: 30}\n"
+                        "neutral_sections:\n  - {start: 800, end: 850}")
+    line = load_line(write(tmp_path, text))
+    assert line.speed_limit(499.0) == 20 and line.speed_limit(500.0) == 30
+    assert line.in_neutral_section(820.0) and not line.in_neutral_section(850.0)
