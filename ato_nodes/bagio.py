@@ -125,6 +125,11 @@ def _mcap_messages(path: Path, wanted: dict[str, str] | None):
     return types, generate()
 
 
+def _unreadable(path: Path, exc: Exception) -> BagError:
+    problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return BagError(f"{path}: not a readable rosbag2 bag or MCAP file ({problem})")
+
+
 def _field(message, path: str) -> float:
     for part in path.split("."):
         message = getattr(message, part)
@@ -156,8 +161,7 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
     except BagError:
         raise
     except Exception as exc:  # rosbags and mcap raise many unrelated types for bad files
-        problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BagError(f"{path}: not a readable rosbag2 bag or MCAP file ({problem})") from None
+        raise _unreadable(path, exc) from None
     return _assemble(path, found, stamps, raws, types)
 
 
@@ -224,8 +228,7 @@ def read_messages(bag: str | Path, topics: list[str] | None = None
     except BagError:
         raise
     except Exception as exc:
-        problem = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise BagError(f"{path}: not a readable rosbag2 bag or MCAP file ({problem})") from None
+        raise _unreadable(path, exc) from None
     selected.sort(key=lambda message: message[1])  # stable: ties keep the recorded order
     return types, selected
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -104,10 +105,10 @@ class Stack:
         self.values["recorder.run_parameters"] = json.dumps(
             {name: value for name, value in self.values.items()
              if not name.startswith(("recorder.", "supervisor."))})
+        self.params_yaml = yaml.safe_dump(ros_parameter_file(self.values), sort_keys=False)
 
     def _start(self) -> None:
-        self.params_path.write_text(yaml.safe_dump(ros_parameter_file(self.values),
-                                                   sort_keys=False))
+        self.params_path.write_text(self.params_yaml)
         env = node_environment(self.lock.domain_id)
         output = subprocess.DEVNULL if self.quiet else None
         for role in NODES:
@@ -167,18 +168,18 @@ class Stack:
     def run(self) -> RunOutcome:
         started = time.monotonic()
         try:
-            self._start()
-            outcome = self._watch()
-        except KeyboardInterrupt:
-            outcome = RunOutcome("interrupted", "interrupted by the user")
+            try:
+                self._start()
+                outcome = self._watch()
+            except KeyboardInterrupt:
+                outcome = RunOutcome("interrupted", "interrupted by the user")
+            finally:
+                self.stop()
+                self.lock.release()
+            if self.report_path.exists() and not outcome.report:
+                outcome.report = json.loads(self.report_path.read_text())
         finally:
-            self.stop()
-            self.lock.release()
+            shutil.rmtree(self.workdir, ignore_errors=True)  # thousands of runs when tuning
         outcome.domain_id = self.lock.domain_id
         outcome.wall_time = time.monotonic() - started
-        if self.report_path.exists() and not outcome.report:
-            outcome.report = json.loads(self.report_path.read_text())
         return outcome
-
-    def params_yaml(self) -> str:
-        return self.params_path.read_text()

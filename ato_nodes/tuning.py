@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 import sys
 import threading
 import time
@@ -229,9 +230,7 @@ class Tuner:
     def _evaluate_in_stack(self, values, overrides, fitness, index) -> Evaluation:
         bag = self.out / "runs" / f"candidate-{index:05d}"
         if bag.exists():  # a candidate interrupted before it was logged: run it again
-            for path in sorted(bag.rglob("*"), reverse=True):
-                path.unlink() if path.is_file() else path.rmdir()
-            bag.rmdir()
+            shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
         return evaluate_in_stack(values, overrides, fitness, index, bag, self.settings.timeout)
 
@@ -252,6 +251,7 @@ class Tuner:
             record = self.log.cached(index, overrides)
             if record is not None:
                 results[index] = record
+                self.best = min(self.best, record.fitness)
             else:
                 pending[pool.submit(self.evaluate, self.values, overrides, self.settings.fitness,
                                     index)] = index
@@ -261,9 +261,7 @@ class Tuner:
             self.log.append(record)
             results[record.index] = record
             self._report(record)
-        fitness = np.array([results[index].fitness for index, _ in requests])
-        self.best = min(self.best, float(fitness.min()))
-        return fitness
+        return np.array([results[index].fitness for index, _ in requests])
 
     def _report(self, record: Evaluation) -> None:
         self.best = min(self.best, record.fitness)

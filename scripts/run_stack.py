@@ -73,7 +73,7 @@ def main() -> None:
                "message": outcome.message, "domain_id": outcome.domain_id,
                "wall_time": outcome.wall_time, **outcome.report}
     if bag.exists():
-        (bag / "params.yaml").write_text(stack.params_yaml())
+        (bag / "params.yaml").write_text(stack.params_yaml)
         try:
             summary["indices"] = score_series(read_series(bag), read_parameters(bag))
         except BagError as exc:
