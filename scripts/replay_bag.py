@@ -88,8 +88,11 @@ def main() -> None:
             played += play(messages, publishers, clock, args.rate, Clock, Time)
             if not args.loop:
                 break
-        for publisher in publishers.values():
-            publisher.wait_for_all_acked(rclpy.duration.Duration(seconds=10))
+        unacknowledged = [topic for topic, publisher in publishers.items()
+                          if not publisher.wait_for_all_acked(rclpy.duration.Duration(seconds=10))]
+        if unacknowledged:
+            print(f"warning: subscribers of {', '.join(unacknowledged)} did not acknowledge "
+                  "every message within 10 s", file=sys.stderr)
         if not args.quiet:
             elapsed = time.monotonic() - started
             print(f"replayed {played} messages in {elapsed:.3f} s "

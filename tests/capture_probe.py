@@ -1,8 +1,11 @@
-"""Subscribes (reliable, keep all) to the given topics and, once nothing has arrived
-for IDLE seconds after the first message, prints every message received as JSON:
-{topic: [hex of the CDR bytes, ...]} in arrival order.
+"""Subscribes (reliable, keep all) to the given topics and, once each topic has delivered
+its expected COUNT of messages (or after TIMEOUT seconds), prints every message received as
+JSON: {topic: [hex of the CDR bytes, ...]} in arrival order.
 
-    ROS_DOMAIN_ID=N python tests/capture_probe.py IDLE TOPIC:TYPE [TOPIC:TYPE ...]
+Stopping on counts, not on an idle gap: a reliable sample lost by the transport at the very
+end of a burst is only repaired at the writer's next heartbeat (Fast DDS: up to 3 s later).
+
+    ROS_DOMAIN_ID=N python tests/capture_probe.py TIMEOUT TOPIC:TYPE:COUNT [...]
 """
 
 import json
@@ -18,25 +21,24 @@ from ato_nodes.nodes.base import QOS, message_class  # noqa: E402
 
 
 def main() -> None:
-    idle = float(sys.argv[1])
+    timeout = float(sys.argv[1])
     rclpy.init()
     node = rclpy.create_node("capture_probe")
     received = {}
-    last = [None]
+    expected = {}
 
     def keep(topic):
         def callback(data: bytes) -> None:
             received[topic].append(data.hex())
-            last[0] = time.monotonic()
         return callback
 
     for item in sys.argv[2:]:
-        topic, type_name = item.split(":")
-        received[topic] = []
+        topic, type_name, count = item.split(":")
+        received[topic], expected[topic] = [], int(count)
         node.create_subscription(message_class(type_name), topic, keep(topic), QOS["data"],
                                  raw=True)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and (last[0] is None or time.monotonic() - last[0] < idle):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and any(len(received[t]) < n for t, n in expected.items()):
         rclpy.spin_once(node, timeout_sec=0.05)
     print(json.dumps(received))
     node.destroy_node()

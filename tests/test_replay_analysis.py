@@ -52,8 +52,10 @@ def domain_env(domain):
 
 def test_replay_delivers_every_message_in_order_with_identical_values(recorded):
     env = domain_env(150)
-    probe = subprocess.Popen([PYTHON, str(ROOT / "tests" / "capture_probe.py"), "1.5",
-                              *(f"{t}:{ty}" for t, ty in STEP_TOPICS.items())],
+    recorded_topics = by_topic(bag_messages(recorded))
+    probe = subprocess.Popen([PYTHON, str(ROOT / "tests" / "capture_probe.py"), "60",
+                              *(f"{t}:{ty}:{len(recorded_topics[t])}"
+                                for t, ty in STEP_TOPICS.items())],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
                     "--domain-id", "150")
@@ -61,7 +63,6 @@ def test_replay_delivers_every_message_in_order_with_identical_values(recorded):
     out, err = probe.communicate(timeout=90)
     assert probe.returncode == 0, err
     received = json.loads(out)
-    recorded_topics = by_topic(bag_messages(recorded))
     assert set(received) == set(recorded_topics)
     for topic, messages in recorded_topics.items():
         assert received[topic] == [data.hex() for _, data in messages], topic
