@@ -31,7 +31,8 @@ ROLES: dict[str, tuple[str, list[tuple[str, str]]]] = {
     "target_speed": ("std_msgs/msg/Float64", [("target", "data")]),
     "state": ("geometry_msgs/msg/Twist", [
         ("speed", "linear.x"), ("acceleration", "linear.y"), ("disturbance", "linear.z"),
-        ("force", "angular.x"), ("resistance", "angular.y")]),
+        ("force", "angular.x"), ("resistance", "angular.y"), ("line_resistance", "angular.z")]),
+    "speed_limit": ("std_msgs/msg/Float64", [("speed_limit", "data")]),
     "measured_speed": ("std_msgs/msg/Float64", [("measured_speed", "data")]),
     "command": ("std_msgs/msg/Float64", [("command", "data")]),
     "controller_state": ("geometry_msgs/msg/Twist", [

@@ -25,6 +25,7 @@ from typing import Any
 import yaml
 
 from ato_nodes.core.params import NODES, ros_parameter_file
+from ato_nodes.core.scoring import LINE_TEXT
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DOMAIN_LOCK_PORT = 47300   # TCP port base + domain id held while a run uses that domain
@@ -102,9 +103,11 @@ class Stack:
         self.params_path = self.workdir / "params.yaml"
         self.values["recorder.output"] = str(self.bag.resolve())
         self.values["supervisor.report"] = str(self.report_path)
-        self.values["recorder.run_parameters"] = json.dumps(
-            {name: value for name, value in self.values.items()
-             if not name.startswith(("recorder.", "supervisor."))})
+        run_parameters = {name: value for name, value in self.values.items()
+                          if not name.startswith(("recorder.", "supervisor."))}
+        if self.values["line.file"]:  # the bag carries its line, so it scores anywhere
+            run_parameters[LINE_TEXT] = Path(self.values["line.file"]).read_text()
+        self.values["recorder.run_parameters"] = json.dumps(run_parameters)
         self.params_yaml = yaml.safe_dump(ros_parameter_file(self.values), sort_keys=False)
 
     def _start(self) -> None:

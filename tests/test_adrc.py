@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from ato_nodes.core.adrc import (HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
+from ato_nodes.core.adrc import (CommandLimiter, HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
                                  NonlinearESO, TrackingDifferentiator, fal, fal_gain, fhan)
 
 
@@ -114,7 +114,7 @@ class TestExtendedStateObserver:
 class TestNLSEF:
     def controller(self, implicit, period=0.05):
         gains = HanADRCGains(implicit_nlsef=implicit)
-        return HanADRC(gains, period, -1e9, 1e9)
+        return HanADRC(gains, period, CommandLimiter(-1e9, 1e9))
 
     def test_literal_law_by_hand(self):
         law = self.controller(implicit=False).control_law
@@ -144,7 +144,7 @@ class TestNLSEF:
         assert u0 == pytest.approx(k1 * e1_next + k2 * e2_next)
 
     def test_command_saturates_and_observer_sees_the_saturated_value(self):
-        adrc = HanADRC(HanADRCGains(), 0.05, -5.0, 5.0)
+        adrc = HanADRC(HanADRCGains(), 0.05, CommandLimiter(-5.0, 5.0))
         out = adrc.step(100.0, 0.0)
         assert out.u == 5.0
         assert adrc.u_applied == 5.0
@@ -153,7 +153,8 @@ class TestNLSEF:
 class TestLinearADRC:
     def test_tracks_a_first_order_plant_with_constant_disturbance(self):
         period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
-        adrc = LinearADRC(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b), period, -1e6, 1e6)
+        adrc = LinearADRC(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b), period,
+                          CommandLimiter(-1e6, 1e6))
         v = 0.0
         for _ in range(400):
             out = adrc.step(10.0, v)

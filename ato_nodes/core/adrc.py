@@ -1,8 +1,10 @@
 """Active disturbance rejection controllers (ROS-free).
 
-Han's second-order nonlinear ADRC (seed 000, eq. 6-13) and a linear,
-bandwidth-parametrised ADRC (Gao). Both map (target speed, measured speed)
-to a specific traction/braking force u in N/kN, one call per control period.
+Han's second-order nonlinear ADRC (seed 000, eq. 6-13; with a bandwidth-
+parametrised observer it is seed 003's NLADRC), seed 004's discrete ADRC and a
+linear, bandwidth-parametrised ADRC (Gao). Each maps (target speed, measured
+speed) to a specific traction/braking force u in N/kN, one call per control
+period, through a CommandLimiter.
 
 Discretisation (the papers give continuous-time equations):
 
@@ -117,6 +119,38 @@ def clamp(x: float, low: float, high: float) -> float:
     return low if x < low else high if x > high else x
 
 
+class CommandLimiter:
+    """What stands between a control law and the train, shared by every controller;
+    the observer is fed its output, the command actually applied.
+
+    * speed-limit module (seed 003), `mode_band` > 0: no traction while the speed is
+      more than mode_band above the target, no braking while more than mode_band below
+      (it picks traction or braking by comparing actual and target speed);
+    * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
+      (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
+    * saturation to [u_min, u_max] (acceleration limit).
+    """
+
+    def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
+                 mode_band: float = 0.0):
+        self.u_min, self.u_max = u_min, u_max
+        self.max_change = max_rate * period
+        self.mode_band = mode_band
+        self.last = 0.0
+
+    def apply(self, u: float, target: float, speed: float) -> float:
+        band = self.mode_band
+        if band > 0.0:
+            if speed > target + band:
+                u = min(u, 0.0)
+            elif speed < target - band:
+                u = max(u, 0.0)
+        if self.max_change > 0.0:
+            u = clamp(u, self.last - self.max_change, self.last + self.max_change)
+        self.last = clamp(u, self.u_min, self.u_max)
+        return self.last
+
+
 @dataclass(frozen=True)
 class HanADRCGains:
     """Seed 000's initial parameters (section 4); b0 and delta are not in the paper."""
@@ -150,10 +184,10 @@ class ControllerOutput:
 class HanADRC:
     """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
 
-    def __init__(self, gains: HanADRCGains, period: float, u_min: float, u_max: float,
+    def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter,
                  initial_target: float = 0.0, initial_speed: float = 0.0):
         self.gains = gains
-        self.u_min, self.u_max = u_min, u_max
+        self.limiter = limiter
         self.td = TrackingDifferentiator(gains.r0, gains.h0, period, v1=initial_target)
         self.eso = NonlinearESO(gains.beta1, gains.beta2, gains.beta3, gains.b0,
                                 gains.delta, period, z1=initial_speed)
@@ -174,9 +208,70 @@ class HanADRC:
         z1, z2, z3 = self.eso.update(measured, self.u_applied)
         v1, v2 = self.td.update(target)
         u0 = self.control_law(v1 - z1, v2 - z2, z2)
-        u = clamp((u0 - z3) / self.gains.b0, self.u_min, self.u_max)
+        u = self.limiter.apply((u0 - z3) / self.gains.b0, target, measured)
         self.u_applied = u
         return ControllerOutput(u, z1, z2, z3, v1, v2)
+
+
+def nladrc_gains(kp: float, kd: float, omega: float, b: float, alpha1: float = 0.75,
+                 alpha2: float = 1.25, r0: float = 15.0, h0: float = 0.01,
+                 delta: float = 0.01) -> HanADRCGains:
+    """Seed 003's NLADRC is Han's structure with a bandwidth-parametrised observer
+    (b01 = 3w, b02 = 3w^2, b03 = w^3) and the nonlinear PD u0 = kp fal(e1) + kd fal(e2),
+    u = (u0 - z3) / b: the same controller with four tuned parameters kp, kd, w, b."""
+    return HanADRCGains(mu1=kp, mu2=kd, alpha1=alpha1, alpha2=alpha2, r0=r0, h0=h0,
+                        beta1=3.0 * omega, beta2=3.0 * omega ** 2, beta3=omega ** 3, b0=b,
+                        delta=delta)
+
+
+@dataclass(frozen=True)
+class DiscreteADRCGains:
+    """Seed 004's gains, per step (the control period folded in)."""
+
+    b01: float = 0.9
+    b02: float = 0.03
+    b03: float = 0.001
+    b1: float = 40.0
+    b2: float = 100.0
+    alpha1: float = 0.75
+    alpha2: float = 0.5
+    b0: float = 1e-4
+    delta: float = 0.01
+    r0: float = 2.0
+    h0: float = 0.1
+
+
+class DiscreteADRC:
+    """Seed 004's discrete second-order ADRC, the ESO exactly as printed:
+
+        e = z1 - y;  z1 += z2 - b01 e;  z2 += z3 - b02 fal(e, 0.5) + b0 u;
+        z3 += -b03 fal(e, 0.25);  u = b1 fal(e1, a1) + b2 fal(e2, a2) - z3 / b0
+
+    With the step folded into the gains, z2 is the speed change per step and z3
+    its change per step, so the TD's v2 (m/s^2) enters e2 = v2 h - z2 in the same
+    per-step unit (the paper leaves this implicit: our reading). The recorded z2
+    and z3 are converted back to m/s^2 and m/s^3.
+    """
+
+    def __init__(self, gains: DiscreteADRCGains, period: float, limiter: CommandLimiter,
+                 initial_target: float = 0.0, initial_speed: float = 0.0):
+        self.gains, self.h, self.limiter = gains, period, limiter
+        self.td = TrackingDifferentiator(gains.r0, gains.h0, period, v1=initial_target)
+        self.z1, self.z2, self.z3 = initial_speed, 0.0, 0.0
+        self.u_applied = 0.0
+
+    def step(self, target: float, measured: float) -> ControllerOutput:
+        g, h = self.gains, self.h
+        e = self.z1 - measured
+        z1 = self.z1 + self.z2 - g.b01 * e
+        z2 = self.z2 + self.z3 - g.b02 * fal(e, 0.5, g.delta) + g.b0 * self.u_applied
+        z3 = self.z3 - g.b03 * fal(e, 0.25, g.delta)
+        self.z1, self.z2, self.z3 = z1, z2, z3
+        v1, v2 = self.td.update(target)
+        u0 = g.b1 * fal(v1 - z1, g.alpha1, g.delta) + g.b2 * fal(v2 * h - z2, g.alpha2, g.delta)
+        u = self.limiter.apply(u0 - z3 / g.b0, target, measured)
+        self.u_applied = u
+        return ControllerOutput(u, z1, z2 / h, z3 / (h * h), v1, v2)
 
 
 @dataclass(frozen=True)
@@ -196,10 +291,10 @@ class LinearADRC:
     The ESO is integrated by backward Euler in closed form, stable for any step.
     """
 
-    def __init__(self, gains: LinearADRCGains, period: float, u_min: float, u_max: float,
+    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter,
                  initial_speed: float = 0.0):
         self.gains, self.h = gains, period
-        self.u_min, self.u_max = u_min, u_max
+        self.limiter = limiter
         self.l1, self.l2 = 2.0 * gains.omega_o, gains.omega_o ** 2
         self.z1, self.z2 = initial_speed, 0.0
         self.u_applied = 0.0
@@ -210,6 +305,7 @@ class LinearADRC:
             1.0 + h * self.l1 + h * h * self.l2)
         self.z2 -= h * self.l2 * e
         self.z1 = measured + e
-        u = clamp((g.omega_c * (target - self.z1) - self.z2) / g.b0, self.u_min, self.u_max)
+        u = self.limiter.apply((g.omega_c * (target - self.z1) - self.z2) / g.b0, target,
+                               measured)
         self.u_applied = u
         return ControllerOutput(u, self.z1, self.z2, 0.0, target, 0.0)

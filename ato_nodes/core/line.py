@@ -62,6 +62,11 @@ class Line:
                 return section.value
         return self.speed_limits[-1].value
 
+    @property
+    def stop_position(self) -> float:
+        """Where the run ends: the last station's mark, else the end of the line."""
+        return self.stations[-1].position if self.stations else self.length
+
     def in_neutral_section(self, position: float) -> bool:
         return any(s.start <= position < s.end for s in self.neutral_sections)
 
@@ -106,9 +111,16 @@ TOP_KEYS = {"name", "length", "planned_run_time", "stations", *SECTION_KEYS}
 def load_line(path: str | Path) -> Line:
     path = Path(path)
     try:
-        root = yaml.compose(path.read_text())
+        text = path.read_text()
     except OSError as exc:
         raise ScenarioError(f"cannot read line file {path}: {exc.strerror}") from None
+    return parse_line(text, path)
+
+
+def parse_line(text: str, path: str | Path = "<line>") -> Line:
+    """A line from the text of a line file; `path` names it in error messages."""
+    try:
+        root = yaml.compose(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f" line {mark.line + 1}" if mark else ""

@@ -21,16 +21,19 @@ identical numbers.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .adrc import ControllerOutput, HanADRC, HanADRCGains, LinearADRC, LinearADRCGains
+from .adrc import (CommandLimiter, ControllerOutput, DiscreteADRC, DiscreteADRCGains, HanADRC,
+                   HanADRCGains, LinearADRC, LinearADRCGains, nladrc_gains)
+from .line import load_line
 from .params import steps
 from .plant import PointMassTrain, TrainParameters, TrainState
-from .profiles import Seed000Profile, StepProfile, TableProfile
+from .profiles import AtoCurve, Seed000Profile, StepProfile, TableProfile
 
 
 LOOKAHEAD = 2  # steps the profile runs ahead of the plant
@@ -42,8 +45,17 @@ class ProfileStage:
         self.total_steps = steps(values)
         self.received = 0
         self.last_position = 0.0
+        self.approach_step = values["profile.approach_step"]
+        self.stair: float | None = None
         kind = values["profile.kind"]
-        if kind == "seed000":
+        line = load_line(values["line.file"]) if values["line.file"] else None
+        self.line = line
+        if kind == "ato":
+            self.curve = AtoCurve(
+                line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
+                values["profile.ato.margin"], values["profile.ato.start_speed"],
+                values["profile.ato.train_length"])
+        elif kind == "seed000":
             self.curve = Seed000Profile(
                 period=values["profile.seed000.cycle"], v_inc=values["profile.seed000.v_inc"],
                 t1=values["profile.seed000.t1"], cruise_high=values["profile.seed000.cruise_high"],
@@ -62,9 +74,28 @@ class ProfileStage:
         else:
             velocity_step = position - self.last_position
             wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * velocity_step)]
+        speed = (position - self.last_position) / self.period if k else 0.0
         self.last_position = position
-        return [self.curve.speed(step * self.period, predicted)
+        return [self.approach(self.curve.speed(step * self.period, predicted), speed)
                 for step, predicted in wanted if step < self.total_steps]
+
+    def approach(self, target: float, speed: float) -> float:
+        """Seed 003's stepped approach: while the target is more than one step away from
+        the speed, the published target is a stair one step from the speed, held until
+        the train is within a quarter step of it."""
+        step = self.approach_step
+        if step <= 0.0 or abs(target - speed) <= step:
+            self.stair = None
+            return target
+        if self.stair is None or abs(self.stair - speed) < step / 4:
+            self.stair = speed + math.copysign(step, target - speed)
+        return self.stair
+
+    def speed_limit(self, position: float) -> float:
+        """The limit that applies at step k's position, m/s (inf without a line)."""
+        if isinstance(self.curve, AtoCurve):
+            return self.curve.limit(position)
+        return self.line.speed_limit(position) if self.line is not None else math.inf
 
 
 @dataclass(slots=True)
@@ -76,9 +107,12 @@ class PlantOutputs:
     disturbance: float   # m/s^2, phi(t_k)
     force: float         # N/kN applied
     resistance: float    # N/kN basic resistance w0
+    line_resistance: float  # N/kN gradient + curve + tunnel resistance of the belt
 
 
 class PlantStage:
+    """The train, its line and its speed sensor (noise and quantisation, seeded)."""
+
     def __init__(self, values: dict[str, Any]):
         self.params = TrainParameters(
             gamma=values["plant.gamma"], gravity=values["plant.gravity"],
@@ -87,7 +121,9 @@ class PlantStage:
             disturbance_amplitude=values["plant.disturbance.amplitude"],
             disturbance_frequency=values["plant.disturbance.frequency"],
             disturbance_phase=values["plant.disturbance.phase"],
-            actuator_lag=values["plant.actuator_lag"],
+            actuator_lag=values["plant.actuator_lag"], dead_time=values["plant.dead_time"],
+            length=values["plant.length"], pantograph_offset=values["plant.pantograph_offset"],
+            hold_at_standstill=values["plant.hold_at_standstill"],
             **({"max_traction_force": values["plant.max_traction_force"],
                 "max_traction_power": values["plant.max_traction_power"],
                 "max_brake_force": values["plant.max_brake_force"],
@@ -96,9 +132,12 @@ class PlantStage:
         self.train = PointMassTrain(
             self.params, values["run.period"], values["plant.substeps"],
             TrainState(position=values["plant.initial_position"],
-                       speed=values["plant.initial_speed"]))
-        self.last_command = 0.0
+                       speed=values["plant.initial_speed"]),
+            load_line(values["line.file"]) if values["line.file"] else None)
         self.max_speed = values["plant.max_speed"]
+        self.noise = values["plant.speed_noise"]
+        self.quantum = values["plant.speed_quantum"]
+        self.rng = np.random.default_rng(values["plant.noise_seed"])
 
     @property
     def diverged(self) -> bool:
@@ -106,13 +145,21 @@ class PlantStage:
         speed = self.train.state.speed
         return not (abs(speed) <= self.max_speed)  # also true for NaN
 
+    def measure(self, speed: float) -> float:
+        """What the speed sensor reports: speed plus noise, to its resolution."""
+        if self.noise > 0.0:
+            speed += self.noise * self.rng.standard_normal()
+        if self.quantum > 0.0:
+            speed = self.quantum * round(speed / self.quantum)
+        return speed
+
     def outputs(self) -> PlantOutputs:
-        s, p = self.train.state, self.params
-        return PlantOutputs(s.position, s.speed, s.speed, self.train.acceleration(self.last_command),
-                            p.disturbance(s.time), s.force, p.resistance(s.speed))
+        s, p, train = self.train.state, self.params, self.train
+        return PlantOutputs(s.position, self.measure(s.speed), s.speed, train.acceleration(),
+                            p.disturbance(s.time), s.force, p.resistance(s.speed),
+                            train.line_resistance())
 
     def apply(self, command: float) -> None:
-        self.last_command = command
         self.train.step(command)
 
 
@@ -127,21 +174,32 @@ class ControllerStage:
         self.targets: deque[float] = deque()
         self.speeds: deque[float] = deque()
         self.step_index = 0
-        self.controller: HanADRC | LinearADRC | None = None
+        self.controller: HanADRC | DiscreteADRC | LinearADRC | None = None
 
-    def _build(self, initial_target: float, initial_speed: float) -> HanADRC | LinearADRC:
+    def _build(self, initial_target: float, initial_speed: float):
         values = self.values
         period = values["run.period"]
-        limits = values["controller.u_min"], values["controller.u_max"]
-        if values["controller.kind"] == "han_adrc":
-            gains = HanADRCGains(**{name: values[f"adrc.{name}"] for name in (
+        limiter = CommandLimiter(values["controller.u_min"], values["controller.u_max"], period,
+                                 values["controller.max_rate"], values["controller.mode_band"])
+        kind = values["controller.kind"]
+        if kind == "linear_adrc":
+            gains = LinearADRCGains(values["ladrc.omega_o"], values["ladrc.omega_c"],
+                                    values["ladrc.b0"])
+            return LinearADRC(gains, period, limiter, initial_speed=initial_speed)
+        if kind == "discrete_adrc":
+            controller, gains = DiscreteADRC, DiscreteADRCGains(**{
+                name: values[f"dadrc.{name}"] for name in DiscreteADRCGains.__dataclass_fields__})
+        elif kind == "nladrc":
+            controller, gains = HanADRC, nladrc_gains(
+                **{name: values[f"nladrc.{name}"] for name in (
+                    "kp", "kd", "omega", "b", "alpha1", "alpha2", "r0", "h0")},
+                delta=values["adrc.delta"])
+        else:
+            controller, gains = HanADRC, HanADRCGains(**{name: values[f"adrc.{name}"] for name in (
                 "mu1", "mu2", "alpha1", "alpha2", "r0", "h0", "beta1", "beta2", "beta3", "b0",
                 "delta", "implicit_nlsef")})
-            return HanADRC(gains, period, *limits, initial_target=initial_target,
-                           initial_speed=initial_speed)
-        gains = LinearADRCGains(values["ladrc.omega_o"], values["ladrc.omega_c"],
-                                values["ladrc.b0"])
-        return LinearADRC(gains, period, *limits, initial_speed=initial_speed)
+        return controller(gains, period, limiter, initial_target=initial_target,
+                          initial_speed=initial_speed)
 
     def ready(self) -> list[ControllerOutput]:
         """Run every step whose inputs have all arrived; their outputs in order."""
@@ -161,7 +219,8 @@ class ControllerStage:
 
 
 SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
-          "force", "resistance", "command", "z1", "z2", "z3", "v1", "v2")
+          "force", "resistance", "line_resistance", "speed_limit", "command", "z1", "z2", "z3",
+          "v1", "v2")
 
 
 def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -179,6 +238,7 @@ def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
         plant.apply(c.u)
         rows.append((k * period, target, out.position, out.measured_speed, out.speed,
                      out.acceleration, out.disturbance, out.force, out.resistance,
+                     out.line_resistance, profile.speed_limit(out.position),
                      c.u, c.z1, c.z2, c.z3, c.v1, c.v2))
         if plant.diverged:
             break

@@ -83,9 +83,26 @@ SPECS: tuple[ParamSpec, ...] = (
        "plant"),
     _p("run.fault", "", "fault injection for testing supervision: NODE:crash:STEP or "
        "NODE:hang:STEP (NODE one of profile, plant, controller, recorder)", ALL),
+    _p("line.file", "", "line file (msg_config/lines/*.yaml): gradients, curves, tunnels, "
+       "limits, neutral sections, stations; relative to the scenario file; empty = open track",
+       ("profile", "plant")),
     # Target-speed profile.
-    _p("profile.kind", "seed000", "target curve: seed000 (eq. 25), step, or table (CSV)",
-       "profile", choices=("seed000", "step", "table")),
+    _p("profile.kind", "seed000", "target curve: seed000 (eq. 25), step, table (CSV), or ato "
+       "(distance-indexed curve from the line's limits, braking and planned run time)",
+       "profile", choices=("seed000", "step", "table", "ato")),
+    _p("profile.ato.acceleration", 0.8, "ATO curve: planned acceleration, m/s^2", "profile",
+       0.01, 5.0),
+    _p("profile.ato.deceleration", 0.8, "ATO curve: planned service braking, m/s^2", "profile",
+       0.01, 5.0),
+    _p("profile.ato.margin", 5.0 * KMH, "ATO curve: distance kept below the line limit, m/s",
+       "profile", 0.0, 50.0),
+    _p("profile.ato.start_speed", 0.3, "ATO curve: target at the departure point (a position-"
+       "indexed curve is 0 there and would never start the train), m/s", "profile", 0.0, 10.0),
+    _p("profile.ato.train_length", 0.0, "ATO curve: train length, m; a raised limit applies "
+       "once the tail has passed the change", "profile", 0.0, 2000.0),
+    _p("profile.approach_step", 0.0, "seed 003's stepped approach: when the target is more "
+       "than this above or below the speed, approach it in steps of this size, m/s (0 = off)",
+       "profile", 0.0, 100.0),
     _p("profile.seed000.cycle", 1200.0, "T of eq. 25, s", "profile", 1.0, 1e6),
     _p("profile.seed000.v_inc", 368.34 * KMH, "Vinc of eq. 25, m/s", "profile", 0.0, 300.0),
     _p("profile.seed000.t1", 125.2841, "t1 of eq. 25, s", "profile", 0.0, 1e6),
@@ -96,6 +113,8 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("profile.table.file", "", "CSV table (time|position,speed); relative to the scenario file",
        "profile"),
     # Train plant.
+    _p("plant.train", "", "train preset (msg_config/trains/NAME.yaml) whose plant.* values "
+       "the scenario starts from; the scenario's own plant.* values override it", "plant"),
     _p("plant.gamma", 0.11, "rotating-mass coefficient", "plant", 0.0, 1.0),
     _p("plant.gravity", 9.8, "g, m/s^2 (seed 000's xi = 0.0098 / (1 + gamma))", "plant", 9.0, 10.5),
     _p("plant.davis_a", 0.16, "basic resistance a, N/kN", "plant", 0.0, 100.0),
@@ -113,19 +132,41 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("plant.max_brake_power", 12000.0, "brake power limit, kW", "plant", 0.0, 1e6),
     _p("plant.actuator_lag", 0.0, "first-order traction/brake lag, s (0 = none)", "plant",
        0.0, 10.0),
+    _p("plant.dead_time", 0.0, "traction/brake dead time, s (rounded to whole periods)",
+       "plant", 0.0, 10.0),
+    _p("plant.length", 0.0, "train length, m (mass belt over the line's sections)", "plant",
+       0.0, 2000.0),
+    _p("plant.pantograph_offset", 0.0, "pantograph distance behind the head, m (neutral "
+       "sections cut traction while it is inside them)", "plant", 0.0, 2000.0),
+    _p("plant.hold_at_standstill", False, "the train cannot roll backwards: speed floors at 0 "
+       "(brakes hold a stopped train)", "plant"),
+    _p("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002)", "plant",
+       0.01, 1.0),
+    _p("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", "plant",
+       0.0, 10.0),
+    _p("plant.speed_quantum", 0.0, "speed sensor resolution, m/s (0 = exact)", "plant",
+       0.0, 10.0),
+    _p("plant.noise_seed", 0, "seed of the speed sensor noise (same seed, same run)", "plant",
+       0, 2**31 - 1),
     _p("plant.substeps", 1, "RK4 sub-steps per control period", "plant", 1, 10000),
     _p("plant.max_speed", 200.0, "speed beyond which a run counts as diverged and ends, m/s",
        "plant", 1.0, 1e4),
     _p("plant.initial_speed", 0.0, "speed at t = 0, m/s", "plant", 0.0, 300.0),
     _p("plant.initial_position", 0.0, "position at t = 0, m", "plant", -1e7, 1e7),
     # Controller.
-    _p("controller.kind", "han_adrc", "han_adrc (seed 000) or linear_adrc", "controller",
-       choices=("han_adrc", "linear_adrc")),
+    _p("controller.kind", "han_adrc", "han_adrc (seed 000), nladrc (seed 003), discrete_adrc "
+       "(seed 004) or linear_adrc", "controller",
+       choices=("han_adrc", "nladrc", "discrete_adrc", "linear_adrc")),
     _p("controller.preview", 0, "steps of target preview: 0 = the TD tracks r_k (paper), "
        "1 = r_k+1, the target at the end of the interval the command acts over",
        "controller", 0, 1),
     _p("controller.u_min", -1e6, "lowest command (braking), N/kN", "controller", -1e9, 0.0),
     _p("controller.u_max", 1e6, "highest command (traction), N/kN", "controller", 0.0, 1e9),
+    _p("controller.max_rate", 0.0, "jerk limit: largest change of the command per second, "
+       "N/kN/s (0 = none)", "controller", 0.0, 1e9),
+    _p("controller.mode_band", 0.0, "speed-limit module (seed 003): no traction while the speed "
+       "is more than this above the target, no braking while more than this below, m/s "
+       "(0 = off)", "controller", 0.0, 100.0),
     _p("adrc.mu1", 6000.0, "NLSEF gain on e1", "controller", 0.0, 1e9),
     _p("adrc.mu2", 5500.0, "NLSEF gain on e2", "controller", 0.0, 1e9),
     _p("adrc.alpha1", 0.75, "NLSEF exponent on e1", "controller", 0.0, 3.0),
@@ -144,6 +185,31 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("ladrc.omega_c", 2.0, "linear ADRC controller bandwidth, rad/s", "controller", 1e-6, 1e6),
     _p("ladrc.b0", 0.0098 / 1.11, "linear ADRC input gain, m/s^2 per N/kN", "controller",
        1e-9, 1e9),
+    _p("nladrc.kp", 2.0, "seed 003 NLADRC: proportional gain of the nonlinear PD", "controller",
+       0.0, 1e6),
+    _p("nladrc.kd", 1.0, "seed 003 NLADRC: derivative gain of the nonlinear PD", "controller",
+       0.0, 1e6),
+    _p("nladrc.omega", 10.0, "seed 003 NLADRC: observer bandwidth w (b01 = 3w, b02 = 3w^2, "
+       "b03 = w^3), rad/s", "controller", 1e-3, 1e4),
+    _p("nladrc.b", 0.5, "seed 003 NLADRC: compensation factor b", "controller", 1e-9, 1e9),
+    _p("nladrc.alpha1", 0.75, "seed 003 NLADRC: fal exponent on e1", "controller", 0.0, 3.0),
+    _p("nladrc.alpha2", 1.25, "seed 003 NLADRC: fal exponent on e2", "controller", 0.0, 3.0),
+    _p("nladrc.r0", 15.0, "seed 003 NLADRC: TD speed factor r", "controller", 1e-6, 1e6),
+    _p("nladrc.h0", 0.01, "seed 003 NLADRC: TD filter factor h0, s", "controller", 1e-6, 10.0),
+    _p("dadrc.b01", 0.9, "seed 004 discrete ESO gain b01 (per step)", "controller", 0.0, 3.0),
+    _p("dadrc.b02", 0.03, "seed 004 discrete ESO gain b02 (per step)", "controller", 0.0, 3.0),
+    _p("dadrc.b03", 0.001, "seed 004 discrete ESO gain b03 (per step)", "controller", 0.0, 3.0),
+    _p("dadrc.b1", 40.0, "seed 004 NLSEF gain on e1, N/kN per (m/s)^a1", "controller", 0.0, 1e6),
+    _p("dadrc.b2", 100.0, "seed 004 NLSEF gain on e2, N/kN per (m/s per step)^a2",
+       "controller", 0.0, 1e6),
+    _p("dadrc.alpha1", 0.75, "seed 004 NLSEF exponent a1 in (0, 1)", "controller", 0.01, 1.0),
+    _p("dadrc.alpha2", 0.5, "seed 004 NLSEF exponent a2 in (0, 1)", "controller", 0.01, 1.0),
+    _p("dadrc.b0", 1e-4, "seed 004 input gain b0 per step^2 (xi h^2 / lag)", "controller",
+       1e-12, 1e3),
+    _p("dadrc.delta", 0.01, "seed 004 fal linear zone (below 0.0025 chatters)", "controller",
+       1e-6, 10.0),
+    _p("dadrc.r0", 2.0, "seed 004 TD speed factor, m/s^2", "controller", 1e-6, 1e6),
+    _p("dadrc.h0", 0.1, "seed 004 TD filter factor, s", "controller", 1e-6, 10.0),
     # Orchestration.
     _p("supervisor.ready_timeout", 30.0, "wall seconds to wait for every edge to match",
        "supervisor", 0.1, 3600.0),
@@ -213,7 +279,7 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
         raise ScenarioError(f"cannot read scenario {path}: {exc.strerror}") from None
     if not isinstance(document, dict):
         raise ScenarioError(f"{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)")
-    values = defaults()
+    given = {}
     for node, section in document.items():
         if node != "/**" and node not in NODES:
             raise ScenarioError(f"{path}: unknown node {node!r}; nodes are /**, {', '.join(NODES)}")
@@ -225,11 +291,39 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
                 raise _unknown(name, str(path))
             if node != "/**" and node not in spec.nodes:
                 raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, not {node}")
-            values[name] = spec.check(value, str(path))
-    table = values["profile.table.file"]
-    if table and not Path(table).is_absolute():
-        values["profile.table.file"] = str((path.parent / table).resolve())
+            given[name] = spec.check(value, str(path))
+    for name in FILE_PARAMETERS:
+        if given.get(name) and not Path(given[name]).is_absolute():
+            local = path.parent / given[name]
+            given[name] = str((local if local.exists() else config_dir() / given[name]).resolve())
+    values = defaults()
+    if given.get("plant.train"):
+        values.update(train_preset(given["plant.train"]))
+    values.update(given)
     return check_consistency(values, str(path))
+
+
+FILE_PARAMETERS = ("profile.table.file", "line.file")  # relative to the scenario file, else
+#                                                        to msg_config/
+
+
+def train_names() -> list[str]:
+    return sorted(p.stem for p in (config_dir() / "trains").glob("*.yaml"))
+
+
+def train_preset(name: str) -> dict[str, Any]:
+    """The plant.* values of msg_config/trains/NAME.yaml (a flat mapping), checked."""
+    path = config_dir() / "trains" / f"{name}.yaml"
+    if not path.is_file():
+        raise ScenarioError(f"unknown train {name!r}; known: {', '.join(train_names())}")
+    document = yaml.safe_load(path.read_text())
+    values = {}
+    for key, value in (document or {}).items():
+        spec = SPEC_BY_NAME.get(key)
+        if spec is None or "plant" not in spec.nodes or key == "plant.train":
+            raise ScenarioError(f"{path}: {key!r} is not a plant parameter")
+        values[key] = spec.check(value, str(path))
+    return {**values, "plant.train": name}
 
 
 def _flatten(mapping: dict, prefix: str = "") -> dict[str, Any]:
@@ -263,15 +357,20 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 
 def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
-    merged = dict(values)
     if isinstance(overrides, dict):
+        checked = {}
         for name, value in overrides.items():
             spec = SPEC_BY_NAME.get(name)
             if spec is None:
                 raise _unknown(name, "override")
-            merged[name] = spec.check(value, "override")
+            checked[name] = spec.check(value, "override")
+        overrides = checked
     else:
-        merged.update(parse_override(text) for text in overrides)
+        overrides = dict(parse_override(text) for text in overrides)
+    merged = {**values, **overrides}
+    if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
+        merged.update(train_preset(overrides["plant.train"]))
+        merged.update(overrides)
     return check_consistency(merged, "parameters")
 
 
@@ -280,6 +379,10 @@ def check_consistency(values: dict[str, Any], where: str) -> dict[str, Any]:
         raise ScenarioError(f"{where}: run.duration must be at least one run.period")
     if values["profile.kind"] == "table" and not values["profile.table.file"]:
         raise ScenarioError(f"{where}: profile.kind is table but profile.table.file is empty")
+    if values["profile.kind"] == "ato" and not values["line.file"]:
+        raise ScenarioError(f"{where}: profile.kind is ato but line.file is empty")
+    if values["line.file"] and not Path(values["line.file"]).is_file():
+        raise ScenarioError(f"{where}: line file {values['line.file']} does not exist")
     try:
         parse_fault(values["run.fault"])
     except ScenarioError as exc:

@@ -6,10 +6,17 @@
     phi(t) = A sin(omega t + phase)     [m/s^2]
 
 F is the specific force actually applied by the train (N/kN, + traction,
-- braking). The commanded force u reaches F through optional envelopes
-(constant force, then constant power, for traction and braking) and an
-optional first-order actuator lag tau: dF/dt = (sat(u) - F) / tau. With
-no envelope and tau = 0 (the paper-faithful variant) F = u.
+- braking). The commanded force u reaches F through an optional dead time
+(whole control periods), optional envelopes (constant force, then constant
+power, for traction and braking) and an optional first-order actuator lag
+tau: dF/dt = (sat(u) - F) / tau (seed 004's Gn(s)). With none of them (the
+paper-faithful variant) F = u.
+
+On a line (core.line), the mass belt's gradient, curve and tunnel
+resistance is added to w0 at the belt's position, and traction is cut
+(u -> min(u, 0)) during every sub-step that starts with the pantograph
+inside a neutral section. `hold_at_standstill` floors the speed at 0: a
+stopped train is held by its brakes instead of rolling back.
 
 Integration: classic RK4 with `substeps` equal sub-steps per control
 period, the command held constant over the period (zero-order hold).
@@ -18,7 +25,10 @@ period, the command held constant over the period (zero-order hold).
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
+
+from .line import Line
 
 
 @dataclass(frozen=True)
@@ -37,6 +47,10 @@ class TrainParameters:
     max_brake_force: float = math.inf         # kN
     max_brake_power: float = math.inf         # kW
     actuator_lag: float = 0.0                 # s, first-order time constant
+    dead_time: float = 0.0                    # s, before a command starts to act
+    length: float = 0.0                       # m, train (mass belt) length
+    pantograph_offset: float = 0.0            # m behind the head
+    hold_at_standstill: bool = False
 
     @property
     def xi(self) -> float:
@@ -74,19 +88,23 @@ class PointMassTrain:
     """Integrates the train over one control period per call."""
 
     def __init__(self, params: TrainParameters, period: float, substeps: int = 1,
-                 state: TrainState | None = None):
+                 state: TrainState | None = None, line: Line | None = None):
         self.p = params
         self.period = period
         self.substeps = substeps
+        self.line = line
         self.state = state or TrainState()
         self.steps = round(self.state.time / period)
         self.lagged = params.actuator_lag > 0.0
         self.limited = math.isfinite(params.max_traction_force + params.max_traction_power
                                      + params.max_brake_force + params.max_brake_power)
+        # Commands waiting out the dead time; the oldest acts next.
+        self.delayed = deque([0.0] * round(params.dead_time / period))
+        self.acting = 0.0  # the command that acted over the last period (after delay and cuts)
         self.rates = self._make_rates()
 
     def _make_rates(self):
-        """rates(t, v, F, command) -> (dv/dt, dF/dt) with every constant bound once:
+        """rates(t, x, v, F, command) -> (dv/dt, dF/dt) with every constant bound once:
         this runs four times per sub-step, in every node and every tuning candidate."""
         p = self.p
         xi, a, b, c = p.xi, p.davis_a, p.davis_b, p.davis_c
@@ -94,6 +112,7 @@ class PointMassTrain:
                                    p.disturbance_phase)
         sin, copysign = math.sin, math.copysign
         limits, limited, tau = p.force_limits, self.limited, p.actuator_lag
+        line, length = self.line, p.length
 
         def achievable(command: float, v: float) -> float:
             if limited:
@@ -101,9 +120,12 @@ class PointMassTrain:
                 return low if command < low else high if command > high else command
             return command
 
-        def rates(t: float, v: float, force: float, command: float) -> tuple[float, float]:
+        def rates(t: float, x: float, v: float, force: float,
+                  command: float) -> tuple[float, float]:
             speed = v if v >= 0.0 else -v
             resistance = copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
+            if line is not None:
+                resistance += line.additional_resistance(x, length)
             if tau > 0.0:
                 dforce = (achievable(command, v) - force) / tau
             else:
@@ -113,31 +135,48 @@ class PointMassTrain:
         self.achievable = achievable
         return rates
 
-    def acceleration(self, command: float) -> float:
-        """True acceleration at the current state under `command`."""
+    def line_resistance(self) -> float:
+        """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
+        if self.line is None:
+            return 0.0
+        return self.line.additional_resistance(self.state.position, self.p.length)
+
+    def acceleration(self) -> float:
+        """True acceleration at the current state under the command now acting."""
         s = self.state
-        return self.rates(s.time, s.speed, s.force, command)[0]
+        return self.rates(s.time, s.position, s.speed, s.force, self.acting)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
-        s, rates = self.state, self.rates
+        if self.delayed:
+            self.delayed.append(command)
+            command = self.delayed.popleft()
+        s, rates, line, hold = self.state, self.rates, self.line, self.p.hold_at_standstill
         h = self.period / self.substeps
         start = s.time
         x, v, f = s.position, s.speed, s.force
         for i in range(self.substeps):
             t = start + i * h
-            a1, g1 = rates(t, v, f, command)
-            v2 = v + h / 2 * a1
-            a2, g2 = rates(t + h / 2, v2, f + h / 2 * g1, command)
-            v3 = v + h / 2 * a2
-            a3, g3 = rates(t + h / 2, v3, f + h / 2 * g2, command)
-            v4 = v + h * a3
-            a4, g4 = rates(t + h, v4, f + h * g3, command)
-            x += h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+            acting = command
+            if line is not None and command > 0.0 and \
+                    line.in_neutral_section(x - self.p.pantograph_offset):
+                acting = 0.0
+            a1, g1 = rates(t, x, v, f, acting)
+            x2, v2 = x + h / 2 * v, v + h / 2 * a1
+            a2, g2 = rates(t + h / 2, x2, v2, f + h / 2 * g1, acting)
+            x3, v3 = x + h / 2 * v2, v + h / 2 * a2
+            a3, g3 = rates(t + h / 2, x3, v3, f + h / 2 * g2, acting)
+            x4, v4 = x + h * v3, v + h * a3
+            a4, g4 = rates(t + h, x4, v4, f + h * g3, acting)
+            x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
             v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
             f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
+            if hold and v < 0.0:
+                v, x_next = 0.0, max(x, x_next)
+            x = x_next
+        self.acting = acting
         if not self.lagged:
-            f = self.achievable(command, v)
+            f = self.achievable(acting, v)
         self.steps += 1
         s.time, s.position, s.speed, s.force = self.steps * self.period, x, v, f
         return s

@@ -90,3 +90,75 @@ class TableProfile:
     def speed(self, t: float, position: float = 0.0) -> float:
         x = t if self.axis == "time" else position
         return float(np.interp(x, self.points, self.speeds))
+
+
+class AtoCurve:
+    """Distance-indexed ATO target curve of one interstation run (seed 004).
+
+    On a grid of `resolution` m from the departure point to the line's stop
+    mark, the target is the lowest of: the line limit less `margin` (a raised
+    limit counts only once the train's tail has passed the change), a cruise
+    speed, the acceleration curve from the departure point and the braking
+    curve to every lower limit ahead and to the stop. In v^2 both curves are
+    running minima (v^2 grows by at most 2 a dx per cell), so the whole curve
+    is a few numpy passes. The cruise speed is the lowest that meets the
+    line's planned run time (bisection); when even the limits cannot meet the
+    plan, the curve runs at the limits. The departure point's target is
+    `start_speed`, not 0, or a position-indexed curve would never start the train.
+    """
+
+    def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
+                 start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5):
+        self.line = line
+        stop = line.stop_position
+        self.positions = np.arange(0.0, stop + resolution / 2, resolution)
+        self.positions[-1] = stop
+        self.limits = self._belt_limits(self.positions, line, train_length)
+        self.acceleration, self.deceleration = acceleration, deceleration
+        self.start_speed = start_speed
+        self.caps = np.maximum(self.limits - margin, start_speed)
+        top = float(self.caps.max())
+        if line.planned_run_time is None or self.run_time(top) >= line.planned_run_time:
+            self.cruise = top
+        else:
+            low, high = start_speed, top
+            for _ in range(60):
+                middle = 0.5 * (low + high)
+                low, high = (middle, high) if self.run_time(middle) > line.planned_run_time \
+                    else (low, middle)
+            self.cruise = high
+        self.speeds = self.curve(self.cruise)
+        self.planned_run_time = self.run_time(self.cruise)
+
+    @staticmethod
+    def _belt_limits(x: np.ndarray, line, train_length: float) -> np.ndarray:
+        limits = np.full_like(x, np.inf)
+        for section in line.speed_limits:
+            inside = (x >= section.start) & (x < section.end + train_length)
+            limits[inside] = np.minimum(limits[inside], section.value)
+        limits[~np.isfinite(limits)] = line.speed_limits[-1].value
+        return limits
+
+    def curve(self, cruise: float) -> np.ndarray:
+        x = self.positions
+        squared = np.minimum(self.caps, cruise) ** 2
+        squared[0] = self.start_speed ** 2
+        rise = 2.0 * self.acceleration * x
+        squared = np.minimum.accumulate(squared - rise) + rise
+        fall = 2.0 * self.deceleration * (x[-1] - x)
+        squared[-1] = 0.0
+        squared = (np.minimum.accumulate((squared - fall)[::-1]) + fall[::-1])[::-1]
+        return np.sqrt(np.maximum(squared, 0.0))
+
+    def run_time(self, cruise: float) -> float:
+        v = self.curve(cruise)
+        return float(np.sum(2.0 * np.diff(self.positions) / (v[:-1] + v[1:])))
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        if position >= self.positions[-1]:
+            return 0.0
+        return float(np.interp(position, self.positions, self.speeds))
+
+    def limit(self, position: float) -> float:
+        """The limit that applies to the train with its head at `position`, m/s."""
+        return float(np.interp(position, self.positions, self.limits))

@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
 import numpy as np
 
 from .indices import tracking_indices
+from .line import Line, load_line, parse_line
+from .operation import format_operation, operation_indices
+
+LINE_TEXT = "line.text"  # run-parameter key of the line file's text, kept in the bag
 
 
 def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
@@ -20,7 +27,33 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
         indices.update(observer_accuracy(series, parameters["adrc.b0"]))
     if parameters and parameters.get("profile.kind") == "step":
         indices["overshoot_percent"] = step_overshoot(series["speed"], series["target"])
+    if {"position", "acceleration", "force"} <= set(series):
+        indices.update(operation(series, parameters or {}))
     return indices
+
+
+def run_line(parameters: dict) -> Line | None:
+    """The run's line: the copy the bag carries (LINE_TEXT), else the file it names."""
+    if parameters.get(LINE_TEXT):
+        return parse_line(parameters[LINE_TEXT], parameters.get("line.file") or "<bag>")
+    if parameters.get("line.file") and Path(parameters["line.file"]).is_file():
+        return load_line(parameters["line.file"])
+    return None
+
+
+def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, float]:
+    """Energy (needs the train's mass), comfort, switches, limits; stopping and
+    punctuality for runs to a station (profile.kind ato)."""
+    line = run_line(parameters)
+    to_station = line is not None and parameters.get("profile.kind") == "ato"
+    if "speed_limit" in series and not np.any(np.isfinite(series["speed_limit"])):
+        series = {name: values for name, values in series.items() if name != "speed_limit"}
+    return operation_indices(
+        series, mass=parameters.get("plant.mass", math.nan),
+        gravity=parameters.get("plant.gravity", 9.8),
+        efficiency=parameters.get("plant.efficiency", 0.9),
+        stop_position=line.stop_position if to_station else None,
+        planned_run_time=line.planned_run_time if to_station else None)
 
 
 def total_disturbance(series: dict[str, np.ndarray], b0: float) -> np.ndarray:
@@ -66,4 +99,5 @@ def format_indices(indices: dict) -> str:
           if "eso_speed_max_dev" in indices else []),
         *([f"overshoot        {indices['overshoot_percent']:.3f} %"]
           if "overshoot_percent" in indices else []),
+        *format_operation(indices),
     ])

@@ -231,6 +231,11 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
         role = getattr(factory, "role", "node")
         print(f"{role}: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         status = 2
+    except Exception:
+        # A signal shuts the context down under a running callback, whose next rcl call
+        # then fails (publisher or context invalid): that is the shutdown, not a fault.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.close()

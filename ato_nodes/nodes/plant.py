@@ -56,7 +56,8 @@ class PlantNode(AtoNode):
         self.clock_pub.publish(self.clock_msg)
         state = self.state_msg
         state.linear.x, state.linear.y, state.linear.z = out.speed, out.acceleration, out.disturbance
-        state.angular.x, state.angular.y = out.force, out.resistance
+        state.angular.x, state.angular.y, state.angular.z = (out.force, out.resistance,
+                                                             out.line_resistance)
         self.state_pub.publish(state)
 
     def on_command(self, msg: Float64) -> None:

@@ -1,5 +1,5 @@
-"""Target-speed profile node: on step k's position, the target of step k+1
-(see ato_nodes.core.loop for why one step ahead)."""
+"""Target-speed profile node: on step k's position, the target of step k+2
+(see ato_nodes.core.loop for why two steps ahead) and the speed limit of step k."""
 
 from __future__ import annotations
 
@@ -15,8 +15,9 @@ class ProfileNode(AtoNode):
     def __init__(self):
         super().__init__()
         self.stage = ProfileStage(self.values)
-        self.target_msg = Float64()
+        self.target_msg, self.limit_msg = Float64(), Float64()
         self.target_pub = self.publisher("target_speed")
+        self.limit_pub = self.publisher("speed_limit")
         self.subscription("position", self.on_position)
         self.ready_when_matched()
 
@@ -25,6 +26,8 @@ class ProfileNode(AtoNode):
         for target in self.stage.on_position(msg.data):
             self.target_msg.data = target
             self.target_pub.publish(self.target_msg)
+        self.limit_msg.data = self.stage.speed_limit(msg.data)
+        self.limit_pub.publish(self.limit_msg)
 
 
 def main() -> None:
