@@ -80,15 +80,16 @@ class ProfileStage:
                 for step, predicted in wanted if step < self.total_steps]
 
     def approach(self, target: float, speed: float) -> float:
-        """Seed 003's stepped approach: while the target is more than one step away from
-        the speed, the published target is a stair one step from the speed, held until
-        the train is within a quarter step of it."""
+        """Seed 003's stepped approach: while the target is more than one step above
+        the speed, the published target is a stair one step above the speed, held
+        until the train is within a quarter step of it. Only upwards: a target below
+        the speed is a braking curve protecting a limit or the stop, never softened."""
         step = self.approach_step
-        if step <= 0.0 or abs(target - speed) <= step:
+        if step <= 0.0 or target - speed <= step:
             self.stair = None
             return target
         if self.stair is None or abs(self.stair - speed) < step / 4:
-            self.stair = speed + math.copysign(step, target - speed)
+            self.stair = speed + step
         return self.stair
 
     def speed_limit(self, position: float) -> float:

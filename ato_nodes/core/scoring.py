@@ -21,8 +21,10 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
     accuracy and the step-response overshoot are added where they apply."""
     length = min(len(values) for values in series.values())
     series = {name: values[:length] for name, values in series.items()}
-    indices = tracking_indices(series["t"], series["target"], series["speed"],
-                               series.get("command"))
+    command = series.get("command")
+    if command is not None and parameters:
+        command = notch_level(command, parameters)
+    indices = tracking_indices(series["t"], series["target"], series["speed"], command)
     if parameters and parameters.get("controller.kind") == "han_adrc" and "z3" in series:
         indices.update(observer_accuracy(series, parameters["adrc.b0"]))
     if parameters and parameters.get("profile.kind") == "step":
@@ -30,6 +32,20 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
     if {"position", "acceleration", "force"} <= set(series):
         indices.update(operation(series, parameters or {}))
     return indices
+
+
+LIMITED = 1e5  # N/kN: a controller limit below this is a real one (defaults are 1e6)
+
+
+def notch_level(command: np.ndarray, parameters: dict) -> np.ndarray:
+    """The command as seed 004's notch level in [-1, 1] (u / u_max in traction,
+    u / |u_min| in braking) when the controller has real limits, so that J's u^2
+    term weighs the command against the tracking error on a fixed scale; the raw
+    command (N/kN) otherwise, as for seed 000."""
+    high, low = parameters.get("controller.u_max", 1e6), parameters.get("controller.u_min", -1e6)
+    if high >= LIMITED or -low >= LIMITED:
+        return command
+    return np.where(command > 0, command / high, command / -low)
 
 
 def run_line(parameters: dict) -> Line | None:
