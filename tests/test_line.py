@@ -1,9 +1,15 @@
 """Line files: validation with file and line, and mass-belt additional resistance."""
 
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from ato_nodes.core.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
 from ato_nodes.core.params import ScenarioError, config_dir
+
+ROOT = Path(__file__).resolve().parents[1]
 
 GOOD = """\
 name: test line
@@ -57,6 +63,9 @@ def test_resistance_varies_linearly_while_straddling_a_change(tmp_path):
     ("  - {start: 700, end: 900}", "tunnels: unknown key 'lenght'"),
     ("length: 1000", "unknown key 'lenght'"),
     ("  - {start: 0, end: 1000, limit: 20}", "no limit from 800 m to the end"),
+    ("  - {start: 0, end: 400, grade: 10}\n  - {start: 400, end: 1000, grade: -5}",
+     "gradients: section starting at 0 m overlaps or precedes"),
+    ("  - {start: 700, end: 900}", "tunnels: section from 900 to 700 m has no positive length"),
 ])
 def test_bad_line_files_name_the_file_and_line(tmp_path, change, problem):
     replacement = {
@@ -66,6 +75,9 @@ def test_bad_line_files_name_the_file_and_line(tmp_path, change, problem):
         "tunnels: unknown key 'lenght'": "  - {start: 700, end: 900, lenght: 3}",
         "unknown key 'lenght'": "lenght: 1000",
         "no limit from 800 m to the end": "  - {start: 0, end: 800, limit: 20}",
+        "gradients: section starting at 0 m overlaps or precedes":
+            "  - {start: 400, end: 1000, grade: -5}\n  - {start: 0, end: 400, grade: 10}",
+        "tunnels: section from 900 to 700 m has no positive length": "  - {start: 900, end: 700}",
     }[problem]
     path = write(tmp_path, GOOD.replace(change, replacement, 1))
     with pytest.raises(ScenarioError) as failure:
@@ -83,3 +95,17 @@ def test_speed_limit_and_neutral_sections_by_position(tmp_path):
     line = load_line(write(tmp_path, text))
     assert line.speed_limit(499.0) == 20 and line.speed_limit(500.0) == 30
     assert line.in_neutral_section(820.0) and not line.in_neutral_section(850.0)
+
+
+def test_a_bad_line_stops_run_stack_with_one_line_and_exit_2(tmp_path):
+    line = write(tmp_path, GOOD.replace("limit: 20", "limit: 0"))
+    scenario = tmp_path / "scenario.yaml"
+    scenario.write_text("profile:\n  ros__parameters:\n    profile.kind: ato\n"
+                        f"    line.file: {line}\n")
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--scenario",
+                             str(scenario), "--out", str(tmp_path / "bag")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(line) in lines[0] and "line 11" in lines[0]
+    assert "limit must be positive" in lines[0] and not (tmp_path / "bag").exists()

@@ -128,17 +128,25 @@ class CommandLimiter:
       (it picks traction or braking by comparing actual and target speed);
     * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
       (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
-    * saturation to [u_min, u_max] (acceleration limit).
+    * saturation to [u_min, u_max] (acceleration limit);
+    * holding brake, `holding_brake` > 0: with a zero target and the train (nearly)
+      stopped, at least this much braking, as an ATO holds a train berthed at a
+      station; without it a controller dithers about zero speed and creeps.
     """
 
+    STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
+
     def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
-                 mode_band: float = 0.0):
+                 mode_band: float = 0.0, holding_brake: float = 0.0):
         self.u_min, self.u_max = u_min, u_max
         self.max_change = max_rate * period
         self.mode_band = mode_band
+        self.holding_brake = holding_brake
         self.last = 0.0
 
     def apply(self, u: float, target: float, speed: float) -> float:
+        if self.holding_brake > 0.0 and target <= 0.0 and speed < self.STOPPED:
+            u = min(u, -self.holding_brake)
         band = self.mode_band
         if band > 0.0:
             if speed > target + band:

@@ -181,7 +181,8 @@ class ControllerStage:
         values = self.values
         period = values["run.period"]
         limiter = CommandLimiter(values["controller.u_min"], values["controller.u_max"], period,
-                                 values["controller.max_rate"], values["controller.mode_band"])
+                                 values["controller.max_rate"], values["controller.mode_band"],
+                                 values["controller.holding_brake"])
         kind = values["controller.kind"]
         if kind == "linear_adrc":
             gains = LinearADRCGains(values["ladrc.omega_o"], values["ladrc.omega_c"],

@@ -167,6 +167,8 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("controller.mode_band", 0.0, "speed-limit module (seed 003): no traction while the speed "
        "is more than this above the target, no braking while more than this below, m/s "
        "(0 = off)", "controller", 0.0, 100.0),
+    _p("controller.holding_brake", 0.0, "braking held with a zero target once the train is "
+       "stopped (station berth), N/kN (0 = none)", "controller", 0.0, 1e6),
     _p("adrc.mu1", 6000.0, "NLSEF gain on e1", "controller", 0.0, 1e9),
     _p("adrc.mu2", 5500.0, "NLSEF gain on e2", "controller", 0.0, 1e9),
     _p("adrc.alpha1", 0.75, "NLSEF exponent on e1", "controller", 0.0, 3.0),
@@ -381,8 +383,9 @@ def check_consistency(values: dict[str, Any], where: str) -> dict[str, Any]:
         raise ScenarioError(f"{where}: profile.kind is table but profile.table.file is empty")
     if values["profile.kind"] == "ato" and not values["line.file"]:
         raise ScenarioError(f"{where}: profile.kind is ato but line.file is empty")
-    if values["line.file"] and not Path(values["line.file"]).is_file():
-        raise ScenarioError(f"{where}: line file {values['line.file']} does not exist")
+    if values["line.file"]:
+        from .line import load_line  # validated before any node starts; errors name file:line
+        load_line(values["line.file"])
     try:
         parse_fault(values["run.fault"])
     except ScenarioError as exc:

@@ -9,8 +9,9 @@ F is the specific force actually applied by the train (N/kN, + traction,
 - braking). The commanded force u reaches F through an optional dead time
 (whole control periods), optional envelopes (constant force, then constant
 power, for traction and braking) and an optional first-order actuator lag
-tau: dF/dt = (sat(u) - F) / tau (seed 004's Gn(s)). With none of them (the
-paper-faithful variant) F = u.
+tau: dG/dt = (sat(u) - G) / tau, F = sat(G) (seed 004's Gn(s); saturating
+again after the lag keeps F inside the envelope as the speed changes). With
+none of them (the paper-faithful variant) F = u.
 
 On a line (core.line), the mass belt's gradient, curve and tunnel
 resistance is added to w0 at the belt's position, and traction is cut
@@ -101,6 +102,7 @@ class PointMassTrain:
         # Commands waiting out the dead time; the oldest acts next.
         self.delayed = deque([0.0] * round(params.dead_time / period))
         self.acting = 0.0  # the command that acted over the last period (after delay and cuts)
+        self.lag_state = self.state.force  # the lag's output before the envelope
         self.rates = self._make_rates()
 
     def _make_rates(self):
@@ -126,8 +128,9 @@ class PointMassTrain:
             resistance = copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
             if line is not None:
                 resistance += line.additional_resistance(x, length)
-            if tau > 0.0:
+            if tau > 0.0:  # `force` is the lag's state; the envelope holds at every speed
                 dforce = (achievable(command, v) - force) / tau
+                force = achievable(force, v)
             else:
                 force, dforce = achievable(command, v), 0.0
             return xi * (force - resistance) + amplitude * sin(omega * t + phase), dforce
@@ -144,7 +147,7 @@ class PointMassTrain:
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""
         s = self.state
-        return self.rates(s.time, s.position, s.speed, s.force, self.acting)[0]
+        return self.rates(s.time, s.position, s.speed, self.lag_state, self.acting)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
@@ -154,7 +157,7 @@ class PointMassTrain:
         s, rates, line, hold = self.state, self.rates, self.line, self.p.hold_at_standstill
         h = self.period / self.substeps
         start = s.time
-        x, v, f = s.position, s.speed, s.force
+        x, v, f = s.position, s.speed, self.lag_state
         for i in range(self.substeps):
             t = start + i * h
             acting = command
@@ -174,9 +177,8 @@ class PointMassTrain:
             if hold and v < 0.0:
                 v, x_next = 0.0, max(x, x_next)
             x = x_next
-        self.acting = acting
-        if not self.lagged:
-            f = self.achievable(acting, v)
+        self.acting, self.lag_state = acting, f
         self.steps += 1
-        s.time, s.position, s.speed, s.force = self.steps * self.period, x, v, f
+        s.time, s.position, s.speed = self.steps * self.period, x, v
+        s.force = self.achievable(f if self.lagged else acting, v)
         return s

@@ -1,0 +1,230 @@
+"""Trains on lines: presets, grades, envelopes, neutral sections, dead time, the speed
+sensor, the ATO curve and the seed-003/004 controllers (ROS-free)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.adrc import (CommandLimiter, DiscreteADRC, DiscreteADRCGains, fal,
+                                 nladrc_gains)
+from ato_nodes.core.line import parse_line
+from ato_nodes.core.loop import PlantStage, ProfileStage, simulate
+from ato_nodes.core.params import (ScenarioError, apply_overrides, defaults, load_scenario,
+                                   train_names, train_preset)
+from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
+from ato_nodes.core.profiles import AtoCurve
+
+
+def line(body: str, length: float = 100000.0, limit: float = 100.0):
+    return parse_line(f"name: t\nlength: {length}\nspeed_limits:\n"
+                      f"  - {{start: 0, end: {length}, limit: {limit}}}\n{body}")
+
+
+def metro(**changes) -> TrainParameters:
+    values = {**defaults(), **train_preset("metro-b")}
+    fields = {"gamma", "gravity", "davis_a", "davis_b", "davis_c", "mass", "actuator_lag",
+              "dead_time", "length", "pantograph_offset", "max_traction_force",
+              "max_traction_power", "max_brake_force", "max_brake_power"}
+    params = {name: values[f"plant.{name}"] for name in fields}
+    params["disturbance_amplitude"] = 0.0
+    return TrainParameters(**{**params, **changes})
+
+
+def test_every_preset_loads_and_a_scenario_overrides_its_preset(tmp_path):
+    assert {"crh380al", "crh380a", "crh5", "metro-b", "maglev"} <= set(train_names())
+    for name in train_names():
+        assert train_preset(name)["plant.mass"] > 0
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("plant:\n  ros__parameters:\n    plant.train: metro-b\n"
+                        "    plant.actuator_lag: 1.25\n")
+    values = load_scenario(str(scenario))
+    assert values["plant.mass"] == 194.3 and values["plant.actuator_lag"] == 1.25
+    with pytest.raises(ScenarioError, match="unknown train 'tgv'"):
+        apply_overrides(values, ["plant.train=tgv"])
+
+
+def test_coasting_on_a_constant_grade_settles_where_grade_and_resistance_balance():
+    params = metro(actuator_lag=0.0, dead_time=0.0, max_traction_force=math.inf)
+    grade = -6.0  # per mille, downhill: the grade pulls with 6 N/kN
+    train = PointMassTrain(params, 0.5, 1, TrainState(position=1000.0, speed=5.0),
+                           line(f"gradients:\n  - {{start: 0, end: 100000, grade: {grade}}}"))
+    for _ in range(12000):  # 6000 s, ~27 time constants of the approach
+        train.step(0.0)
+    a, b, c = params.davis_a, params.davis_b, params.davis_c
+    balance = (-b + math.sqrt(b * b - 4 * c * (a + grade))) / (2 * c)  # w0(v) = -grade
+    assert train.state.speed == pytest.approx(balance, rel=1e-6)
+
+
+def test_plant_acceleration_uses_the_belt_resistance_of_the_line():
+    track = line("gradients:\n  - {start: 0, end: 500, grade: 10}\n"
+                 "  - {start: 500, end: 100000, grade: -5}")
+    params = metro(actuator_lag=0.0, dead_time=0.0, max_traction_force=math.inf)
+    for head in (300.0, 550.0, 700.0):  # on +10, straddling, on -5
+        train = PointMassTrain(params, 0.1, 1, TrainState(position=head, speed=10.0), track)
+        expected = params.xi * (20.0 - params.resistance(10.0)
+                                - track.additional_resistance(head, params.length))
+        train.acting = 20.0
+        assert train.acceleration() == pytest.approx(expected)
+    assert track.additional_resistance(550.0, 118.0) == pytest.approx(
+        (10.0 * 68.0 - 5.0 * 50.0) / 118.0)
+
+
+def test_traction_and_braking_never_exceed_the_envelope_force_or_power():
+    params = metro()
+    weight = params.mass * params.gravity  # kN
+    train = PointMassTrain(params, 0.1, 2, TrainState())
+    forces, speeds = [], []
+    for command in [1e3] * 600 + [-1e3] * 400:  # flat out, then full brake
+        state = train.step(command)
+        forces.append(state.force * weight / 1000.0)
+        speeds.append(state.speed)
+    forces, speeds = np.array(forces), np.array(speeds)
+    assert speeds.max() > 60 / 3.6  # well into the constant-power region
+    assert forces.max() <= params.max_traction_force + 1e-9
+    assert -forces.min() <= params.max_brake_force + 1e-9
+    assert np.max(forces * speeds) <= params.max_traction_power * (1 + 1e-9)
+    assert np.max(-forces * speeds) <= params.max_brake_power * (1 + 1e-9)
+    assert forces.max() == pytest.approx(params.max_traction_force, rel=1e-3)  # reached
+
+
+def test_a_neutral_section_cuts_traction_exactly_while_the_pantograph_is_inside():
+    period, start, end, offset = 0.01, 400.0, 650.0, 30.0
+    track = line(f"neutral_sections:\n  - {{start: {start}, end: {end}}}")
+    params = metro(actuator_lag=0.0, dead_time=0.0, pantograph_offset=offset)
+    train = PointMassTrain(params, period, 1, TrainState(speed=15.0), track)
+    cut, inside, previous = 0.0, 0.0, train.state.position
+    while train.state.position < end + offset + 100.0:
+        previous = train.state.position
+        state = train.step(5.0)
+        pantograph = previous - offset
+        cut += period if state.force == 0.0 else 0.0
+        assert (state.force == 0.0) == (start <= pantograph < end)
+        inside += period if start <= pantograph < end else 0.0
+    speed = 15.0  # roughly; the time inside is (end - start) / v within a step
+    assert cut == pytest.approx(inside) and cut > 0.8 * (end - start) / (speed * 1.5)
+
+
+def test_dead_time_delays_the_command_by_whole_periods():
+    params = metro(actuator_lag=0.0, dead_time=0.3, max_traction_force=math.inf)
+    train = PointMassTrain(params, 0.1, 1, TrainState(speed=10.0))
+    forces = [train.step(50.0).force for _ in range(5)]
+    assert forces == [0.0, 0.0, 0.0, 50.0, 50.0]
+
+
+def test_a_held_train_does_not_roll_back_under_braking_or_on_an_up_grade():
+    track = line("gradients:\n  - {start: 0, end: 100000, grade: 20}")
+    params = metro(actuator_lag=0.0, dead_time=0.0, hold_at_standstill=True)
+    train = PointMassTrain(params, 0.1, 2, TrainState(position=100.0, speed=1.0), track)
+    for _ in range(100):
+        train.step(-30.0)
+    assert train.state.speed == 0.0 and train.state.position > 100.0
+
+
+def test_the_speed_sensor_is_seeded_noisy_and_quantised():
+    values = load_scenario("seed004-metro")
+
+    def readings(**changes):
+        stage = PlantStage({**values, **changes})
+        return np.array([stage.outputs().measured_speed for _ in range(2000)])
+
+    first, again = readings(), readings()
+    np.testing.assert_array_equal(first, again)
+    assert not np.array_equal(first, readings(**{"plant.noise_seed": 5}))
+    noisy = readings(**{"plant.speed_quantum": 0.0, "plant.speed_noise": 0.05})
+    assert np.std(noisy) == pytest.approx(0.05, rel=0.1)
+    steps_of_quantum = first / 0.01
+    np.testing.assert_allclose(steps_of_quantum, np.round(steps_of_quantum), atol=1e-9)
+
+
+TRACK = """gradients:
+  - {start: 0, end: 3000, grade: 0}
+speed_limits:
+  - {start: 0, end: 1000, limit: 15}
+  - {start: 1000, end: 2000, limit: 25}
+  - {start: 2000, end: 3000, limit: 12}
+stations:
+  - {name: A, position: 0}
+  - {name: B, position: 2900}
+"""
+
+
+def ato_line(planned=None):
+    return parse_line(f"name: t\nlength: 3000\n"
+                      + (f"planned_run_time: {planned}\n" if planned else "") + TRACK)
+
+
+def test_the_ato_curve_respects_limits_braking_and_the_stop():
+    curve = AtoCurve(ato_line(), 0.6, 0.8, margin=1.0, start_speed=0.3, train_length=100.0)
+    x, v = curve.positions, curve.speeds
+    assert np.all(v <= curve.limits - 1.0 + 1e-9)
+    assert v[0] == pytest.approx(0.3) and v[-1] == 0.0 and x[-1] == 2900.0
+    assert curve.speed(0.0, 2950.0) == 0.0
+    assert np.all(v[(x > 1000) & (x < 1100)] <= 14.0 + 1e-9)  # raised only once the tail is past
+    # Braking never needs more than the planned deceleration, acceleration likewise.
+    change = np.diff(v * v) / (2 * np.diff(x))
+    assert change.min() >= -0.8 - 1e-9 and change.max() <= 0.6 + 1e-9
+    # Stopping curve into the mark: v = sqrt(2 b d).
+    assert curve.speed(0.0, 2890.0) == pytest.approx(math.sqrt(2 * 0.8 * 10.0), rel=1e-3)
+
+
+def test_the_ato_curve_meets_the_planned_run_time_with_the_lowest_cruise_speed():
+    fastest = AtoCurve(ato_line(), 0.6, 0.8, margin=1.0)
+    planned = fastest.planned_run_time * 1.15
+    curve = AtoCurve(ato_line(planned), 0.6, 0.8, margin=1.0)
+    assert curve.planned_run_time == pytest.approx(planned, rel=1e-6)
+    assert curve.cruise < fastest.cruise
+    slow = AtoCurve(ato_line(fastest.planned_run_time * 0.9), 0.6, 0.8, margin=1.0)
+    assert slow.cruise == fastest.cruise  # an impossible plan runs at the limits
+
+
+def test_the_stepped_approach_holds_a_stair_one_step_above_the_speed():
+    values = {**defaults(), "profile.kind": "step", "profile.step.speed": 20.0,
+              "profile.approach_step": 2.0, "run.period": 1.0}
+    stage = ProfileStage(values)
+    assert stage.approach(20.0, 5.0) == 7.0
+    assert stage.approach(20.0, 6.0) == 7.0    # not reached yet: the stair holds
+    assert stage.approach(20.0, 6.8) == 8.8    # within a quarter step: the next stair
+    assert stage.approach(20.0, 19.0) == 20.0  # close: the target itself
+    assert stage.approach(3.0, 10.0) == 3.0    # braking targets are never softened
+
+
+def test_the_command_limiter_bands_modes_limits_rate_and_saturates():
+    limiter = CommandLimiter(-50.0, 60.0, period=0.1, max_rate=100.0, mode_band=0.5)
+    assert limiter.apply(30.0, target=10.0, speed=10.0) == 10.0     # rate: 100 * 0.1
+    assert limiter.apply(30.0, target=10.0, speed=11.0) == 0.0      # 1 m/s above: no traction
+    assert limiter.apply(-30.0, target=10.0, speed=9.0) == 0.0      # 1 m/s below: no braking
+    limiter = CommandLimiter(-50.0, 60.0)
+    assert limiter.apply(1e4, 0.0, 0.0) == 60.0 and limiter.apply(-1e4, 0.0, 0.0) == -50.0
+
+
+def test_nladrc_is_han_adrc_with_a_bandwidth_parametrised_observer():
+    gains = nladrc_gains(kp=3.0, kd=2.0, omega=4.0, b=0.5)
+    assert (gains.beta1, gains.beta2, gains.beta3) == (12.0, 48.0, 64.0)
+    assert (gains.mu1, gains.mu2, gains.b0, gains.r0, gains.h0) == (3.0, 2.0, 0.5, 15.0, 0.01)
+
+
+def test_the_discrete_adrc_follows_the_printed_equations_for_one_step():
+    g = DiscreteADRCGains(b01=0.8, b02=0.2, b03=0.01, b1=30.0, b2=50.0, b0=2e-4)
+    controller = DiscreteADRC(g, 0.1, CommandLimiter(-1e9, 1e9), initial_target=1.0,
+                              initial_speed=1.0)
+    controller.z2, controller.z3, controller.u_applied = 0.05, 0.002, 10.0
+    out = controller.step(2.0, 1.2)
+    e = 1.0 - 1.2
+    z1 = 1.0 + 0.05 - 0.8 * e
+    z2 = 0.05 + 0.002 - 0.2 * fal(e, 0.5, 0.01) + 2e-4 * 10.0
+    z3 = 0.002 - 0.01 * fal(e, 0.25, 0.01)
+    v1, v2 = controller.td.v1, controller.td.v2
+    u = 30.0 * fal(v1 - z1, 0.75, 0.01) + 50.0 * fal(v2 * 0.1 - z2, 0.5, 0.01) - z3 / 2e-4
+    assert out.u == pytest.approx(u) and out.z1 == pytest.approx(z1)
+    assert out.z2 == pytest.approx(z2 / 0.1) and out.z3 == pytest.approx(z3 / 0.01)
+
+
+@pytest.mark.parametrize("scenario", ["seed004-metro", "seed003-maglev"])
+def test_line_scenarios_reach_the_station_within_the_limits(scenario):
+    values = load_scenario(scenario)
+    series = simulate(values)
+    assert len(series["t"]) == round(values["run.duration"] / values["run.period"])
+    assert np.all(series["target"] <= series["speed_limit"] + 1e-9)  # never above the limit
+    stop = 2600.0 if scenario == "seed004-metro" else 9000.0
+    assert series["speed"][-1] == 0.0 and abs(series["position"][-1] - stop) < 2.0
