@@ -18,7 +18,7 @@ import numpy as np
 
 from ato_nodes.bagio import Run
 from ato_nodes.core.indices import MS_TO_KMH
-from ato_nodes.core.scoring import score_series, total_disturbance
+from ato_nodes.core.scoring import observer_b0, score_series, total_disturbance
 
 SEED000_BANDS_KMH = (0.05, 0.4)  # seed 000: body text and abstract
 INDEX_COLUMNS = [  # (key, heading, format)
@@ -32,6 +32,15 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("eso_acceleration_max_dev", "max abs(z2-a) m/s^2", "{:.3g}"),
     ("eso_disturbance_max_dev", "max abs(z3-f)", "{:.3g}"),
     ("overshoot_percent", "overshoot %", "{:.3f}"),
+    ("traction_energy_kwh", "traction kWh", "{:.2f}"),
+    ("regenerated_energy_kwh", "regenerated kWh", "{:.2f}"),
+    ("max_jerk", "max jerk m/s^3", "{:.3f}"),
+    ("comfort_index", "comfort m/s^3", "{:.4f}"),
+    ("switch_count", "switches", "{:d}"),
+    ("overspeed_time", "overspeed s", "{:.2f}"),
+    ("max_overspeed_kmh", "max overspeed km/h", "{:.3f}"),
+    ("stopping_error", "stopping error m", "{:+.3f}"),
+    ("running_time_error", "run-time error s", "{:+.2f}"),
 ]
 
 
@@ -67,13 +76,15 @@ def _save(figure, path: Path) -> Path:
 
 
 def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
-             target=None, bands: bool = False) -> Path:
+             target=None, bands: bool = False, limit=None) -> Path:
     """One line per run of y(series) against x(series); optionally the first run's
-    target as a dashed line and seed 000's error bands."""
+    target as a dashed line, its speed limit, and seed 000's error bands."""
     plt = _pyplot()
     figure, axes = plt.subplots(figsize=(9, 4.5))
     if target is not None:
         axes.plot(x(runs[0].series), target(runs[0].series), "k--", lw=1, label="target")
+    if limit is not None and np.any(np.isfinite(runs[0].series.get("speed_limit", [np.inf]))):
+        axes.plot(x(runs[0].series), limit(runs[0].series), "r-", lw=1, label="speed limit")
     for run in runs:
         axes.plot(x(run.series), y(run.series), lw=0.9, label=label(run))
     if bands:
@@ -98,15 +109,18 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
     def target(s):
         return s["target"] * MS_TO_KMH
 
+    def limit(s):
+        return s["speed_limit"] * MS_TO_KMH
+
     figures = [Figure("Speed against time", _overlay(
         runs, time, speed, ("time (s)", "speed (km/h)", "Speed tracking"),
-        out / "speed_time.png", target=target))]
+        out / "speed_time.png", target=target, limit=limit))]
     with_position = [run for run in runs if "position" in run.series]
     if with_position:
         figures.append(Figure("Speed against distance", _overlay(
             with_position, lambda s: s["position"] / 1000, speed,
             ("distance (km)", "speed (km/h)", "Speed against distance"),
-            out / "speed_distance.png", target=target)))
+            out / "speed_distance.png", target=target, limit=limit)))
     figures.append(Figure("Tracking error", _overlay(
         runs, time, lambda s: (s["target"] - s["speed"]) * MS_TO_KMH,
         ("time (s)", "target - speed (km/h)", "Tracking error"), out / "error.png", bands=True)))
@@ -135,7 +149,7 @@ def plot_observer(run: Run, path: Path) -> Figure | None:
     axes[1].plot(s["t"], s["acceleration"], "k", lw=1, label="acceleration")
     axes[1].plot(s["t"], s["z2"], "r--", lw=0.8, label="z2")
     axes[1].set_ylabel("m/s^2")
-    b0 = (run.parameters or {}).get("adrc.b0")
+    b0 = observer_b0(run.parameters or {})
     if b0 is not None and "command" in s:
         axes[2].plot(s["t"], total_disturbance(s, b0), "k", lw=1, label="total disturbance f")
     axes[2].plot(s["t"], s["z3"], "r--", lw=0.8, label="z3")

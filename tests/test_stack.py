@@ -244,3 +244,22 @@ def test_a_diverging_run_ends_early_the_same_way_in_both_runners(tmp_path):
     expected = in_process(20, "adrc.b0=0.001")
     assert summary["steps"] == len(expected["t"]) < 400
     np.testing.assert_array_equal(read_series(bag)["speed"], expected["speed"])
+
+
+@pytest.mark.parametrize("scenario", ["seed004-metro", "seed003-maglev"])
+def test_line_scenarios_run_through_the_stack_exactly_as_in_process(tmp_path, scenario):
+    """Train preset, line, ATO curve, dead time, seeded sensor noise, the seed's controller:
+    the bag's series equal the in-process ones and its indices include the line's."""
+    bag = tmp_path / scenario
+    result = run_stack("--scenario", scenario, "--duration", "60", "--out", str(bag), "--quiet")
+    assert result.returncode == 0, result.stderr
+    values = apply_overrides(load_scenario(scenario), ["run.duration=60"])
+    expected = simulate(values)
+    recorded = read_series(bag)
+    for name in ("target", "position", "measured_speed", "speed", "force", "command",
+                 "speed_limit", "line_resistance", "z3"):
+        np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)
+    scored = subprocess.run([*SCORE_BAG, str(bag), "--json"], capture_output=True, text=True)
+    from_bag = json.loads(scored.stdout)
+    assert from_bag == pytest.approx(score_series(expected, values), nan_ok=True)
+    assert from_bag["traction_energy_kwh"] > 0 and "overspeed_time" in from_bag

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import math
 from pathlib import Path
 
@@ -11,7 +12,14 @@ from .indices import tracking_indices
 from .line import Line, load_line, parse_line
 from .operation import format_operation, operation_indices
 
-LINE_TEXT = "line.text"  # run-parameter key of the line file's text, kept in the bag
+# Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
+# travel as a ROS parameter (YAML) to the recorder, whose YAML round trips mangle
+# backslash escapes in long strings.
+LINE_BASE64 = "line.base64"
+
+
+def encode_line(text: str) -> str:
+    return base64.b64encode(text.encode()).decode()
 
 
 def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
@@ -25,8 +33,9 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
     if command is not None and parameters:
         command = notch_level(command, parameters)
     indices = tracking_indices(series["t"], series["target"], series["speed"], command)
-    if parameters and parameters.get("controller.kind") == "han_adrc" and "z3" in series:
-        indices.update(observer_accuracy(series, parameters["adrc.b0"]))
+    b0 = observer_b0(parameters or {})
+    if b0 is not None and {"z1", "z2", "z3", "acceleration"} <= set(series):
+        indices.update(observer_accuracy(series, b0))
     if parameters and parameters.get("profile.kind") == "step":
         indices["overshoot_percent"] = step_overshoot(series["speed"], series["target"])
     if {"position", "acceleration", "force"} <= set(series):
@@ -49,9 +58,10 @@ def notch_level(command: np.ndarray, parameters: dict) -> np.ndarray:
 
 
 def run_line(parameters: dict) -> Line | None:
-    """The run's line: the copy the bag carries (LINE_TEXT), else the file it names."""
-    if parameters.get(LINE_TEXT):
-        return parse_line(parameters[LINE_TEXT], parameters.get("line.file") or "<bag>")
+    """The run's line: the copy the bag carries (LINE_BASE64), else the file it names."""
+    if parameters.get(LINE_BASE64):
+        return parse_line(base64.b64decode(parameters[LINE_BASE64]).decode(),
+                          parameters.get("line.file") or "<bag>")
     if parameters.get("line.file") and Path(parameters["line.file"]).is_file():
         return load_line(parameters["line.file"])
     return None
@@ -70,6 +80,18 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
         efficiency=parameters.get("plant.efficiency", 0.9),
         stop_position=line.stop_position if to_station else None,
         planned_run_time=line.planned_run_time if to_station else None)
+
+
+def observer_b0(parameters: dict) -> float | None:
+    """The input gain of the run's third-order observer, per s^2 (None: no such observer)."""
+    kind = parameters.get("controller.kind")
+    if kind == "han_adrc":
+        return parameters["adrc.b0"]
+    if kind == "nladrc":
+        return parameters["nladrc.b"]
+    if kind == "discrete_adrc":  # its b0 is per step^2
+        return parameters["dadrc.b0"] / parameters["run.period"] ** 2
+    return None
 
 
 def total_disturbance(series: dict[str, np.ndarray], b0: float) -> np.ndarray:
