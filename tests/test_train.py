@@ -168,6 +168,15 @@ def test_the_ato_curve_respects_limits_braking_and_the_stop():
     assert curve.speed(0.0, 2890.0) == pytest.approx(math.sqrt(2 * 0.8 * 10.0), rel=1e-3)
 
 
+def test_above_the_power_speed_the_planned_acceleration_falls_as_one_over_v():
+    curve = AtoCurve(ato_line(), 0.6, 0.8, power_speed=8.0)
+    x, v = curve.positions, curve.speeds
+    rising = (x > 5) & (x < 600) & (np.gradient(v) > 0) & (v < curve.caps - 0.2)
+    acceleration = v * np.gradient(v, x)  # dv/dt = v dv/dx
+    expected = np.where(v <= 8.0, 0.6, 0.6 * 8.0 / v)
+    np.testing.assert_allclose(acceleration[rising], expected[rising], rtol=0.02)
+
+
 def test_the_ato_curve_meets_the_planned_run_time_with_the_lowest_cruise_speed():
     fastest = AtoCurve(ato_line(), 0.6, 0.8, margin=1.0)
     planned = fastest.planned_run_time * 1.15

@@ -54,7 +54,8 @@ class ProfileStage:
             self.curve = AtoCurve(
                 line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
                 values["profile.ato.margin"], values["profile.ato.start_speed"],
-                values["profile.ato.train_length"])
+                values["profile.ato.train_length"],
+                power_speed=values["profile.ato.power_speed"] or math.inf)
         elif kind == "seed000":
             self.curve = Seed000Profile(
                 period=values["profile.seed000.cycle"], v_inc=values["profile.seed000.v_inc"],

@@ -92,6 +92,8 @@ SPECS: tuple[ParamSpec, ...] = (
        "profile", choices=("seed000", "step", "table", "ato")),
     _p("profile.ato.acceleration", 0.8, "ATO curve: planned acceleration, m/s^2", "profile",
        0.01, 5.0),
+    _p("profile.ato.power_speed", 0.0, "ATO curve: above this speed the planned acceleration "
+       "falls as 1/v (constant power), m/s (0 = constant acceleration)", "profile", 0.0, 300.0),
     _p("profile.ato.deceleration", 0.8, "ATO curve: planned service braking, m/s^2", "profile",
        0.01, 5.0),
     _p("profile.ato.margin", 5.0 * KMH, "ATO curve: distance kept below the line limit, m/s",

@@ -108,13 +108,15 @@ class AtoCurve:
     """
 
     def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
-                 start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5):
+                 start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
+                 power_speed: float = math.inf):
         self.line = line
         stop = line.stop_position
         self.positions = np.arange(0.0, stop + resolution / 2, resolution)
         self.positions[-1] = stop
         self.limits = self._belt_limits(self.positions, line, train_length)
         self.acceleration, self.deceleration = acceleration, deceleration
+        self.power_speed = power_speed
         self.start_speed = start_speed
         self.caps = np.maximum(self.limits - margin, start_speed)
         top = float(self.caps.max())
@@ -139,12 +141,32 @@ class AtoCurve:
         limits[~np.isfinite(limits)] = line.speed_limits[-1].value
         return limits
 
+    def run_up(self, speed: np.ndarray) -> np.ndarray:
+        """Distance the planned acceleration needs from standstill to `speed`: a up to
+        power_speed v_p, then a v_p / v (constant power)."""
+        a, vp = self.acceleration, self.power_speed
+        low = speed * speed / (2.0 * a)
+        if not math.isfinite(vp):
+            return low
+        return np.where(speed <= vp, low, vp * vp / (2.0 * a) + (speed ** 3 - vp ** 3) / (3.0 * a * vp))
+
+    def run_up_speed(self, distance: np.ndarray) -> np.ndarray:
+        """The inverse of run_up."""
+        a, vp = self.acceleration, self.power_speed
+        low = np.sqrt(2.0 * a * distance)
+        if not math.isfinite(vp):
+            return low
+        knee = vp * vp / (2.0 * a)
+        return np.where(distance <= knee, low,
+                        np.cbrt(vp ** 3 + 3.0 * a * vp * np.maximum(distance - knee, 0.0)))
+
     def curve(self, cruise: float) -> np.ndarray:
+        """In run-up distance d(v) the acceleration curve from any point grows by one
+        metre per metre, so the forward pass is a running minimum too."""
         x = self.positions
-        squared = np.minimum(self.caps, cruise) ** 2
-        squared[0] = self.start_speed ** 2
-        rise = 2.0 * self.acceleration * x
-        squared = np.minimum.accumulate(squared - rise) + rise
+        run_up = self.run_up(np.minimum(self.caps, cruise))
+        run_up[0] = self.run_up(np.array(self.start_speed))
+        squared = self.run_up_speed(np.minimum.accumulate(run_up - x) + x) ** 2
         fall = 2.0 * self.deceleration * (x[-1] - x)
         squared[-1] = 0.0
         squared = (np.minimum.accumulate((squared - fall)[::-1]) + fall[::-1])[::-1]
