@@ -173,7 +173,7 @@ def test_above_the_power_speed_the_planned_acceleration_falls_as_one_over_v():
     x, v = curve.positions, curve.speeds
     rising = (x > 5) & (x < 600) & (np.gradient(v) > 0) & (v < curve.caps - 0.2)
     acceleration = v * np.gradient(v, x)  # dv/dt = v dv/dx
-    expected = np.where(v <= 8.0, 0.6, 0.6 * 8.0 / v)
+    expected = 0.6 * np.minimum(1.0, 8.0 / np.maximum(v, 8.0))
     np.testing.assert_allclose(acceleration[rising], expected[rising], rtol=0.02)
 
 
@@ -237,3 +237,21 @@ def test_line_scenarios_reach_the_station_within_the_limits(scenario):
     assert np.all(series["target"] <= series["speed_limit"] + 1e-9)  # never above the limit
     stop = 2600.0 if scenario == "seed004-metro" else 9000.0
     assert series["speed"][-1] == 0.0 and abs(series["position"][-1] - stop) < 2.0
+
+
+def test_the_scorer_takes_the_line_from_the_bag_and_j_uses_the_notch_level():
+    from ato_nodes.core.scoring import LINE_BASE64, encode_line, notch_level, score_series
+    t = np.arange(0.0, 10.0, 1.0)
+    series = {"t": t, "target": np.zeros_like(t), "speed": np.zeros_like(t),
+              "position": np.full_like(t, 2899.5), "acceleration": np.zeros_like(t),
+              "force": np.zeros_like(t), "command": np.where(t < 5, 50.0, -20.0)}
+    parameters = {"profile.kind": "ato", "plant.mass": 200.0, "controller.u_max": 100.0,
+                  "controller.u_min": -40.0,
+                  LINE_BASE64: encode_line("name: t\nlength: 3000\nplanned_run_time: 5\n" + TRACK)}
+    indices = score_series(series, parameters)
+    assert indices["stopping_error"] == pytest.approx(-0.5)  # B's mark is at 2900 m
+    np.testing.assert_allclose(notch_level(series["command"], parameters),
+                               np.where(t < 5, 0.5, -0.5))
+    assert indices["j_seed004"] == pytest.approx(10.0 * 0.25 * 9.0)  # |e| = 0, u^2 = 0.25
+    unlimited = {**parameters, "controller.u_max": 1e6, "controller.u_min": -1e6}
+    np.testing.assert_array_equal(notch_level(series["command"], unlimited), series["command"])
