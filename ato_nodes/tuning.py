@@ -91,19 +91,73 @@ class Evaluation:
     index: int
     params: dict[str, Any]
     fitness: float
-    status: str                 # ok, diverged, failed, timeout, invalid
+    status: str                 # ok, infeasible, diverged, failed, timeout, invalid
     wall_time: float
     indices: dict[str, Any] = field(default_factory=dict)
     message: str = ""
 
 
-def fitness_of(indices: dict[str, Any], fitness: str) -> float:
-    value = indices.get(FITNESS[fitness], math.nan)
-    return float(value) if math.isfinite(value) else PENALTY
+INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
 
 
-def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any], fitness: str,
-                        index: int) -> Evaluation:
+@dataclass(frozen=True)
+class Requirement:
+    """An operational requirement on an index, `name<=limit`: a candidate that breaks
+    it is infeasible, whatever its fitness (a controller that never leaves the
+    platform tracks a position-indexed target well: 0.3 m/s off, standing still)."""
+
+    name: str
+    limit: float
+
+    @classmethod
+    def parse(cls, text: str) -> Requirement:
+        name, sep, limit = text.partition("<=")
+        try:
+            return cls(name.strip(), float(limit)) if sep and name.strip() else cls._bad(text)
+        except ValueError:
+            return cls._bad(text)
+
+    @staticmethod
+    def _bad(text: str):
+        raise ScenarioError(f"--require expects INDEX<=VALUE (e.g. abs_stopping_error<=0.3), "
+                            f"got {text!r}")
+
+    def violation(self, indices: dict[str, Any]) -> float:
+        """0 when met; else how far it is broken, relative to max(|limit|, 1)."""
+        value = indices.get(self.name, math.nan)
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            return 1e3
+        return max(0.0, value - self.limit) / max(abs(self.limit), 1.0)
+
+
+@dataclass(frozen=True)
+class Objective:
+    """The fitness index to minimise and the requirements a candidate must meet.
+    Infeasible candidates rank after every feasible one, by how far they miss."""
+
+    fitness: str = "itae"
+    requirements: tuple[Requirement, ...] = ()
+
+    def score(self, indices: dict[str, Any]) -> tuple[float, str, str]:
+        """(fitness, status, message) of a completed run."""
+        value = indices.get(FITNESS[self.fitness], math.nan)
+        if not math.isfinite(value):
+            return PENALTY, "diverged", f"{self.fitness} is not finite"
+        broken = [(r, r.violation(indices)) for r in self.requirements]
+        broken = [(r, v) for r, v in broken if v > 0.0]
+        if not broken:
+            return float(value), "ok", ""
+        message = "; ".join(f"{r.name} {indices.get(r.name, math.nan):.4g} > {r.limit:g}"
+                            for r, _ in broken)
+        return INFEASIBLE + 1e6 * sum(v for _, v in broken), "infeasible", message
+
+
+def objective_of(objective: Objective | str) -> Objective:
+    return objective if isinstance(objective, Objective) else Objective(objective)
+
+
+def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
+                        objective: Objective | str, index: int) -> Evaluation:
     """One candidate with the core code in this process (a worker of the pool)."""
     started = time.perf_counter()
     try:
@@ -112,13 +166,16 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any], fitne
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
     series = simulate(run_values)
     indices = score_series(series, run_values)
-    diverged = len(series["t"]) < steps(run_values) or not indices["finite"]
-    return Evaluation(index, overrides, PENALTY if diverged else fitness_of(indices, fitness),
-                      "diverged" if diverged else "ok", time.perf_counter() - started, indices)
+    elapsed = time.perf_counter() - started
+    if len(series["t"]) < steps(run_values) or not indices["finite"]:
+        return Evaluation(index, overrides, PENALTY, "diverged", elapsed, indices)
+    value, status, message = objective_of(objective).score(indices)
+    return Evaluation(index, overrides, value, status, elapsed, indices, message)
 
 
-def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any], fitness: str,
-                      index: int, bag: Path, timeout: float) -> Evaluation:
+def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
+                      objective: Objective | str, index: int, bag: Path,
+                      timeout: float) -> Evaluation:
     """One candidate through the real node graph, scored from its bag."""
     from ato_nodes.bagio import BagError, read_parameters, read_series
     from ato_nodes.launch import Stack
@@ -135,10 +192,12 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any], fitness
             indices = score_series(read_series(bag), read_parameters(bag))
         except BagError as exc:
             outcome.message += f"; {exc}"
-    status = {"completed": "ok"}.get(outcome.status, outcome.status)
-    value = fitness_of(indices, fitness) if status == "ok" else PENALTY
-    return Evaluation(index, overrides, value, status, time.perf_counter() - started, indices,
-                      outcome.message)
+    elapsed = time.perf_counter() - started
+    if outcome.status != "completed" or not indices:
+        status = outcome.status if outcome.status != "completed" else "failed"
+        return Evaluation(index, overrides, PENALTY, status, elapsed, indices, outcome.message)
+    value, status, message = objective_of(objective).score(indices)
+    return Evaluation(index, overrides, value, status, elapsed, indices, message)
 
 
 class EvaluationLog:
@@ -185,13 +244,19 @@ class TuningSettings:
     fitness: str = "itae"
     timeout: float = 300.0     # s of wall time per stack candidate
     options: dict[str, Any] = field(default_factory=dict)
+    requirements: tuple[Requirement, ...] = ()
+
+    @property
+    def objective(self) -> Objective:
+        return Objective(self.fitness, self.requirements)
 
     def describe(self) -> dict[str, Any]:
         return {"algorithm": self.algorithm, "scenario": self.scenario,
                 "params": {n: [lo, hi] for n, lo, hi in zip(self.space.names, self.space.lower,
                                                             self.space.upper)},
                 "evaluations": self.evaluations, "seed": self.seed, "fitness": self.fitness,
-                "in_process": self.in_process, "options": self.options}
+                "in_process": self.in_process, "options": self.options,
+                "requirements": [f"{r.name}<={r.limit:g}" for r in self.requirements]}
 
 
 class Tuner:
@@ -227,12 +292,12 @@ class Tuner:
         self.started = time.monotonic()
         self.best = math.inf
 
-    def _evaluate_in_stack(self, values, overrides, fitness, index) -> Evaluation:
+    def _evaluate_in_stack(self, values, overrides, objective, index) -> Evaluation:
         bag = self.out / "runs" / f"candidate-{index:05d}"
         if bag.exists():  # a candidate interrupted before it was logged: run it again
             shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
-        return evaluate_in_stack(values, overrides, fitness, index, bag, self.settings.timeout)
+        return evaluate_in_stack(values, overrides, objective, index, bag, self.settings.timeout)
 
     def _pool(self) -> Executor:
         if self.settings.in_process and self.evaluate is evaluate_in_process:
@@ -253,8 +318,8 @@ class Tuner:
                 results[index] = record
                 self.best = min(self.best, record.fitness)
             else:
-                pending[pool.submit(self.evaluate, self.values, overrides, self.settings.fitness,
-                                    index)] = index
+                pending[pool.submit(self.evaluate, self.values, overrides,
+                                    self.settings.objective, index)] = index
         for future in as_completed(pending):
             record = future.result()
             self.fresh += 1
@@ -308,6 +373,7 @@ class Tuner:
                    "best_params": best_overrides, "evaluations_used": result.evaluations,
                    "iterations": result.iterations, "stop_reason": str(result.stop_reason.value),
                    "failed_evaluations": failures,
+                   "best_is_feasible": result.best_f < INFEASIBLE,
                    "best_indices": _best_indices(self.log, best_overrides),
                    "wall_time": time.monotonic() - self.started}
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))

@@ -25,7 +25,7 @@ import _cli
 
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario
-from ato_nodes.tuning import FITNESS, SearchSpace, Tuner, TuningSettings
+from ato_nodes.tuning import FITNESS, Requirement, SearchSpace, Tuner, TuningSettings
 
 
 def parse_args() -> argparse.Namespace:
@@ -40,6 +40,10 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=1, help="candidates run in parallel")
     parser.add_argument("--fitness", default="itae", choices=sorted(FITNESS))
+    parser.add_argument("--require", action="append", default=[], metavar="INDEX<=VALUE",
+                        help="operational requirement on a scored index (repeatable), e.g. "
+                        "abs_stopping_error<=0.3: a candidate that breaks one is infeasible and "
+                        "ranks after every feasible one, by how far it misses")
     parser.add_argument("--population", type=int, help="population size (default: the paper's)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="fixed parameter override for every candidate (repeatable)")
@@ -64,7 +68,8 @@ def main() -> None:
         options = {"population_size": args.population} if args.population else {}
         settings = TuningSettings(args.algorithm, args.scenario, space, args.evaluations,
                                   args.seed, args.workers, args.in_process, args.fitness,
-                                  args.timeout, options)
+                                  args.timeout, options,
+                                  tuple(Requirement.parse(text) for text in args.require))
         if args.out.exists() and any(args.out.iterdir()) and not args.resume:
             raise ScenarioError(f"{args.out} is not empty; use --resume or another --out")
         tuner = Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet)

@@ -123,3 +123,37 @@ def test_bad_tuning_input_is_one_line_and_exit_2(tmp_path):
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and "low < high" in result.stderr
+
+
+def test_requirements_rank_infeasible_runs_after_feasible_ones_by_how_far_they_miss():
+    from ato_nodes.tuning import INFEASIBLE, Objective, Requirement
+    objective = Objective("j", (Requirement.parse("abs_stopping_error<=0.3"),
+                                Requirement.parse("overspeed_time<=0")))
+    feasible = {"j_seed004": 900.0, "abs_stopping_error": 0.2, "overspeed_time": 0.0}
+    near = {**feasible, "j_seed004": 70.0, "abs_stopping_error": 0.5}
+    far = {**near, "abs_stopping_error": 2600.0}
+    assert objective.score(feasible) == (900.0, "ok", "")
+    near_value, status, message = objective.score(near)
+    assert status == "infeasible" and "abs_stopping_error 0.5 > 0.3" in message
+    assert INFEASIBLE < near_value < objective.score(far)[0] < PENALTY
+    assert objective.score({**feasible, "overspeed_time": 2.0})[0] > INFEASIBLE
+    assert objective.score({"j_seed004": float("nan")})[1] == "diverged"
+    with pytest.raises(ScenarioError, match="INDEX<=VALUE"):
+        Requirement.parse("abs_stopping_error<0.3")
+
+
+def test_a_tuning_with_a_requirement_never_picks_the_train_that_stays_at_the_platform(tmp_path):
+    """Without the stop requirement, J rewards a metro controller that never moves
+    (the position-indexed target is 0.3 m/s where it stands)."""
+    from ato_nodes.tuning import Objective, Requirement
+    values = apply_overrides(load_scenario("seed004-metro"), ["run.duration=200"])
+    parked = {"dadrc.b1": 0.0, "dadrc.b2": 0.0, "dadrc.b03": 0.0}  # no command ever builds up
+    moving = {}
+    plain, required = Objective("j"), Objective("j", (Requirement("abs_stopping_error", 0.5),))
+    parked_plain = evaluate_in_process(values, parked, plain, 0)
+    moving_plain = evaluate_in_process(values, moving, plain, 1)
+    assert parked_plain.indices["abs_stopping_error"] > 2000
+    assert parked_plain.fitness < moving_plain.fitness  # the degenerate optimum
+    assert evaluate_in_process(values, parked, required, 0).status == "infeasible"
+    assert evaluate_in_process(values, parked, required, 0).fitness > \
+        evaluate_in_process(values, moving, required, 1).fitness
