@@ -255,3 +255,15 @@ def test_the_scorer_takes_the_line_from_the_bag_and_j_uses_the_notch_level():
     assert indices["j_seed004"] == pytest.approx(10.0 * 0.25 * 9.0)  # |e| = 0, u^2 = 0.25
     unlimited = {**parameters, "controller.u_max": 1e6, "controller.u_min": -1e6}
     np.testing.assert_array_equal(notch_level(series["command"], unlimited), series["command"])
+
+
+def test_the_scorer_finds_the_stepped_approach_and_the_error_outside_it():
+    from ato_nodes.core.scoring import score_series
+    values = apply_overrides(load_scenario("seed003-maglev"), ["run.duration=80"])
+    series = simulate(values)
+    indices = score_series(series, values)
+    assert indices["stepped_time"] > 5.0  # the departure climbs in 2 km/h stairs
+    assert indices["max_abs_error_outside_steps_kmh"] <= indices["max_abs_error_kmh"]
+    smooth = apply_overrides(values, ["profile.approach_step=0"])
+    indices = score_series(simulate(smooth), smooth)
+    assert "stepped_time" not in indices

@@ -33,7 +33,7 @@ from .adrc import (CommandLimiter, ControllerOutput, DiscreteADRC, DiscreteADRCG
 from .line import load_line
 from .params import steps
 from .plant import PointMassTrain, TrainParameters, TrainState
-from .profiles import AtoCurve, Seed000Profile, StepProfile, TableProfile
+from .profiles import AtoCurve, Seed000Profile, StepProfile, TableProfile, ato_curve
 
 
 LOOKAHEAD = 2  # steps the profile runs ahead of the plant
@@ -51,11 +51,7 @@ class ProfileStage:
         line = load_line(values["line.file"]) if values["line.file"] else None
         self.line = line
         if kind == "ato":
-            self.curve = AtoCurve(
-                line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
-                values["profile.ato.margin"], values["profile.ato.start_speed"],
-                values["profile.ato.train_length"],
-                power_speed=values["profile.ato.power_speed"] or math.inf)
+            self.curve = ato_curve(values, line)
         elif kind == "seed000":
             self.curve = Seed000Profile(
                 period=values["profile.seed000.cycle"], v_inc=values["profile.seed000.v_inc"],

@@ -184,3 +184,11 @@ class AtoCurve:
     def limit(self, position: float) -> float:
         """The limit that applies to the train with its head at `position`, m/s."""
         return float(np.interp(position, self.positions, self.limits))
+
+
+def ato_curve(values: dict, line) -> AtoCurve:
+    """The ATO curve a run's profile.ato.* parameters give on `line`."""
+    return AtoCurve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
+                    values["profile.ato.margin"], values["profile.ato.start_speed"],
+                    values["profile.ato.train_length"],
+                    power_speed=values["profile.ato.power_speed"] or math.inf)

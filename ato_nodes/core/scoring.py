@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .indices import tracking_indices
+from .indices import MS_TO_KMH, tracking_indices
 from .line import Line, load_line, parse_line
 from .operation import format_operation, operation_indices
+from .profiles import ato_curve
 
 # Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
 # travel as a ROS parameter (YAML) to the recorder, whose YAML round trips mangle
@@ -74,12 +75,29 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
     to_station = line is not None and parameters.get("profile.kind") == "ato"
     if "speed_limit" in series and not np.any(np.isfinite(series["speed_limit"])):
         series = {name: values for name, values in series.items() if name != "speed_limit"}
-    return operation_indices(
+    indices = operation_indices(
         series, mass=parameters.get("plant.mass", math.nan),
         gravity=parameters.get("plant.gravity", 9.8),
         efficiency=parameters.get("plant.efficiency", 0.9),
         stop_position=line.stop_position if to_station else None,
         planned_run_time=line.planned_run_time if to_station else None)
+    if to_station and parameters.get("profile.approach_step", 0.0) > 0.0:
+        steps = stepped_approach(series, parameters, line)
+        error = np.abs(series["target"] - series["speed"])[~steps]
+        indices["max_abs_error_outside_steps_kmh"] = float(error.max()) * MS_TO_KMH \
+            if error.size else 0.0
+        indices["stepped_time"] = float(np.count_nonzero(steps) * parameters["run.period"])
+    return indices
+
+
+def stepped_approach(series: dict[str, np.ndarray], parameters: dict, line: Line) -> np.ndarray:
+    """Steps where seed 003's stepped approach held the target below the ATO curve
+    (rebuilt from the run's parameters and line): the stairs sit at least a step
+    below the curve, the extrapolated targets within centimetres per second of it."""
+    curve = ato_curve(parameters, line)
+    planned = np.interp(series["position"], curve.positions, curve.speeds)
+    planned[series["position"] >= curve.positions[-1]] = 0.0
+    return series["target"] < planned - 0.2 * parameters["profile.approach_step"]
 
 
 def observer_b0(parameters: dict) -> float | None:
@@ -137,5 +155,8 @@ def format_indices(indices: dict) -> str:
           if "eso_speed_max_dev" in indices else []),
         *([f"overshoot        {indices['overshoot_percent']:.3f} %"]
           if "overshoot_percent" in indices else []),
+        *([f"max |e| o. steps {indices['max_abs_error_outside_steps_kmh']:.4f} km/h outside "
+           f"{indices['stepped_time']:.1f} s of stepped approach"]
+          if "max_abs_error_outside_steps_kmh" in indices else []),
         *format_operation(indices),
     ])
