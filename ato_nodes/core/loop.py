@@ -40,6 +40,8 @@ LOOKAHEAD = 2  # steps the profile runs ahead of the plant
 
 
 class ProfileStage:
+    """Targets (LOOKAHEAD steps ahead) and the speed limit from each step's position."""
+
     def __init__(self, values: dict[str, Any]):
         self.period = values["run.period"]
         self.total_steps = steps(values)
@@ -48,10 +50,9 @@ class ProfileStage:
         self.approach_step = values["profile.approach_step"]
         self.stair: float | None = None
         kind = values["profile.kind"]
-        line = load_line(values["line.file"]) if values["line.file"] else None
-        self.line = line
+        self.line = load_line(values["line.file"]) if values["line.file"] else None
         if kind == "ato":
-            self.curve = ato_curve(values, line)
+            self.curve = ato_curve(values, self.line)
         elif kind == "seed000":
             self.curve = Seed000Profile(
                 period=values["profile.seed000.cycle"], v_inc=values["profile.seed000.v_inc"],
@@ -66,12 +67,12 @@ class ProfileStage:
         """Position s_k of step k in; the targets to publish now out, in step order."""
         k = self.received
         self.received += 1
+        travel = position - self.last_position if k else 0.0  # over the last step
         if k == 0:
             wanted = [(step, position) for step in range(LOOKAHEAD + 1)]
         else:
-            velocity_step = position - self.last_position
-            wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * velocity_step)]
-        speed = (position - self.last_position) / self.period if k else 0.0
+            wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * travel)]
+        speed = travel / self.period
         self.last_position = position
         return [self.approach(self.curve.speed(step * self.period, predicted), speed)
                 for step, predicted in wanted if step < self.total_steps]
