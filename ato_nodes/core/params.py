@@ -371,6 +371,11 @@ def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any
         overrides = checked
     else:
         overrides = dict(parse_override(text) for text in overrides)
+    for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
+        given = overrides.get(name)
+        if given and not Path(given).is_absolute() and not Path(given).exists() \
+                and (config_dir() / given).exists():
+            overrides[name] = str((config_dir() / given).resolve())
     merged = {**values, **overrides}
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
         merged.update(train_preset(overrides["plant.train"]))
