@@ -35,7 +35,7 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("overshoot_percent", "overshoot %", "{:.3f}"),
     ("traction_energy_kwh", "traction kWh", "{:.2f}"),
     ("regenerated_energy_kwh", "regenerated kWh", "{:.2f}"),
-    ("max_jerk", "max jerk m/s^3", "{:.3f}"),
+    ("max_jerk", "max jerk (1 s) m/s^3", "{:.3f}"),
     ("comfort_index", "comfort m/s^3", "{:.4f}"),
     ("switch_count", "switches", "{:d}"),
     ("overspeed_time", "overspeed s", "{:.2f}"),

@@ -13,6 +13,7 @@ values) against the log, running only what the log lacks.
 from __future__ import annotations
 
 import csv
+import difflib
 import json
 import math
 import shutil
@@ -32,7 +33,7 @@ from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.params import (SPEC_BY_NAME, ScenarioError, apply_overrides,
                                    ros_parameter_file, steps)
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.scoring import INDEX_NAMES, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
 FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error"}
@@ -113,9 +114,14 @@ class Requirement:
     def parse(cls, text: str) -> Requirement:
         name, sep, limit = text.partition("<=")
         try:
-            return cls(name.strip(), float(limit)) if sep and name.strip() else cls._bad(text)
+            requirement = cls(name.strip(), float(limit)) if sep else cls._bad(text)
         except ValueError:
             return cls._bad(text)
+        if requirement.name not in INDEX_NAMES:
+            close = difflib.get_close_matches(requirement.name, INDEX_NAMES, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ScenarioError(f"--require: unknown index {requirement.name!r}{hint}")
+        return requirement
 
     @staticmethod
     def _bad(text: str):
@@ -149,7 +155,8 @@ class Objective:
             return float(value), "ok", ""
         message = "; ".join(f"{r.name} {indices.get(r.name, math.nan):.4g} > {r.limit:g}"
                             for r, _ in broken)
-        return INFEASIBLE + 1e6 * sum(v for _, v in broken), "infeasible", message
+        miss = min(sum(v for _, v in broken), 1e5)  # stays below PENALTY: still a run
+        return INFEASIBLE + 1e6 * miss, "infeasible", message
 
 
 def objective_of(objective: Objective | str) -> Objective:

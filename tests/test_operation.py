@@ -136,3 +136,12 @@ def test_format_operation_lists_present_keys():
         "switches".ljust(17) + "3",
         "stopping error".ljust(17) + "-0.250 m",
     ]
+
+
+def test_jerk_is_judged_over_one_second_and_per_sample():
+    # The acceleration steps from -0.6 to 0 (a train stopping under braking), 0.1 s samples.
+    t = np.arange(0.0, 5.0, 0.1)
+    acceleration = np.where(t < 2.0, -0.6, 0.0)
+    result = operation_indices(run(t, acceleration=acceleration), mass=400.0)
+    assert result["max_jerk"] == pytest.approx(0.6)          # 0.6 m/s^2 over 1 s
+    assert result["max_jerk_sampled"] == pytest.approx(6.0)  # 0.6 m/s^2 over 0.1 s

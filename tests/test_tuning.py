@@ -140,6 +140,8 @@ def test_requirements_rank_infeasible_runs_after_feasible_ones_by_how_far_they_m
     assert objective.score({"j_seed004": float("nan")})[1] == "diverged"
     with pytest.raises(ScenarioError, match="INDEX<=VALUE"):
         Requirement.parse("abs_stopping_error<0.3")
+    with pytest.raises(ScenarioError, match="did you mean abs_stopping_error"):
+        Requirement.parse("abs_stoping_error<=0.3")
 
 
 def test_a_tuning_with_a_requirement_never_picks_the_train_that_stays_at_the_platform(tmp_path):

@@ -222,6 +222,8 @@ def _stations(path: Path, node: yaml.Node | None, length: float) -> tuple[Statio
         unknown = sorted(set(entry) - {"name", "position", "dwell"})
         if unknown:
             raise _error(path, item, f"stations: unknown key {unknown[0]!r}")
+        if "position" not in entry:
+            raise _error(path, item, "stations: missing 'position'")
         position = _number(path, entry["position"], "position")
         if not 0 <= position <= length:
             raise _error(path, item, f"stations: {position:g} m is off the line")

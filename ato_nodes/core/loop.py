@@ -88,7 +88,7 @@ class ProfileStage:
             return target
         if self.stair is None or abs(self.stair - speed) < step / 4:
             self.stair = speed + step
-        return self.stair
+        return min(self.stair, target)  # a stair held while the target fell stays under it
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies at step k's position, m/s (inf without a line)."""
@@ -193,7 +193,7 @@ class ControllerStage:
             controller, gains = HanADRC, nladrc_gains(
                 **{name: values[f"nladrc.{name}"] for name in (
                     "kp", "kd", "omega", "b", "alpha1", "alpha2", "r0", "h0")},
-                delta=values["adrc.delta"])
+                delta=values["nladrc.delta"])
         else:
             controller, gains = HanADRC, HanADRCGains(**{name: values[f"adrc.{name}"] for name in (
                 "mu1", "mu2", "alpha1", "alpha2", "r0", "h0", "beta1", "beta2", "beta3", "b0",

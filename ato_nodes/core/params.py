@@ -96,14 +96,14 @@ SPECS: tuple[ParamSpec, ...] = (
        "falls as 1/v (constant power), m/s (0 = constant acceleration)", "profile", 0.0, 300.0),
     _p("profile.ato.deceleration", 0.8, "ATO curve: planned service braking, m/s^2", "profile",
        0.01, 5.0),
+    _p("profile.ato.stop_jerk", 0.0, "ATO curve: the braking into the stop mark eases off at "
+       "this jerk, m/s^3 (0 = full service braking to the mark)", "profile", 0.0, 10.0),
     _p("profile.ato.margin", 5.0 * KMH, "ATO curve: distance kept below the line limit, m/s",
        "profile", 0.0, 50.0),
     _p("profile.ato.start_speed", 0.3, "ATO curve: target at the departure point (a position-"
-       "indexed curve is 0 there and would never start the train), m/s", "profile", 0.0, 10.0),
-    _p("profile.ato.train_length", 0.0, "ATO curve: train length, m; a raised limit applies "
-       "once the tail has passed the change", "profile", 0.0, 2000.0),
+       "indexed curve is 0 there and would never start the train), m/s", "profile", 0.01, 10.0),
     _p("profile.approach_step", 0.0, "seed 003's stepped approach: when the target is more "
-       "than this above or below the speed, approach it in steps of this size, m/s (0 = off)",
+       "than this above the speed, approach it in stairs of this size, m/s (0 = off)",
        "profile", 0.0, 100.0),
     _p("profile.seed000.cycle", 1200.0, "T of eq. 25, s", "profile", 1.0, 1e6),
     _p("profile.seed000.v_inc", 368.34 * KMH, "Vinc of eq. 25, m/s", "profile", 0.0, 300.0),
@@ -136,14 +136,15 @@ SPECS: tuple[ParamSpec, ...] = (
        0.0, 10.0),
     _p("plant.dead_time", 0.0, "traction/brake dead time, s (rounded to whole periods)",
        "plant", 0.0, 10.0),
-    _p("plant.length", 0.0, "train length, m (mass belt over the line's sections)", "plant",
+    _p("plant.length", 0.0, "train length, m (mass belt over the line's sections; the ATO "
+       "curve raises a limit once the tail has passed the change)", ("plant", "profile"),
        0.0, 2000.0),
     _p("plant.pantograph_offset", 0.0, "pantograph distance behind the head, m (neutral "
        "sections cut traction while it is inside them)", "plant", 0.0, 2000.0),
     _p("plant.hold_at_standstill", False, "the train cannot roll backwards: speed floors at 0 "
        "(brakes hold a stopped train)", "plant"),
-    _p("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002)", "plant",
-       0.01, 1.0),
+    _p("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
+       "the scorer from the bag's run parameters, no node uses it", (), 0.01, 1.0),
     _p("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", "plant",
        0.0, 10.0),
     _p("plant.speed_quantum", 0.0, "speed sensor resolution, m/s (0 = exact)", "plant",
@@ -198,6 +199,7 @@ SPECS: tuple[ParamSpec, ...] = (
     _p("nladrc.b", 0.5, "seed 003 NLADRC: compensation factor b", "controller", 1e-9, 1e9),
     _p("nladrc.alpha1", 0.75, "seed 003 NLADRC: fal exponent on e1", "controller", 0.0, 3.0),
     _p("nladrc.alpha2", 1.25, "seed 003 NLADRC: fal exponent on e2", "controller", 0.0, 3.0),
+    _p("nladrc.delta", 0.01, "seed 003 NLADRC: fal linear zone", "controller", 1e-9, 100.0),
     _p("nladrc.r0", 15.0, "seed 003 NLADRC: TD speed factor r", "controller", 1e-6, 1e6),
     _p("nladrc.h0", 0.01, "seed 003 NLADRC: TD filter factor h0, s", "controller", 1e-6, 10.0),
     _p("dadrc.b01", 0.9, "seed 004 discrete ESO gain b01 (per step)", "controller", 0.0, 3.0),
@@ -295,7 +297,11 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
                 raise _unknown(name, str(path))
             if node != "/**" and node not in spec.nodes:
                 raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, not {node}")
-            given[name] = spec.check(value, str(path))
+            value = spec.check(value, str(path))
+            if name in given and given[name] != value:
+                raise ScenarioError(f"{path}: {name} is given twice, as {given[name]!r} and "
+                                    f"{value!r}")
+            given[name] = value
     for name in FILE_PARAMETERS:
         if given.get(name) and not Path(given[name]).is_absolute():
             local = path.parent / given[name]
@@ -320,9 +326,14 @@ def train_preset(name: str) -> dict[str, Any]:
     path = config_dir() / "trains" / f"{name}.yaml"
     if not path.is_file():
         raise ScenarioError(f"unknown train {name!r}; known: {', '.join(train_names())}")
-    document = yaml.safe_load(path.read_text())
+    try:
+        document = yaml.safe_load(path.read_text())
+    except yaml.YAMLError:
+        raise ScenarioError(f"{path}: malformed YAML") from None
+    if not isinstance(document, dict):
+        raise ScenarioError(f"{path}: a train preset is a mapping of plant.* values")
     values = {}
-    for key, value in (document or {}).items():
+    for key, value in document.items():
         spec = SPEC_BY_NAME.get(key)
         if spec is None or "plant" not in spec.nodes or key == "plant.train":
             raise ScenarioError(f"{path}: {key!r} is not a plant parameter")
@@ -373,9 +384,9 @@ def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any
         overrides = dict(parse_override(text) for text in overrides)
     for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
         given = overrides.get(name)
-        if given and not Path(given).is_absolute() and not Path(given).exists() \
-                and (config_dir() / given).exists():
-            overrides[name] = str((config_dir() / given).resolve())
+        if given and not Path(given).is_absolute():  # the nodes run elsewhere: absolute
+            local = Path(given)
+            overrides[name] = str((local if local.exists() else config_dir() / given).resolve())
     merged = {**values, **overrides}
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
         merged.update(train_preset(overrides["plant.train"]))
@@ -392,7 +403,10 @@ def check_consistency(values: dict[str, Any], where: str) -> dict[str, Any]:
         raise ScenarioError(f"{where}: profile.kind is ato but line.file is empty")
     if values["line.file"]:
         from .line import load_line  # validated before any node starts; errors name file:line
-        load_line(values["line.file"])
+        line = load_line(values["line.file"])
+        if values["profile.kind"] == "ato" and line.stop_position <= 0.0:
+            raise ScenarioError(f"{where}: the ato profile needs a stop beyond the departure "
+                                f"point; {values['line.file']} stops at 0 m")
     try:
         parse_fault(values["run.fault"])
     except ScenarioError as exc:

@@ -15,9 +15,10 @@ none of them (the paper-faithful variant) F = u.
 
 On a line (core.line), the mass belt's gradient, curve and tunnel
 resistance is added to w0 at the belt's position, and traction is cut
-(u -> min(u, 0)) during every sub-step that starts with the pantograph
-inside a neutral section. `hold_at_standstill` floors the speed at 0: a
-stopped train is held by its brakes instead of rolling back.
+(command and applied force -> min(., 0)) during every sub-step that starts
+with the pantograph inside a neutral section; it returns through the lag.
+`hold_at_standstill` floors the speed at 0: a stopped train is held by its
+brakes (acceleration 0) instead of rolling back.
 
 Integration: classic RK4 with `substeps` equal sub-steps per control
 period, the command held constant over the period (zero-order hold).
@@ -101,20 +102,23 @@ class PointMassTrain:
                                      + params.max_brake_force + params.max_brake_power)
         # Commands waiting out the dead time; the oldest acts next.
         self.delayed = deque([0.0] * round(params.dead_time / period))
-        self.acting = 0.0  # the command that acted over the last period (after delay and cuts)
+        self.acting = 0.0  # the command that acted over the last period (after the delay)
+        self.powered = True  # whether the last sub-step had traction power
         self.lag_state = self.state.force  # the lag's output before the envelope
         self.rates = self._make_rates()
 
     def _make_rates(self):
-        """rates(t, x, v, F, command) -> (dv/dt, dF/dt) with every constant bound once:
-        this runs four times per sub-step, in every node and every tuning candidate."""
+        """rates(t, x, v, G, command, powered) -> (dv/dt, dG/dt), G the lag's state, with
+        every constant bound once: this runs four times per sub-step, in every node and
+        every tuning candidate. Unpowered (pantograph in a neutral section), traction
+        is gone at once, from the lag's input and from its output alike."""
         p = self.p
         xi, a, b, c = p.xi, p.davis_a, p.davis_b, p.davis_c
         amplitude, omega, phase = (p.disturbance_amplitude, p.disturbance_frequency,
                                    p.disturbance_phase)
         sin, copysign = math.sin, math.copysign
         limits, limited, tau = p.force_limits, self.limited, p.actuator_lag
-        line, length = self.line, p.length
+        line, length, hold = self.line, p.length, p.hold_at_standstill
 
         def achievable(command: float, v: float) -> float:
             if limited:
@@ -122,18 +126,25 @@ class PointMassTrain:
                 return low if command < low else high if command > high else command
             return command
 
-        def rates(t: float, x: float, v: float, force: float,
-                  command: float) -> tuple[float, float]:
+        def rates(t: float, x: float, v: float, force: float, command: float,
+                  powered: bool = True) -> tuple[float, float]:
             speed = v if v >= 0.0 else -v
             resistance = copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
             if line is not None:
                 resistance += line.additional_resistance(x, length)
+            if not powered and command > 0.0:
+                command = 0.0
             if tau > 0.0:  # `force` is the lag's state; the envelope holds at every speed
                 dforce = (achievable(command, v) - force) / tau
                 force = achievable(force, v)
             else:
                 force, dforce = achievable(command, v), 0.0
-            return xi * (force - resistance) + amplitude * sin(omega * t + phase), dforce
+            if not powered and force > 0.0:
+                force = 0.0
+            acceleration = xi * (force - resistance) + amplitude * sin(omega * t + phase)
+            if hold and v <= 0.0 and acceleration < 0.0:  # held by the brakes
+                acceleration = 0.0
+            return acceleration, dforce
 
         self.achievable = achievable
         return rates
@@ -147,7 +158,8 @@ class PointMassTrain:
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""
         s = self.state
-        return self.rates(s.time, s.position, s.speed, self.lag_state, self.acting)[0]
+        return self.rates(s.time, s.position, s.speed, self.lag_state, self.acting,
+                          self.powered)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
@@ -158,27 +170,27 @@ class PointMassTrain:
         h = self.period / self.substeps
         start = s.time
         x, v, f = s.position, s.speed, self.lag_state
+        powered = True
         for i in range(self.substeps):
             t = start + i * h
-            acting = command
-            if line is not None and command > 0.0 and \
-                    line.in_neutral_section(x - self.p.pantograph_offset):
-                acting = 0.0
-            a1, g1 = rates(t, x, v, f, acting)
+            powered = line is None or not line.in_neutral_section(x - self.p.pantograph_offset)
+            a1, g1 = rates(t, x, v, f, command, powered)
             x2, v2 = x + h / 2 * v, v + h / 2 * a1
-            a2, g2 = rates(t + h / 2, x2, v2, f + h / 2 * g1, acting)
+            a2, g2 = rates(t + h / 2, x2, v2, f + h / 2 * g1, command, powered)
             x3, v3 = x + h / 2 * v2, v + h / 2 * a2
-            a3, g3 = rates(t + h / 2, x3, v3, f + h / 2 * g2, acting)
+            a3, g3 = rates(t + h / 2, x3, v3, f + h / 2 * g2, command, powered)
             x4, v4 = x + h * v3, v + h * a3
-            a4, g4 = rates(t + h, x4, v4, f + h * g3, acting)
+            a4, g4 = rates(t + h, x4, v4, f + h * g3, command, powered)
             x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
             v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
             f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
             if hold and v < 0.0:
                 v, x_next = 0.0, max(x, x_next)
             x = x_next
-        self.acting, self.lag_state = acting, f
+        self.acting, self.lag_state, self.powered = command, f, powered
         self.steps += 1
         s.time, s.position, s.speed = self.steps * self.period, x, v
-        s.force = self.achievable(f if self.lagged else acting, v)
+        s.force = self.achievable(f if self.lagged else command, v)
+        if not powered and s.force > 0.0:
+            s.force = 0.0
         return s

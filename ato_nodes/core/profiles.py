@@ -109,14 +109,14 @@ class AtoCurve:
 
     def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
                  start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
-                 power_speed: float = math.inf):
+                 power_speed: float = math.inf, stop_jerk: float = 0.0):
         self.line = line
         stop = line.stop_position
         self.positions = np.arange(0.0, stop + resolution / 2, resolution)
         self.positions[-1] = stop
         self.limits = self._belt_limits(self.positions, line, train_length)
         self.acceleration, self.deceleration = acceleration, deceleration
-        self.power_speed = power_speed
+        self.power_speed, self.stop_jerk = power_speed, stop_jerk
         self.start_speed = start_speed
         self.caps = np.maximum(self.limits - margin, start_speed)
         top = float(self.caps.max())
@@ -170,7 +170,20 @@ class AtoCurve:
         fall = 2.0 * self.deceleration * (x[-1] - x)
         squared[-1] = 0.0
         squared = (np.minimum.accumulate((squared - fall)[::-1]) + fall[::-1])[::-1]
+        if self.stop_jerk > 0.0:
+            squared = np.minimum(squared, self.stopping(x[-1] - x) ** 2)
         return np.sqrt(np.maximum(squared, 0.0))
+
+    def stopping(self, distance: np.ndarray) -> np.ndarray:
+        """Speed at `distance` before the mark on a stop whose braking eases off at
+        stop_jerk: in time before the stop, deceleration j t up to the service value
+        b (v = j t^2 / 2, d = j t^3 / 6), constant b before that."""
+        j, b = self.stop_jerk, self.deceleration
+        ease = b / j                                   # s of easing off
+        ease_distance, ease_speed = j * ease ** 3 / 6.0, j * ease ** 2 / 2.0
+        easing = 0.5 * j * np.cbrt(6.0 * np.maximum(distance, 0.0) / j) ** 2
+        braking = np.sqrt(ease_speed ** 2 + 2.0 * b * np.maximum(distance - ease_distance, 0.0))
+        return np.where(distance <= ease_distance, easing, braking)
 
     def run_time(self, cruise: float) -> float:
         v = self.curve(cruise)
@@ -183,12 +196,14 @@ class AtoCurve:
 
     def limit(self, position: float) -> float:
         """The limit that applies to the train with its head at `position`, m/s."""
-        return float(np.interp(position, self.positions, self.limits))
+        cell = np.searchsorted(self.positions, position, side="right") - 1
+        return float(self.limits[min(max(cell, 0), len(self.limits) - 1)])
 
 
 def ato_curve(values: dict, line) -> AtoCurve:
     """The ATO curve a run's profile.ato.* parameters give on `line`."""
     return AtoCurve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
                     values["profile.ato.margin"], values["profile.ato.start_speed"],
-                    values["profile.ato.train_length"],
-                    power_speed=values["profile.ato.power_speed"] or math.inf)
+                    values["plant.length"],
+                    power_speed=values["profile.ato.power_speed"] or math.inf,
+                    stop_jerk=values["profile.ato.stop_jerk"])
