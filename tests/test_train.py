@@ -285,3 +285,30 @@ def test_the_scorer_finds_the_stepped_approach_and_the_error_outside_it():
     smooth = apply_overrides(values, ["profile.approach_step=0"])
     indices = score_series(simulate(smooth), smooth)
     assert "stepped_time" not in indices
+
+
+def test_the_tuned_metro_meets_the_operational_targets():
+    """The shipped seed-004 tuning: stop within 0.3 m, jerk under 0.75 m/s^3 (1 s),
+    never above the limit, and a lower J than the untuned gains."""
+    from ato_nodes.core.scoring import score_series
+    results = {}
+    for scenario in ("seed004-metro", "seed004-metro-tuned"):
+        values = load_scenario(scenario)
+        series = simulate(values)
+        results[scenario] = score_series(series, values)
+        assert np.all(series["speed"] <= series["speed_limit"]) or scenario == "seed004-metro"
+    tuned = results["seed004-metro-tuned"]
+    assert tuned["abs_stopping_error"] <= 0.3 and tuned["max_jerk"] < 0.75
+    assert tuned["overspeed_time"] == 0.0 and tuned["running_time_error"] <= 5.0
+    assert tuned["j_seed004"] < results["seed004-metro"]["j_seed004"]
+
+
+def test_the_tuned_maglev_tracks_better_than_the_untuned_one():
+    from ato_nodes.core.scoring import score_series
+    itae = {}
+    for scenario in ("seed003-maglev", "seed003-maglev-tuned"):
+        values = load_scenario(scenario)
+        indices = score_series(simulate(values), values)
+        itae[scenario] = indices["itae"]
+    assert itae["seed003-maglev-tuned"] < 0.6 * itae["seed003-maglev"]
+    assert indices["abs_stopping_error"] <= 0.5 and indices["overspeed_time"] == 0.0
