@@ -31,3 +31,10 @@ def test_tracking_indices_in_kmh_and_finiteness():
     assert result["steps"] == len(T) and result["finite"]
     speed[3] = np.nan
     assert not tracking_indices(T, target, speed)["finite"]
+
+
+def test_median_error_in_kmh():
+    t = np.arange(5.0)
+    result = tracking_indices(t, np.array([1.0, 1.0, 1.0, 1.0, 1.0]),
+                              np.array([1.0, 0.9, 0.5, 1.2, 3.0]))
+    assert result["median_abs_error_kmh"] == pytest.approx(0.2 * 3.6)  # |e|: 0 .1 .5 .2 2
