@@ -296,7 +296,8 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
             if spec is None:
                 raise _unknown(name, str(path))
             if node != "/**" and node not in spec.nodes:
-                raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, not {node}")
+                owners = ", ".join(spec.nodes) or "/** (no node uses it; the scorer reads it)"
+                raise ScenarioError(f"{path}: {name} belongs to {owners}, not {node}")
             value = spec.check(value, str(path))
             if name in given and given[name] != value:
                 raise ScenarioError(f"{path}: {name} is given twice, as {given[name]!r} and "
