@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -202,8 +203,16 @@ class AtoCurve:
 
 def ato_curve(values: dict, line) -> AtoCurve:
     """The ATO curve a run's profile.ato.* parameters give on `line`."""
-    return AtoCurve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
-                    values["profile.ato.margin"], values["profile.ato.start_speed"],
-                    values["plant.length"],
-                    power_speed=values["profile.ato.power_speed"] or math.inf,
-                    stop_jerk=values["profile.ato.stop_jerk"])
+    return _ato_curve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
+                      values["profile.ato.margin"], values["profile.ato.start_speed"],
+                      values["plant.length"], values["profile.ato.power_speed"] or math.inf,
+                      values["profile.ato.stop_jerk"])
+
+
+@functools.lru_cache(maxsize=8)
+def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
+               power_speed, stop_jerk) -> AtoCurve:
+    """One curve per distinct line and parameters (the profile and the scorer both need
+    it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
+    return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
+                    power_speed=power_speed, stop_jerk=stop_jerk)

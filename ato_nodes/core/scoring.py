@@ -46,12 +46,13 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
 
 # Every index score_series can give (a run gives those that apply to it).
 INDEX_NAMES = (
-    "steps", "finite", "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh", "median_abs_error_kmh",
-    "j_seed004",
+    "steps", "finite", "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh",
+    "median_abs_error_kmh", "j_seed004",
     "eso_speed_max_dev", "eso_acceleration_max_dev", "eso_disturbance_max_dev",
     "overshoot_percent", "traction_energy_kwh", "regenerated_energy_kwh", "net_energy_kwh",
-    "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time", "max_overspeed_kmh",
-    "stopping_error", "abs_stopping_error", "arrival_time", "running_time_error",
+    "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time",
+    "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "arrival_time",
+    "running_time_error",
     "max_abs_error_outside_steps_kmh", "stepped_time")
 
 LIMITED = 1e5  # N/kN: a controller limit below this is a real one (defaults are 1e6)
