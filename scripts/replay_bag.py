@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -24,6 +25,7 @@ import _cli
 from ato_nodes.bagio import BagError, read_messages
 
 WAIT_LIMIT = 30.0  # s to wait for --wait-subscribers
+TEARDOWN_LIMIT = 10.0  # s the ROS teardown may take before the process just exits
 
 
 def parse_args() -> argparse.Namespace:
@@ -100,8 +102,21 @@ def main() -> None:
     except KeyboardInterrupt:
         pass
     finally:
+        # Every message is out (and acknowledged); the DDS teardown once hung for minutes
+        # after a slow reliable subscriber on a loaded machine: it may not hold the exit.
+        leaving = sys.exc_info()[1]  # the exit under way, if any: its status stands
+        status = leaving.code if isinstance(leaving, SystemExit) else int(leaving is not None)
+        watchdog = threading.Timer(TEARDOWN_LIMIT, exit_now, (status,))
+        watchdog.daemon = True
+        watchdog.start()
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def exit_now(status: int) -> None:
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 def wait_for_subscribers(publishers, count: int) -> None:
