@@ -26,8 +26,11 @@ from ato_nodes.core.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
 
-# role -> (message type, [(series name, field path)])
-ROLES: dict[str, tuple[str, list[tuple[str, str]]]] = {
+LABELLED = "labelled"  # a Float64MultiArray whose layout.dim[0].label names its entries
+MATRIX = "matrix"      # a Float64MultiArray kept whole: one row per step
+
+# role -> (message type, [(series name, field path)] or LABELLED or (MATRIX, series name))
+ROLES: dict[str, tuple[str, object]] = {
     "target_speed": ("std_msgs/msg/Float64", [("target", "data")]),
     "state": ("geometry_msgs/msg/Twist", [
         ("speed", "linear.x"), ("acceleration", "linear.y"), ("disturbance", "linear.z"),
@@ -35,9 +38,8 @@ ROLES: dict[str, tuple[str, list[tuple[str, str]]]] = {
     "speed_limit": ("std_msgs/msg/Float64", [("speed_limit", "data")]),
     "measured_speed": ("std_msgs/msg/Float64", [("measured_speed", "data")]),
     "command": ("std_msgs/msg/Float64", [("command", "data")]),
-    "controller_state": ("geometry_msgs/msg/Twist", [
-        ("z1", "linear.x"), ("z2", "linear.y"), ("z3", "linear.z"), ("v1", "angular.x"),
-        ("v2", "angular.y")]),
+    "controller_state": ("std_msgs/msg/Float64MultiArray", LABELLED),
+    "target_preview": ("std_msgs/msg/Float64MultiArray", (MATRIX, "preview")),
     "position": ("std_msgs/msg/Float64", [("position", "data")]),
 }
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -194,13 +196,28 @@ def _assemble(path, found, stamps, raws, types) -> Run:
             valid = positions >= 0
             base, series = _trim(base, series, valid)
             pick = role_order[positions[valid]]
-        for name, field_path in fields:
-            series[name] = np.array([_field(decoded[i], field_path) for i in pick], dtype=float)
+        series.update(_columns(fields, [decoded[i] for i in pick]))
     if "speed" not in series:
         series["speed"] = series["measured_speed"]
     length = min(len(values) for values in series.values())
     series = {name: values[:length] for name, values in series.items()}
     return Run(path, series, read_parameters(path), {r: found[r] for r in usable}, missing, notes)
+
+
+def _columns(fields, messages) -> dict[str, np.ndarray]:
+    """The series one role's messages give, by its ROLES entry."""
+    if fields == LABELLED:
+        if not messages or not messages[0].layout.dim:
+            return {}
+        names = messages[0].layout.dim[0].label.split(",")
+        table = np.array([message.data for message in messages], dtype=float)
+        return {name: table[:, i] for i, name in enumerate(names) if name}
+    if isinstance(fields, tuple):
+        rows = [np.asarray(message.data, dtype=float) for message in messages]
+        width = min((len(row) for row in rows), default=0)
+        return {fields[1]: np.array([row[:width] for row in rows]).reshape(len(rows), width)}
+    return {name: np.array([_field(message, path) for message in messages], dtype=float)
+            for name, path in fields}
 
 
 def _trim(base, series, valid):

@@ -24,8 +24,8 @@ from typing import Any
 
 import yaml
 
-from ato_nodes.core.params import NODES, ros_parameter_file
-from ato_nodes.core.scoring import LINE_BASE64, encode_line
+from ato_nodes.core.scenario import ros_parameter_file
+from ato_nodes.core.schema import NODES
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DOMAIN_LOCK_PORT = 47300   # TCP port base + domain id held while a run uses that domain
@@ -103,11 +103,6 @@ class Stack:
         self.params_path = self.workdir / "params.yaml"
         self.values["recorder.output"] = str(self.bag.resolve())
         self.values["supervisor.report"] = str(self.report_path)
-        run_parameters = {name: value for name, value in self.values.items()
-                          if not name.startswith(("recorder.", "supervisor."))}
-        if self.values["line.file"]:  # the bag carries its line, so it scores anywhere
-            run_parameters[LINE_BASE64] = encode_line(Path(self.values["line.file"]).read_text())
-        self.values["recorder.run_parameters"] = json.dumps(run_parameters)
         self.params_yaml = yaml.safe_dump(ros_parameter_file(self.values), sort_keys=False)
 
     def _start(self) -> None:

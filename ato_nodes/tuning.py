@@ -31,8 +31,9 @@ import yaml
 from ato_nodes.analysis import plot_convergence
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
-from ato_nodes.core.params import (SPEC_BY_NAME, ScenarioError, apply_overrides,
-                                   ros_parameter_file, steps)
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, ros_parameter_file
+from ato_nodes.core.schema import SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import INDEX_NAMES, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
@@ -59,7 +60,7 @@ class SearchSpace:
             spec = SPEC_BY_NAME.get(name.strip())
             if not sep or not colon:
                 raise ScenarioError(f"--params expects name=low:high, got {item!r}")
-            if spec is None or spec.kind not in (int, float):
+            if spec is None or spec.value_type not in (int, float):
                 raise ScenarioError(f"--params: {name.strip()!r} is not a numeric parameter")
             try:
                 low_value, high_value = float(low), float(high)
@@ -68,7 +69,7 @@ class SearchSpace:
             if not low_value < high_value:
                 raise ScenarioError(f"--params: {spec.name} needs low < high")
             for value in (low_value, high_value):
-                spec.check(spec.kind(value), "--params")
+                spec.check(spec.value_type(value), "--params")
             if spec.name in names:
                 raise ScenarioError(f"--params: {spec.name} is given twice")
             names.append(spec.name)
@@ -79,7 +80,7 @@ class SearchSpace:
         return cls(tuple(names), np.array(lower), np.array(upper))
 
     def overrides(self, x: np.ndarray) -> dict[str, Any]:
-        return {name: (int(round(value)) if SPEC_BY_NAME[name].kind is int else float(value))
+        return {name: (int(round(value)) if SPEC_BY_NAME[name].value_type is int else float(value))
                 for name, value in zip(self.names, x)}
 
     def start(self, values: dict[str, Any]) -> np.ndarray:

@@ -25,7 +25,8 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.core.loop import simulate
-from ato_nodes.core.params import apply_overrides, load_scenario, steps
+from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.schema import steps
 from ato_nodes.core.scoring import score_series
 from ato_nodes.launch import DomainLock, Stack, node_environment
 

@@ -22,7 +22,8 @@ import _cli
 
 from ato_nodes.analysis import plot_convergence
 from ato_nodes.bagio import read_run
-from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
 from ato_nodes.launch import Stack
 from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings

@@ -17,7 +17,9 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.bagio import BagError, read_parameters, read_series
-from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario, steps
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.schema import steps
 from ato_nodes.core.scoring import format_indices, score_series
 
 EXIT_FAILED, EXIT_INTERRUPTED = 1, 130

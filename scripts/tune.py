@@ -24,7 +24,8 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.core.optimizers import ALGORITHMS
-from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.tuning import FITNESS, Requirement, SearchSpace, Tuner, TuningSettings
 
 

@@ -1,11 +1,20 @@
 """Han's ADRC pieces against values worked out by hand or closed forms."""
 
 import math
+from dataclasses import replace
 
 import pytest
 
-from ato_nodes.core.adrc import (CommandLimiter, HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
+from ato_nodes.core.adrc import (HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
                                  NonlinearESO, TrackingDifferentiator, fal, fal_gain, fhan)
+from ato_nodes.core.limiter import CommandLimiter
+from ato_nodes.core.schema import defaults
+from ato_nodes.core.spec import settings
+
+
+def han_gains() -> HanADRCGains:
+    """Seed 000's initial parameters, as the schema gives them."""
+    return settings(HanADRCGains, "adrc", defaults())
 
 
 class TestFal:
@@ -113,7 +122,7 @@ class TestExtendedStateObserver:
 
 class TestNLSEF:
     def controller(self, implicit, period=0.05):
-        gains = HanADRCGains(implicit_nlsef=implicit)
+        gains = replace(han_gains(), implicit_nlsef=implicit)
         return HanADRC(gains, period, CommandLimiter(-1e9, 1e9))
 
     def test_literal_law_by_hand(self):
@@ -144,7 +153,7 @@ class TestNLSEF:
         assert u0 == pytest.approx(k1 * e1_next + k2 * e2_next)
 
     def test_command_saturates_and_observer_sees_the_saturated_value(self):
-        adrc = HanADRC(HanADRCGains(), 0.05, CommandLimiter(-5.0, 5.0))
+        adrc = HanADRC(han_gains(), 0.05, CommandLimiter(-5.0, 5.0))
         out = adrc.step(100.0, 0.0)
         assert out.u == 5.0
         assert adrc.u_applied == 5.0
@@ -160,4 +169,4 @@ class TestLinearADRC:
             out = adrc.step(10.0, v)
             v += period * (b * out.u + disturbance)
         assert v == pytest.approx(10.0, abs=1e-3)
-        assert out.z2 == pytest.approx(disturbance, abs=1e-3)
+        assert out.extras[1] == pytest.approx(disturbance, abs=1e-3)

@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from ato_nodes.core.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
-from ato_nodes.core.params import ScenarioError, config_dir
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.paths import config_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -100,7 +101,7 @@ def test_speed_limit_and_neutral_sections_by_position(tmp_path):
 def test_a_bad_line_stops_run_stack_with_one_line_and_exit_2(tmp_path):
     line = write(tmp_path, GOOD.replace("limit: 20", "limit: 0"))
     scenario = tmp_path / "scenario.yaml"
-    scenario.write_text("profile:\n  ros__parameters:\n    profile.kind: ato\n"
+    scenario.write_text("/**:\n  ros__parameters:\n    profile.kind: ato\n"
                         f"    line.file: {line}\n")
     result = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--scenario",
                              str(scenario), "--out", str(tmp_path / "bag")],

@@ -3,7 +3,7 @@
 import pytest
 
 from ato_nodes.core.loop import ControllerStage, ProfileStage, simulate
-from ato_nodes.core.params import apply_overrides, load_scenario
+from ato_nodes.core.scenario import apply_overrides, load_scenario
 
 
 def values(*overrides):
@@ -17,7 +17,7 @@ def test_profile_sends_targets_two_steps_ahead_from_extrapolated_position(tmp_pa
                                   "run.duration=1"))
     # constant 5 m per step: s_k = 5 k, so the target of step j is V(5 j) = 0.5 j.
     # At k = 0 no motion is known yet: r_0..r_2 are taken at s_0 (a standing start).
-    sent = [profile.on_position(5.0 * k) for k in range(4)]
+    sent = [[horizon[0] for horizon in profile.on_position(5.0 * k)] for k in range(4)]
     assert sent[0] == pytest.approx([0.0, 0.0, 0.0])
     assert sent[1] == pytest.approx([1.5]) and sent[3] == pytest.approx([2.5])
 
@@ -28,23 +28,22 @@ def test_profile_stops_at_the_last_step():
     assert len(sent) == 4
 
 
-def test_controller_waits_for_its_preview_target_except_at_the_last_step():
+def test_controller_pairs_each_speed_with_a_horizon_and_tracks_its_preview_entry():
     stage = ControllerStage(values("controller.preview=1"))  # 4 steps
     stage.speeds.append(0.0)
-    stage.targets.append(1.0)
-    assert stage.ready() == []  # r_1 not there yet
-    stage.targets.extend([2.0, 3.0, 4.0])
-    stage.speeds.extend([0.0, 0.0, 0.0])
+    assert stage.ready() == []  # the horizon of step 0 not there yet
+    stage.horizons.extend([[1.0, 2.0], [2.0, 3.0]])
+    stage.speeds.append(0.0)
     outputs = stage.ready()
-    assert len(outputs) == 4 and stage.step_index == 4
-    # the TD was started on r_1, the preview of step 0
-    assert outputs[0].v1 == pytest.approx(2.0)
+    assert len(outputs) == 2 and stage.step_index == 2
+    v1 = stage.output_names.index("v1")
+    assert outputs[0].extras[v1] == pytest.approx(2.0)  # the TD was started on r_1
 
 
 def test_without_preview_each_step_needs_only_its_own_target():
     stage = ControllerStage(values())
     stage.speeds.append(0.0)
-    stage.targets.append(1.0)
+    stage.horizons.append([1.0])
     assert len(stage.ready()) == 1
 
 

@@ -2,8 +2,10 @@
 
 import pytest
 
-from ato_nodes.core.params import (SPECS, ScenarioError, apply_overrides, load_scenario,
-                                   ros_parameter_file, scenario_names, steps)
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import (apply_overrides, load_scenario, ros_parameter_file,
+                                     scenario_names)
+from ato_nodes.core.schema import SPECS, steps
 
 
 def test_shipped_scenarios_load():
@@ -51,7 +53,7 @@ def test_parameter_in_the_wrong_node(tmp_path):
     ("adrc.r0=-1", "out of range"),
     ("adrc.r0=fast", "must be a number"),
     ("plant.substeps=1.5", "must be an integer"),
-    ("controller.kind=pid", "must be one of"),
+    ("controller.kind=mpc", "must be one of"),
     ("run.real_time=maybe", "true or false"),
     ("adrc.mu11=1", "did you mean adrc.mu1"),
     ("adrc.mu1", "name=value"),
@@ -68,10 +70,13 @@ def test_overrides_apply_with_their_types():
     assert values["run.real_time"] is True and steps(values) == 100
 
 
-def test_ros_parameter_file_gives_each_node_only_its_own():
+def test_ros_parameter_file_shares_under_the_wildcard_and_gives_each_node_its_own():
     file = ros_parameter_file(load_scenario("seed000"))
     assert "adrc.mu1" in file["controller"]["ros__parameters"]
     assert "adrc.mu1" not in file["plant"]["ros__parameters"]
-    assert all("run.period" in section["ros__parameters"] for section in file.values())
+    shared = file["/**"]["ros__parameters"]
+    assert {"run.period", "plant.mass", "profile.kind", "line.file"} <= set(shared)
+    assert not any(name in section["ros__parameters"] for node, section in file.items()
+                   if node != "/**" for name in shared)
     declared = {name for section in file.values() for name in section["ros__parameters"]}
-    assert declared == {spec.name for spec in SPECS if spec.nodes}  # others: scorer only
+    assert declared == {spec.name for spec in SPECS}

@@ -4,9 +4,17 @@ import math
 
 import pytest
 
-from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
+from dataclasses import replace
+
+from ato_nodes.core.plant import PointMassTrain, TrainState
+from ato_nodes.core.schema import defaults
 
 QUIET = dict(disturbance_amplitude=0.0)
+
+
+def TrainParameters(**changes):  # noqa: N802 -- the schema's defaults, changed
+    from ato_nodes.core.plant import TrainParameters as parameters
+    return replace(parameters.from_values(defaults()), **changes)
 
 
 def run(train, command, seconds):

@@ -2,12 +2,14 @@
 
 import pytest
 
-from ato_nodes.core.profiles import KMH, Seed000Profile, StepProfile, TableProfile
+from ato_nodes.core.context import RunContext
+from ato_nodes.core.profiles import KMH, StepProfile, TableProfile
+from ato_nodes.core.schema import defaults
 
 
 @pytest.fixture
 def curve():
-    return Seed000Profile()
+    return RunContext(defaults()).plan  # seed 000's eq. 25 with the paper's constants
 
 
 def test_values_at_the_piece_boundaries(curve):

@@ -138,7 +138,7 @@ def test_a_bag_missing_some_topics_gives_what_it_can(recorded, tmp_path):
     write_bag(partial, [(t, STEP_TOPICS[t], s, d) for t, s, d in bag_messages(recorded) if t in keep])
     result = script("analyze.py", partial, "--out", tmp_path / "report")
     assert result.returncode == 0, result.stderr
-    assert "no state, speed_limit, command, controller_state, position topic" in result.stdout
+    assert "no state, speed_limit, command, controller_state, target_preview, position topic" in result.stdout
     indices = json.loads((tmp_path / "report" / "indices.json").read_text())["partial"]
     assert indices["steps"] == 100 and "itae" in indices and "j_seed004" not in indices
 

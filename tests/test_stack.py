@@ -19,7 +19,7 @@ from rosbags.highlevel import AnyReader
 
 from ato_nodes.bagio import read_series
 from ato_nodes.core.loop import simulate
-from ato_nodes.core.params import apply_overrides, load_scenario
+from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
 from ato_nodes.core.topics import step_topics
 
@@ -187,7 +187,7 @@ def test_a_crashing_node_stops_the_stack_and_is_named(tmp_path):
     (["--scenario", "no-such-scenario"], "unknown scenario 'no-such-scenario'"),
     (["--set", "adrc.r0=-1"], "adrc.r0 = -1.0 is out of range"),
     (["--set", "adrc.mu11=5"], "unknown parameter 'adrc.mu11'"),
-    (["--set", "controller.kind=pid"], "must be one of"),
+    (["--set", "controller.kind=mpc"], "must be one of"),
     (["--duration", "-3"], "out of range"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, problem):

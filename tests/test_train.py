@@ -2,16 +2,19 @@
 sensor, the ATO curve and the seed-003/004 controllers (ROS-free)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from ato_nodes.core.adrc import (CommandLimiter, DiscreteADRC, DiscreteADRCGains, fal,
-                                 nladrc_gains)
+from ato_nodes.core.adrc import DiscreteADRC, DiscreteADRCGains, fal, nladrc_gains
+from ato_nodes.core.limiter import CommandLimiter
 from ato_nodes.core.line import parse_line
 from ato_nodes.core.loop import PlantStage, ProfileStage, simulate
-from ato_nodes.core.params import (ScenarioError, apply_overrides, defaults, load_scenario,
-                                   train_names, train_preset)
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, load_scenario, train_names, train_preset
+from ato_nodes.core.schema import defaults
+from ato_nodes.core.spec import settings
 from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
 from ato_nodes.core.profiles import AtoCurve
 
@@ -22,13 +25,9 @@ def line(body: str, length: float = 100000.0, limit: float = 100.0):
 
 
 def metro(**changes) -> TrainParameters:
-    values = {**defaults(), **train_preset("metro-b")}
-    fields = {"gamma", "gravity", "davis_a", "davis_b", "davis_c", "mass", "actuator_lag",
-              "dead_time", "length", "pantograph_offset", "max_traction_force",
-              "max_traction_power", "max_brake_force", "max_brake_power"}
-    params = {name: values[f"plant.{name}"] for name in fields}
-    params["disturbance_amplitude"] = 0.0
-    return TrainParameters(**{**params, **changes})
+    values = {**defaults(), **train_preset("metro-b"), "plant.envelope": True,
+              "plant.disturbance.amplitude": 0.0}
+    return replace(TrainParameters.from_values(values), **changes)
 
 
 def test_every_preset_loads_and_a_scenario_overrides_its_preset(tmp_path):
@@ -36,7 +35,7 @@ def test_every_preset_loads_and_a_scenario_overrides_its_preset(tmp_path):
     for name in train_names():
         assert train_preset(name)["plant.mass"] > 0
     scenario = tmp_path / "s.yaml"
-    scenario.write_text("plant:\n  ros__parameters:\n    plant.train: metro-b\n"
+    scenario.write_text("/**:\n  ros__parameters:\n    plant.train: metro-b\n"
                         "    plant.actuator_lag: 1.25\n")
     values = load_scenario(str(scenario))
     assert values["plant.mass"] == 194.3 and values["plant.actuator_lag"] == 1.25
@@ -44,7 +43,8 @@ def test_every_preset_loads_and_a_scenario_overrides_its_preset(tmp_path):
         apply_overrides(values, ["plant.train=tgv"])
     scenario.write_text("profile:\n  ros__parameters:\n    line.file: a.yaml\n"
                         "plant:\n  ros__parameters:\n    line.file: b.yaml\n")
-    with pytest.raises(ScenarioError, match="line.file is given twice"):
+    with pytest.raises(ScenarioError, match="line.file is shared by profile, plant, controller: "
+                       "give it under /"):
         load_scenario(str(scenario))
 
 
@@ -226,15 +226,17 @@ def test_the_command_limiter_bands_modes_limits_rate_and_saturates():
 
 
 def test_nladrc_is_han_adrc_with_a_bandwidth_parametrised_observer():
-    gains = nladrc_gains(kp=3.0, kd=2.0, omega=4.0, b=0.5)
+    gains = nladrc_gains(kp=3.0, kd=2.0, omega=4.0, b=0.5, alpha1=0.75, alpha2=1.25, r0=15.0,
+                         h0=0.01, delta=0.01)
     assert (gains.beta1, gains.beta2, gains.beta3) == (12.0, 48.0, 64.0)
     assert (gains.mu1, gains.mu2, gains.b0, gains.r0, gains.h0) == (3.0, 2.0, 0.5, 15.0, 0.01)
 
 
 def test_the_discrete_adrc_follows_the_printed_equations_for_one_step():
-    g = DiscreteADRCGains(b01=0.8, b02=0.2, b03=0.01, b1=30.0, b2=50.0, b0=2e-4)
-    controller = DiscreteADRC(g, 0.1, CommandLimiter(-1e9, 1e9), initial_target=1.0,
-                              initial_speed=1.0)
+    g = replace(settings(DiscreteADRCGains, "dadrc", defaults()), b01=0.8, b02=0.2, b03=0.01,
+                b1=30.0, b2=50.0, b0=2e-4)
+    controller = DiscreteADRC(g, 0.1, CommandLimiter(-1e9, 1e9))
+    controller.start(1.0, 1.0)
     controller.z2, controller.z3, controller.u_applied = 0.05, 0.002, 10.0
     out = controller.step(2.0, 1.2)
     e = 1.0 - 1.2
@@ -243,8 +245,8 @@ def test_the_discrete_adrc_follows_the_printed_equations_for_one_step():
     z3 = 0.002 - 0.01 * fal(e, 0.25, 0.01)
     v1, v2 = controller.td.v1, controller.td.v2
     u = 30.0 * fal(v1 - z1, 0.75, 0.01) + 50.0 * fal(v2 * 0.1 - z2, 0.5, 0.01) - z3 / 2e-4
-    assert out.u == pytest.approx(u) and out.z1 == pytest.approx(z1)
-    assert out.z2 == pytest.approx(z2 / 0.1) and out.z3 == pytest.approx(z3 / 0.01)
+    assert out.u == pytest.approx(u) and out.extras[0] == pytest.approx(z1)
+    assert out.extras[1] == pytest.approx(z2 / 0.1) and out.extras[2] == pytest.approx(z3 / 0.01)
 
 
 @pytest.mark.parametrize("scenario", ["seed004-metro", "seed003-maglev", "hsr-neutral"])

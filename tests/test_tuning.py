@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.core.params import ScenarioError, apply_overrides, load_scenario
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings, evaluate_in_process,
                               evaluate_in_stack)
 

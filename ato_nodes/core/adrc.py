@@ -38,6 +38,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .limiter import CommandLimiter
+from .registry import Component, Output
+from .spec import param, settings
+
 
 def sign(x: float) -> float:
     return (x > 0.0) - (x < 0.0)
@@ -115,91 +119,75 @@ class NonlinearESO:
         return self.z1, self.z2, self.z3
 
 
-def clamp(x: float, low: float, high: float) -> float:
-    return low if x < low else high if x > high else x
-
-
-class CommandLimiter:
-    """What stands between a control law and the train, shared by every controller;
-    the observer is fed its output, the command actually applied.
-
-    * speed-limit module (seed 003), `mode_band` > 0: no traction while the speed is
-      more than mode_band above the target, no braking while more than mode_band below
-      (it picks traction or braking by comparing actual and target speed);
-    * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
-      (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
-    * saturation to [u_min, u_max] (acceleration limit);
-    * holding brake, `holding_brake` > 0: with a zero target and the train (nearly)
-      stopped, at least this much braking, as an ATO holds a train berthed at a
-      station; without it a controller dithers about zero speed and creeps.
-    """
-
-    STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
-
-    def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
-                 mode_band: float = 0.0, holding_brake: float = 0.0):
-        self.u_min, self.u_max = u_min, u_max
-        self.max_change = max_rate * period
-        self.mode_band = mode_band
-        self.holding_brake = holding_brake
-        self.last = 0.0
-
-    def apply(self, u: float, target: float, speed: float) -> float:
-        if self.holding_brake > 0.0 and target <= 0.0 and speed < self.STOPPED:
-            u = min(u, -self.holding_brake)
-        band = self.mode_band
-        if band > 0.0:
-            if speed > target + band:
-                u = min(u, 0.0)
-            elif speed < target - band:
-                u = max(u, 0.0)
-        if self.max_change > 0.0:
-            u = clamp(u, self.last - self.max_change, self.last + self.max_change)
-        self.last = clamp(u, self.u_min, self.u_max)
-        return self.last
+HAN_ADRC_PARAMETERS = (
+    param("adrc.mu1", 6000.0, "NLSEF gain on e1", "controller", 0.0, 1e9),
+    param("adrc.mu2", 5500.0, "NLSEF gain on e2", "controller", 0.0, 1e9),
+    param("adrc.alpha1", 0.75, "NLSEF exponent on e1", "controller", 0.0, 3.0),
+    param("adrc.alpha2", 1.5, "NLSEF exponent on e2", "controller", 0.0, 3.0),
+    param("adrc.r0", 5.0, "TD speed factor, m/s^2", "controller", 1e-6, 1e6),
+    param("adrc.h0", 0.001, "TD filter factor, s", "controller", 1e-6, 10.0),
+    param("adrc.beta1", 1200.0, "ESO gain beta1", "controller", 0.0, 1e9),
+    param("adrc.beta2", 1700.0, "ESO gain beta2", "controller", 0.0, 1e9),
+    param("adrc.beta3", 4500.0, "ESO gain beta3", "controller", 0.0, 1e9),
+    param("adrc.b0", 0.1766, "compensation factor b0 (not in the paper; ~xi / 50 ms, see "
+          "README)", "controller", 1e-9, 1e9),
+    param("adrc.delta", 0.01, "fal linear-zone half width", "controller", 1e-9, 100.0),
+    param("adrc.implicit_nlsef", True, "implicit NLSEF discretisation (false: literal law)",
+          "controller"),
+)
 
 
 @dataclass(frozen=True)
 class HanADRCGains:
-    """Seed 000's initial parameters (section 4); b0 and delta are not in the paper."""
+    """Seed 000's parameters (adrc.*; the paper's initial values are the defaults in
+    HAN_ADRC_PARAMETERS); b0 and delta are not in the paper."""
 
-    mu1: float = 6000.0
-    mu2: float = 5500.0
-    alpha1: float = 0.75
-    alpha2: float = 1.5
-    r0: float = 5.0
-    h0: float = 0.001
-    beta1: float = 1200.0
-    beta2: float = 1700.0
-    beta3: float = 4500.0
-    b0: float = 0.1766
-    delta: float = 0.01
-    implicit_nlsef: bool = True
+    mu1: float
+    mu2: float
+    alpha1: float
+    alpha2: float
+    r0: float
+    h0: float
+    beta1: float
+    beta2: float
+    beta3: float
+    b0: float
+    delta: float
+    implicit_nlsef: bool
 
 
 @dataclass(slots=True)
 class ControllerOutput:
-    """One control step: the command and the internal states worth recording."""
+    """One control step: the command (N/kN) and the values of the controller's
+    declared outputs, in the order of its registry entry."""
 
     u: float
-    z1: float
-    z2: float
-    z3: float
-    v1: float
-    v2: float
+    extras: tuple[float, ...]
+
+
+OBSERVER_OUTPUTS = (
+    Output("z1", "m/s", "ESO speed estimate"),
+    Output("z2", "m/s^2", "ESO acceleration estimate"),
+    Output("z3", "m/s^3", "ESO total-disturbance estimate"),
+    Output("v1", "m/s", "TD target"),
+    Output("v2", "m/s^2", "TD target derivative"),
+)
 
 
 class HanADRC:
     """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
 
-    def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter,
-                 initial_target: float = 0.0, initial_speed: float = 0.0):
+    def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter):
         self.gains = gains
         self.limiter = limiter
-        self.td = TrackingDifferentiator(gains.r0, gains.h0, period, v1=initial_target)
+        self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
         self.eso = NonlinearESO(gains.beta1, gains.beta2, gains.beta3, gains.b0,
-                                gains.delta, period, z1=initial_speed)
+                                gains.delta, period)
         self.u_applied = 0.0
+
+    def start(self, target: float, measured: float) -> None:
+        """The TD starts at the first target, the observer at the first measurement."""
+        self.td.v1, self.eso.z1 = target, measured
 
     def control_law(self, e1: float, e2: float, z2: float) -> float:
         """NLSEF (eq. 12), implicit or literal (see module docstring): u0 from the
@@ -212,41 +200,77 @@ class HanADRC:
         k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
         return (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
 
-    def step(self, target: float, measured: float) -> ControllerOutput:
+    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
         z1, z2, z3 = self.eso.update(measured, self.u_applied)
         v1, v2 = self.td.update(target)
         u0 = self.control_law(v1 - z1, v2 - z2, z2)
         u = self.limiter.apply((u0 - z3) / self.gains.b0, target, measured)
         self.u_applied = u
-        return ControllerOutput(u, z1, z2, z3, v1, v2)
+        return ControllerOutput(u, (z1, z2, z3, v1, v2))
 
 
-def nladrc_gains(kp: float, kd: float, omega: float, b: float, alpha1: float = 0.75,
-                 alpha2: float = 1.25, r0: float = 15.0, h0: float = 0.01,
-                 delta: float = 0.01) -> HanADRCGains:
+NLADRC_PARAMETERS = (
+    param("nladrc.kp", 2.0, "seed 003 NLADRC: proportional gain of the nonlinear PD",
+          "controller", 0.0, 1e6),
+    param("nladrc.kd", 1.0, "seed 003 NLADRC: derivative gain of the nonlinear PD",
+          "controller", 0.0, 1e6),
+    param("nladrc.omega", 10.0, "seed 003 NLADRC: observer bandwidth w (b01 = 3w, b02 = 3w^2, "
+          "b03 = w^3), rad/s", "controller", 1e-3, 1e4),
+    param("nladrc.b", 0.5, "seed 003 NLADRC: compensation factor b", "controller", 1e-9, 1e9),
+    param("nladrc.alpha1", 0.75, "seed 003 NLADRC: fal exponent on e1", "controller", 0.0, 3.0),
+    param("nladrc.alpha2", 1.25, "seed 003 NLADRC: fal exponent on e2", "controller", 0.0, 3.0),
+    param("nladrc.delta", 0.01, "seed 003 NLADRC: fal linear zone", "controller", 1e-9, 100.0),
+    param("nladrc.r0", 15.0, "seed 003 NLADRC: TD speed factor r", "controller", 1e-6, 1e6),
+    param("nladrc.h0", 0.01, "seed 003 NLADRC: TD filter factor h0, s", "controller",
+          1e-6, 10.0),
+)
+
+
+def nladrc_gains(kp: float, kd: float, omega: float, b: float, alpha1: float, alpha2: float,
+                 r0: float, h0: float, delta: float) -> HanADRCGains:
     """Seed 003's NLADRC is Han's structure with a bandwidth-parametrised observer
     (b01 = 3w, b02 = 3w^2, b03 = w^3) and the nonlinear PD u0 = kp fal(e1) + kd fal(e2),
     u = (u0 - z3) / b: the same controller with four tuned parameters kp, kd, w, b."""
     return HanADRCGains(mu1=kp, mu2=kd, alpha1=alpha1, alpha2=alpha2, r0=r0, h0=h0,
                         beta1=3.0 * omega, beta2=3.0 * omega ** 2, beta3=omega ** 3, b0=b,
-                        delta=delta)
+                        delta=delta, implicit_nlsef=True)
+
+
+DISCRETE_ADRC_PARAMETERS = (
+    param("dadrc.b01", 0.9, "seed 004 discrete ESO gain b01 (per step)", "controller", 0.0, 3.0),
+    param("dadrc.b02", 0.03, "seed 004 discrete ESO gain b02 (per step)", "controller", 0.0, 3.0),
+    param("dadrc.b03", 0.001, "seed 004 discrete ESO gain b03 (per step)", "controller",
+          0.0, 3.0),
+    param("dadrc.b1", 40.0, "seed 004 NLSEF gain on e1, N/kN per (m/s)^a1", "controller",
+          0.0, 1e6),
+    param("dadrc.b2", 100.0, "seed 004 NLSEF gain on e2, N/kN per (m/s per step)^a2",
+          "controller", 0.0, 1e6),
+    param("dadrc.alpha1", 0.75, "seed 004 NLSEF exponent a1 in (0, 1)", "controller", 0.01, 1.0),
+    param("dadrc.alpha2", 0.5, "seed 004 NLSEF exponent a2 in (0, 1)", "controller", 0.01, 1.0),
+    param("dadrc.b0", 1e-4, "seed 004 input gain b0 per step^2 (xi h^2 / lag)", "controller",
+          1e-12, 1e3),
+    param("dadrc.delta", 0.01, "seed 004 fal linear zone (below 0.0025 chatters)", "controller",
+          1e-6, 10.0),
+    param("dadrc.r0", 2.0, "seed 004 TD speed factor, m/s^2", "controller", 1e-6, 1e6),
+    param("dadrc.h0", 0.1, "seed 004 TD filter factor, s", "controller", 1e-6, 10.0),
+)
 
 
 @dataclass(frozen=True)
 class DiscreteADRCGains:
-    """Seed 004's gains, per step (the control period folded in)."""
+    """Seed 004's gains (dadrc.*), per step (the control period folded in)."""
 
-    b01: float = 0.9
-    b02: float = 0.03
-    b03: float = 0.001
-    b1: float = 40.0
-    b2: float = 100.0
-    alpha1: float = 0.75
-    alpha2: float = 0.5
-    b0: float = 1e-4
-    delta: float = 0.01
-    r0: float = 2.0
-    h0: float = 0.1
+    b01: float
+    b02: float
+    b03: float
+    b1: float
+    b2: float
+    alpha1: float
+    alpha2: float
+    b0: float
+    delta: float
+    r0: float
+    h0: float
 
 
 class DiscreteADRC:
@@ -261,14 +285,16 @@ class DiscreteADRC:
     and z3 are converted back to m/s^2 and m/s^3.
     """
 
-    def __init__(self, gains: DiscreteADRCGains, period: float, limiter: CommandLimiter,
-                 initial_target: float = 0.0, initial_speed: float = 0.0):
+    def __init__(self, gains: DiscreteADRCGains, period: float, limiter: CommandLimiter):
         self.gains, self.h, self.limiter = gains, period, limiter
-        self.td = TrackingDifferentiator(gains.r0, gains.h0, period, v1=initial_target)
-        self.z1, self.z2, self.z3 = initial_speed, 0.0, 0.0
+        self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
+        self.z1, self.z2, self.z3 = 0.0, 0.0, 0.0
         self.u_applied = 0.0
 
-    def step(self, target: float, measured: float) -> ControllerOutput:
+    def start(self, target: float, measured: float) -> None:
+        self.td.v1, self.z1 = target, measured
+
+    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
         g, h = self.gains, self.h
         e = self.z1 - measured
         z1 = self.z1 + self.z2 - g.b01 * e
@@ -279,16 +305,26 @@ class DiscreteADRC:
         u0 = g.b1 * fal(v1 - z1, g.alpha1, g.delta) + g.b2 * fal(v2 * h - z2, g.alpha2, g.delta)
         u = self.limiter.apply(u0 - z3 / g.b0, target, measured)
         self.u_applied = u
-        return ControllerOutput(u, z1, z2 / h, z3 / (h * h), v1, v2)
+        return ControllerOutput(u, (z1, z2 / h, z3 / (h * h), v1, v2))
+
+
+LINEAR_ADRC_PARAMETERS = (
+    param("ladrc.omega_o", 20.0, "linear ADRC observer bandwidth, rad/s", "controller",
+          1e-6, 1e6),
+    param("ladrc.omega_c", 2.0, "linear ADRC controller bandwidth, rad/s", "controller",
+          1e-6, 1e6),
+    param("ladrc.b0", 0.0098 / 1.11, "linear ADRC input gain, m/s^2 per N/kN", "controller",
+          1e-9, 1e9),
+)
 
 
 @dataclass(frozen=True)
 class LinearADRCGains:
-    """Bandwidth parametrisation: observer bandwidth omega_o, controller omega_c."""
+    """Bandwidth parametrisation (ladrc.*): observer bandwidth omega_o, controller omega_c."""
 
-    omega_o: float = 20.0
-    omega_c: float = 2.0
-    b0: float = 0.0098 / 1.11
+    omega_o: float
+    omega_c: float
+    b0: float
 
 
 class LinearADRC:
@@ -299,15 +335,17 @@ class LinearADRC:
     The ESO is integrated by backward Euler in closed form, stable for any step.
     """
 
-    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter,
-                 initial_speed: float = 0.0):
+    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter):
         self.gains, self.h = gains, period
         self.limiter = limiter
         self.l1, self.l2 = 2.0 * gains.omega_o, gains.omega_o ** 2
-        self.z1, self.z2 = initial_speed, 0.0
+        self.z1, self.z2 = 0.0, 0.0
         self.u_applied = 0.0
 
-    def step(self, target: float, measured: float) -> ControllerOutput:
+    def start(self, target: float, measured: float) -> None:
+        self.z1 = measured
+
+    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
         g, h = self.gains, self.h
         e = (self.z1 - measured + h * (self.z2 + g.b0 * self.u_applied)) / (
             1.0 + h * self.l1 + h * h * self.l2)
@@ -316,4 +354,32 @@ class LinearADRC:
         u = self.limiter.apply((g.omega_c * (target - self.z1) - self.z2) / g.b0, target,
                                measured)
         self.u_applied = u
-        return ControllerOutput(u, self.z1, self.z2, 0.0, target, 0.0)
+        return ControllerOutput(u, (self.z1, self.z2))
+
+
+HAN_ADRC = Component(
+    "han_adrc", "seed 000: Han's nonlinear ADRC", HAN_ADRC_PARAMETERS,
+    lambda values, context, limiter: HanADRC(settings(HanADRCGains, "adrc", values),
+                                             context.period, limiter),
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["adrc.b0"])
+
+NLADRC = Component(
+    "nladrc", "seed 003: NLADRC, bandwidth-parametrised observer", NLADRC_PARAMETERS,
+    lambda values, context, limiter: HanADRC(nladrc_gains(**{
+        spec.name.split(".", 1)[1]: values[spec.name] for spec in NLADRC_PARAMETERS}),
+        context.period, limiter),
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"])
+
+DISCRETE_ADRC = Component(
+    "discrete_adrc", "seed 004: discrete ADRC", DISCRETE_ADRC_PARAMETERS,
+    lambda values, context, limiter: DiscreteADRC(settings(DiscreteADRCGains, "dadrc", values),
+                                                  context.period, limiter),
+    OBSERVER_OUTPUTS,
+    observer_gain=lambda values: values["dadrc.b0"] / values["run.period"] ** 2)  # b0 per step^2
+
+LINEAR_ADRC = Component(
+    "linear_adrc", "first-order linear ADRC", LINEAR_ADRC_PARAMETERS,
+    lambda values, context, limiter: LinearADRC(settings(LinearADRCGains, "ladrc", values),
+                                                context.period, limiter),
+    (Output("z1", "m/s", "ESO speed estimate"),
+     Output("z2", "m/s^2", "ESO total-disturbance estimate")))

@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from .params import ScenarioError
+from .errors import ScenarioError
 
 CURVE_CONSTANT = 600.0     # A of w_r = A / R, N/kN m
 TUNNEL_CONSTANT = 0.00013  # w_s = 0.00013 L_s, N/kN per m of tunnel

@@ -2,69 +2,63 @@
 
 Step k (t_k = k * period), in every runner:
   plant.outputs()            -> position s_k, measured and true speed, ... at t_k
-  profile.on_position(s_k)   -> target r_k+2 (and r_0, r_1, r_2 at k = 0)
-  controller.step(r, y_k)    -> command u_k (N/kN); r = r_k+p with p = controller.preview
+  profile.on_position(s_k)   -> the horizon of step k+2: r_k+2 .. r_k+2+N, N = controller.preview
+                                (and the horizons of steps 0, 1, 2 at k = 0)
+  controller.step(horizon_k, y_k) -> command u_k (N/kN), tracking r_k+N
   plant.apply(u_k)           -> integrate [t_k, t_k+1] with u_k held
 The target topic carries r_k as its k-th message, whatever the runner, so the
 recorded target of step k is always r(t_k). The profile sends targets two
 steps ahead, from the position extrapolated to t_k+2 (s_k + 2 (s_k - s_k-1);
 error ~ a (2 dt)^2, centimetres; exact for time-indexed curves), so it runs
 beside the controller instead of in front of it: the critical path of a step
-is two message hops (plant -> controller -> plant), and the controller can
-look one step ahead (preview = 1: its reference is the target for the end
-of the interval its command acts over, as the ATO knows its planned curve).
+is two message hops (plant -> controller -> plant). Beyond r_k+2 the horizon is
+the plan (the run context's preview): exact for time-indexed targets, along
+the planned trajectory for position-indexed ones.
 
-The ROS nodes run one stage each and pass the values as float64 messages,
-bit for bit; `simulate()` makes the same calls in one process, so both give
-identical numbers.
+Each stage is built when its node starts, from exactly the values the node
+declares (schema.NodeValues) and the run context; the ROS nodes run one stage
+each and pass the values as float64 messages, bit for bit; `simulate()` makes
+the same calls in one process, so both give identical numbers.
 """
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from .adrc import (CommandLimiter, ControllerOutput, DiscreteADRC, DiscreteADRCGains, HanADRC,
-                   HanADRCGains, LinearADRC, LinearADRCGains, nladrc_gains)
-from .line import load_line
-from .params import steps
+from .components import CONTROLLERS
+from .context import RunContext
+from .limiter import CommandLimiter
+from .line import Line, load_line
 from .plant import PointMassTrain, TrainParameters, TrainState
-from .profiles import AtoCurve, Seed000Profile, StepProfile, TableProfile, ato_curve
+from .schema import NodeValues, steps
 
 
 LOOKAHEAD = 2  # steps the profile runs ahead of the plant
 
 
 class ProfileStage:
-    """Targets (LOOKAHEAD steps ahead) and the speed limit from each step's position."""
+    """Target horizons (LOOKAHEAD steps ahead) and the speed limit from each step's
+    position."""
 
-    def __init__(self, values: dict[str, Any]):
+    def __init__(self, values: dict[str, Any], line: Line | None = None):
+        self.context = RunContext(values, line)
+        self.context.plan  # built now: a bad table or line fails at start-up
         self.period = values["run.period"]
         self.total_steps = steps(values)
+        self.preview = values["controller.preview"]
         self.received = 0
         self.last_position = 0.0
         self.approach_step = values["profile.approach_step"]
         self.stair: float | None = None
-        kind = values["profile.kind"]
-        self.line = load_line(values["line.file"]) if values["line.file"] else None
-        if kind == "ato":
-            self.curve = ato_curve(values, self.line)
-        elif kind == "seed000":
-            self.curve = Seed000Profile(
-                period=values["profile.seed000.cycle"], v_inc=values["profile.seed000.v_inc"],
-                t1=values["profile.seed000.t1"], cruise_high=values["profile.seed000.cruise_high"],
-                cruise_low=values["profile.seed000.cruise_low"])
-        elif kind == "step":
-            self.curve = StepProfile(values["profile.step.speed"], values["profile.step.time"])
-        else:
-            self.curve = TableProfile.from_csv(values["profile.table.file"])
 
-    def on_position(self, position: float) -> list[float]:
-        """Position s_k of step k in; the targets to publish now out, in step order."""
+    def on_position(self, position: float) -> list[list[float]]:
+        """Position s_k of step k in; the horizons to publish now out, in step order.
+        A horizon's first entry is its step's target (with seed 003's stepped
+        approach), the rest the plan."""
         k = self.received
         self.received += 1
         travel = position - self.last_position if k else 0.0  # over the last step
@@ -74,8 +68,13 @@ class ProfileStage:
             wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * travel)]
         speed = travel / self.period
         self.last_position = position
-        return [self.approach(self.curve.speed(step * self.period, predicted), speed)
-                for step, predicted in wanted if step < self.total_steps]
+        horizons = []
+        for step, predicted in wanted:
+            if step < self.total_steps:
+                horizon = self.context.horizon(step, predicted, self.preview)
+                horizon[0] = self.approach(horizon[0], speed)
+                horizons.append(horizon)
+        return horizons
 
     def approach(self, target: float, speed: float) -> float:
         """Seed 003's stepped approach: while the target is more than one step above
@@ -92,9 +91,7 @@ class ProfileStage:
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies at step k's position, m/s (inf without a line)."""
-        if isinstance(self.curve, AtoCurve):
-            return self.curve.limit(position)
-        return self.line.speed_limit(position) if self.line is not None else math.inf
+        return self.context.speed_limit(position)
 
 
 @dataclass(slots=True)
@@ -112,27 +109,14 @@ class PlantOutputs:
 class PlantStage:
     """The train, its line and its speed sensor (noise and quantisation, seeded)."""
 
-    def __init__(self, values: dict[str, Any]):
-        self.params = TrainParameters(
-            gamma=values["plant.gamma"], gravity=values["plant.gravity"],
-            davis_a=values["plant.davis_a"], davis_b=values["plant.davis_b"],
-            davis_c=values["plant.davis_c"], mass=values["plant.mass"],
-            disturbance_amplitude=values["plant.disturbance.amplitude"],
-            disturbance_frequency=values["plant.disturbance.frequency"],
-            disturbance_phase=values["plant.disturbance.phase"],
-            actuator_lag=values["plant.actuator_lag"], dead_time=values["plant.dead_time"],
-            length=values["plant.length"], pantograph_offset=values["plant.pantograph_offset"],
-            hold_at_standstill=values["plant.hold_at_standstill"],
-            **({"max_traction_force": values["plant.max_traction_force"],
-                "max_traction_power": values["plant.max_traction_power"],
-                "max_brake_force": values["plant.max_brake_force"],
-                "max_brake_power": values["plant.max_brake_power"]}
-               if values["plant.envelope"] else {}))
+    def __init__(self, values: dict[str, Any], line: Line | None = None):
+        self.params = TrainParameters.from_values(values)
+        if line is None and values["line.file"]:
+            line = load_line(values["line.file"])
         self.train = PointMassTrain(
             self.params, values["run.period"], values["plant.substeps"],
             TrainState(position=values["plant.initial_position"],
-                       speed=values["plant.initial_speed"]),
-            load_line(values["line.file"]) if values["line.file"] else None)
+                       speed=values["plant.initial_speed"]), line)
         self.max_speed = values["plant.max_speed"]
         self.noise = values["plant.speed_noise"]
         self.quantum = values["plant.speed_quantum"]
@@ -163,84 +147,70 @@ class PlantStage:
 
 
 class ControllerStage:
-    """The controller and its pairing rule: step k needs the measured speed y_k and
-    the targets up to r_k+preview (r_N-1 at most)."""
+    """The controller (built at once from the registry) and its pairing rule: step k
+    needs the measured speed y_k and the horizon r_k .. r_k+N; it tracks r_k+N."""
 
-    def __init__(self, values: dict[str, Any]):
-        self.values = values
+    def __init__(self, values: dict[str, Any], line: Line | None = None):
+        self.component = CONTROLLERS.chosen(values)
+        self.context = RunContext(values, line)
+        self.controller = self.component.factory(values, self.context,
+                                                 CommandLimiter.from_values(values))
         self.preview = values["controller.preview"]
-        self.total_steps = steps(values)
-        self.targets: deque[float] = deque()
+        self.horizons: deque[list[float]] = deque()
         self.speeds: deque[float] = deque()
         self.step_index = 0
-        self.controller: HanADRC | DiscreteADRC | LinearADRC | None = None
 
-    def _build(self, initial_target: float, initial_speed: float):
-        values = self.values
-        period = values["run.period"]
-        limiter = CommandLimiter(values["controller.u_min"], values["controller.u_max"], period,
-                                 values["controller.max_rate"], values["controller.mode_band"],
-                                 values["controller.holding_brake"])
-        kind = values["controller.kind"]
-        if kind == "linear_adrc":
-            gains = LinearADRCGains(values["ladrc.omega_o"], values["ladrc.omega_c"],
-                                    values["ladrc.b0"])
-            return LinearADRC(gains, period, limiter, initial_speed=initial_speed)
-        if kind == "discrete_adrc":
-            controller, gains = DiscreteADRC, DiscreteADRCGains(**{
-                name: values[f"dadrc.{name}"] for name in DiscreteADRCGains.__dataclass_fields__})
-        elif kind == "nladrc":
-            controller, gains = HanADRC, nladrc_gains(
-                **{name: values[f"nladrc.{name}"] for name in (
-                    "kp", "kd", "omega", "b", "alpha1", "alpha2", "r0", "h0")},
-                delta=values["nladrc.delta"])
-        else:
-            controller, gains = HanADRC, HanADRCGains(**{name: values[f"adrc.{name}"] for name in (
-                "mu1", "mu2", "alpha1", "alpha2", "r0", "h0", "beta1", "beta2", "beta3", "b0",
-                "delta", "implicit_nlsef")})
-        return controller(gains, period, limiter, initial_target=initial_target,
-                          initial_speed=initial_speed)
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.component.output_names
 
-    def ready(self) -> list[ControllerOutput]:
-        """Run every step whose inputs have all arrived; their outputs in order."""
+    def ready(self) -> list:
+        """Run every step whose inputs have both arrived; their outputs in order."""
         outputs = []
-        while self.speeds:
-            lead = min(self.preview, self.total_steps - 1 - self.step_index)
-            if len(self.targets) <= lead:
-                break
-            reference = self.targets[lead]
+        while self.speeds and self.horizons:
+            horizon = self.horizons.popleft()
             speed = self.speeds.popleft()
-            self.targets.popleft()
-            if self.controller is None:
-                self.controller = self._build(reference, speed)
-            outputs.append(self.controller.step(reference, speed))
+            reference = horizon[self.preview]
+            if self.step_index == 0:
+                self.controller.start(reference, speed)
+            outputs.append(self.controller.step(reference, speed, horizon))
             self.step_index += 1
         return outputs
 
 
 SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
-          "force", "resistance", "line_resistance", "speed_limit", "command", "z1", "z2", "z3",
-          "v1", "v2")
+          "force", "resistance", "line_resistance", "speed_limit", "command")
 
 
 def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
-    """Run the loop in this process; one array per SERIES name, one entry per step.
-    A diverged run (see PlantStage.diverged) ends early, as it does in the stack."""
+    """Run the loop in this process: one array per SERIES name, per controller output
+    and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
+    gets exactly what its node declares. A diverged run (see PlantStage.diverged)
+    ends early, as it does in the stack."""
     period = values["run.period"]
-    profile, plant, controller = ProfileStage(values), PlantStage(values), ControllerStage(values)
-    rows = []
+    line = load_line(values["line.file"]) if values["line.file"] else None
+    profile = ProfileStage(NodeValues("profile", values), line)
+    plant = PlantStage(NodeValues("plant", values), line)
+    controller = ControllerStage(NodeValues("controller", values), line)
+    rows, extras, horizons = [], [], []
     for k in range(steps(values)):
         out = plant.outputs()
-        controller.targets.extend(profile.on_position(out.position))
-        target = controller.targets[0]
+        controller.horizons.extend(profile.on_position(out.position))
+        horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
         (c,) = controller.ready()
         plant.apply(c.u)
-        rows.append((k * period, target, out.position, out.measured_speed, out.speed,
+        rows.append((k * period, horizon[0], out.position, out.measured_speed, out.speed,
                      out.acceleration, out.disturbance, out.force, out.resistance,
-                     out.line_resistance, profile.speed_limit(out.position),
-                     c.u, c.z1, c.z2, c.z3, c.v1, c.v2))
+                     out.line_resistance, profile.speed_limit(out.position), c.u))
+        extras.append(c.extras)
+        horizons.append(horizon)
         if plant.diverged:
             break
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES))
-    return {name: table[:, i] for i, name in enumerate(SERIES)}
+    series = {name: table[:, i] for i, name in enumerate(SERIES)}
+    names = controller.output_names
+    extra_table = np.array(extras, dtype=float).reshape(-1, len(names))
+    series.update({name: extra_table[:, i] for i, name in enumerate(names)})
+    series["preview"] = np.array(horizons, dtype=float).reshape(len(rows), -1)
+    return series

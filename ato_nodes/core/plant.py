@@ -35,24 +35,44 @@ from .line import Line
 
 @dataclass(frozen=True)
 class TrainParameters:
-    gamma: float = 0.11
-    gravity: float = 9.8
-    davis_a: float = 0.16
-    davis_b: float = 0.0053
-    davis_c: float = 0.0018
-    mass: float = 388.4                       # t, converts kN/kW envelopes to N/kN
-    disturbance_amplitude: float = 1.0 / 3.6  # m/s^2 (1 km/h per s)
-    disturbance_frequency: float = 0.77       # rad/s
-    disturbance_phase: float = 0.0            # rad
-    max_traction_force: float = math.inf      # kN
-    max_traction_power: float = math.inf      # kW
-    max_brake_force: float = math.inf         # kN
-    max_brake_power: float = math.inf         # kW
-    actuator_lag: float = 0.0                 # s, first-order time constant
-    dead_time: float = 0.0                    # s, before a command starts to act
-    length: float = 0.0                       # m, train (mass belt) length
-    pantograph_offset: float = 0.0            # m behind the head
-    hold_at_standstill: bool = False
+    """The train's physics (the plant.* parameters of the schema hold the defaults)."""
+
+    gamma: float
+    gravity: float
+    davis_a: float
+    davis_b: float
+    davis_c: float
+    mass: float                   # t, converts kN/kW envelopes to N/kN
+    disturbance_amplitude: float  # m/s^2
+    disturbance_frequency: float  # rad/s
+    disturbance_phase: float      # rad
+    max_traction_force: float     # kN (inf: no envelope)
+    max_traction_power: float     # kW
+    max_brake_force: float        # kN
+    max_brake_power: float        # kW
+    actuator_lag: float           # s, first-order time constant
+    dead_time: float              # s, before a command starts to act
+    length: float                 # m, train (mass belt) length
+    pantograph_offset: float      # m behind the head
+    hold_at_standstill: bool
+
+    @classmethod
+    def from_values(cls, values) -> TrainParameters:
+        """From the run's plant.* values; without plant.envelope the limits are infinite."""
+        envelope = values["plant.envelope"]
+        return cls(
+            gamma=values["plant.gamma"], gravity=values["plant.gravity"],
+            davis_a=values["plant.davis_a"], davis_b=values["plant.davis_b"],
+            davis_c=values["plant.davis_c"], mass=values["plant.mass"],
+            disturbance_amplitude=values["plant.disturbance.amplitude"],
+            disturbance_frequency=values["plant.disturbance.frequency"],
+            disturbance_phase=values["plant.disturbance.phase"],
+            **{name: values[f"plant.{name}"] if envelope else math.inf for name in (
+                "max_traction_force", "max_traction_power", "max_brake_force",
+                "max_brake_power")},
+            actuator_lag=values["plant.actuator_lag"], dead_time=values["plant.dead_time"],
+            length=values["plant.length"], pantograph_offset=values["plant.pantograph_offset"],
+            hold_at_standstill=values["plant.hold_at_standstill"])
 
     @property
     def xi(self) -> float:

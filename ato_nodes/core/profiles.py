@@ -10,26 +10,43 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import ScenarioError
+from .registry import Component
+from .spec import PROFILE_NODES, param
+
 KMH = 1.0 / 3.6  # m/s per km/h
+
+
+SEED000_PARAMETERS = (
+    param("profile.seed000.cycle", 1200.0, "T of eq. 25, s", PROFILE_NODES, 1.0, 1e6),
+    param("profile.seed000.v_inc", 368.34 * KMH, "Vinc of eq. 25, m/s", PROFILE_NODES, 0.0, 300.0),
+    param("profile.seed000.t1", 125.2841, "t1 of eq. 25, s", PROFILE_NODES, 0.0, 1e6),
+    param("profile.seed000.cruise_high", 350.0 * KMH, "upper cruise speed, m/s", PROFILE_NODES,
+          0.0, 300.0),
+    param("profile.seed000.cruise_low", 200.0 * KMH, "lower cruise speed, m/s", PROFILE_NODES,
+          0.0, 300.0),
+)
 
 
 @dataclass(frozen=True)
 class Seed000Profile:
-    """Seed 000 eq. 25 as reconstructed in SPEC.md (constants in SI).
+    """Seed 000 eq. 25 as reconstructed in docs/papers.md (constants in SI; the
+    defaults are in SEED000_PARAMETERS).
 
     Start - cruise - decelerate - cruise - accelerate - cruise - decelerate -
     stop over 2T. The 200 km/h and 0 bounds of the second and fourth pieces
     follow from continuity (the extracted text prints 350 for all four).
     """
 
-    period: float = 1200.0             # T, s
-    v_inc: float = 368.34 * KMH        # m/s
-    t1: float = 125.2841               # s
-    cruise_high: float = 350.0 * KMH   # m/s
-    cruise_low: float = 200.0 * KMH    # m/s
+    cycle: float         # T, s
+    v_inc: float         # m/s
+    t1: float            # s
+    cruise_high: float   # m/s
+    cruise_low: float    # m/s
+    position_indexed = False
 
     def speed(self, t: float, position: float = 0.0) -> float:
-        T, v = self.period, self.v_inc
+        T, v = self.cycle, self.v_inc
         if t < T / 2:
             return min(v * (1.0 - math.exp(-t / 120.0)), self.cruise_high)
         if t < T:
@@ -44,7 +61,8 @@ class StepProfile:
     """Zero before `time`, `speed` from then on (seed 000's step-response test)."""
 
     speed_after: float
-    time: float = 0.0
+    time: float
+    position_indexed = False
 
     def speed(self, t: float, position: float = 0.0) -> float:
         return self.speed_after if t >= self.time else 0.0
@@ -66,6 +84,7 @@ class TableProfile:
         if np.any(speeds < 0) or not np.all(np.isfinite(speeds)):
             raise ValueError("profile table speeds must be finite and non-negative")
         self.axis = axis
+        self.position_indexed = axis == "position"
         self.points = [float(x) for x in points]
         self.speeds = [float(x) for x in speeds]
 
@@ -107,6 +126,8 @@ class AtoCurve:
     plan, the curve runs at the limits. The departure point's target is
     `start_speed`, not 0, or a position-indexed curve would never start the train.
     """
+
+    position_indexed = True
 
     def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
                  start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
@@ -216,3 +237,60 @@ def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_leng
     it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
                     power_speed=power_speed, stop_jerk=stop_jerk)
+
+
+STEP_PARAMETERS = (
+    param("profile.step.speed", 10.0 * KMH, "step height, m/s", PROFILE_NODES, 0.0, 300.0),
+    param("profile.step.time", 0.0, "step instant, s", PROFILE_NODES, 0.0, 1e7),
+)
+TABLE_PARAMETERS = (
+    param("profile.table.file", "", "CSV table (time|position,speed); relative to the scenario "
+          "file, else to msg_config/", PROFILE_NODES),
+)
+ATO_PARAMETERS = (
+    param("profile.ato.acceleration", 0.8, "ATO curve: planned acceleration, m/s^2",
+          PROFILE_NODES, 0.01, 5.0),
+    param("profile.ato.power_speed", 0.0, "ATO curve: above this speed the planned acceleration "
+          "falls as 1/v (constant power), m/s (0 = constant acceleration)", PROFILE_NODES,
+          0.0, 300.0),
+    param("profile.ato.deceleration", 0.8, "ATO curve: planned service braking, m/s^2",
+          PROFILE_NODES, 0.01, 5.0),
+    param("profile.ato.stop_jerk", 0.0, "ATO curve: the braking into the stop mark eases off at "
+          "this jerk, m/s^3 (0 = full service braking to the mark)", PROFILE_NODES, 0.0, 10.0),
+    param("profile.ato.margin", 5.0 * KMH, "ATO curve: distance kept below the line limit, m/s",
+          PROFILE_NODES, 0.0, 50.0),
+    param("profile.ato.start_speed", 0.3, "ATO curve: target at the departure point (a position-"
+          "indexed curve is 0 there and would never start the train), m/s", PROFILE_NODES,
+          0.01, 10.0),
+)
+
+
+def _table(values, context) -> TableProfile:
+    if not values["profile.table.file"]:
+        raise ScenarioError("profile.kind is table but profile.table.file is empty")
+    try:
+        return TableProfile.from_csv(values["profile.table.file"])
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+
+
+def _ato(values, context) -> AtoCurve:
+    line = context.line
+    if line is None:
+        raise ScenarioError("profile.kind is ato but line.file is empty")
+    if line.stop_position <= 0.0:
+        raise ScenarioError(f"the ato profile needs a stop beyond the departure point; "
+                            f"{values['line.file']} stops at 0 m")
+    return ato_curve(values, line)
+
+
+SEED000 = Component(
+    "seed000", "seed 000 eq. 25, time-indexed", SEED000_PARAMETERS,
+    lambda values, context: Seed000Profile(**{
+        spec.name.rsplit(".", 1)[1]: values[spec.name] for spec in SEED000_PARAMETERS}))
+STEP = Component(
+    "step", "a speed step at a given time", STEP_PARAMETERS,
+    lambda values, context: StepProfile(values["profile.step.speed"], values["profile.step.time"]))
+TABLE = Component("table", "CSV table against time or position", TABLE_PARAMETERS, _table)
+ATO = Component("ato", "distance-indexed ATO curve from the line, braking and planned run time",
+                ATO_PARAMETERS, _ato)

@@ -8,10 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .components import CONTROLLERS
+from .context import RunContext
+from .errors import ScenarioError
 from .indices import MS_TO_KMH, tracking_indices
 from .line import Line, load_line, parse_line
 from .operation import format_operation, operation_indices
-from .profiles import ato_curve
+from .schema import defaults
 
 # Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
 # travel as a ROS parameter (YAML) to the recorder, whose YAML round trips mangle
@@ -26,8 +29,9 @@ def encode_line(text: str) -> str:
 def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
                  ) -> dict[str, float]:
     """Indices of a run. Series of unequal length (an interrupted run) are cut to
-    the steps every one of them holds. With the run's parameters, the observer's
-    accuracy and the step-response overshoot are added where they apply."""
+    the steps every one of them holds. Which indices apply follows from what the
+    run has: the observer's accuracy for a controller with a third-order observer,
+    the overshoot for a step target, stopping and punctuality for a line with a stop."""
     length = min(len(values) for values in series.values())
     series = {name: values[:length] for name, values in series.items()}
     command = series.get("command")
@@ -37,7 +41,7 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
     b0 = observer_b0(parameters or {})
     if b0 is not None and {"z1", "z2", "z3", "acceleration"} <= set(series):
         indices.update(observer_accuracy(series, b0))
-    if parameters and parameters.get("profile.kind") == "step":
+    if is_step(series["target"]):
         indices["overshoot_percent"] = step_overshoot(series["speed"], series["target"])
     if {"position", "acceleration", "force"} <= set(series):
         indices.update(operation(series, parameters or {}))
@@ -79,11 +83,18 @@ def run_line(parameters: dict) -> Line | None:
     return None
 
 
+def is_step(target: np.ndarray) -> bool:
+    """A step target: at most two distinct values, the last held from its first step on."""
+    values = np.unique(target)
+    return len(values) <= 2 and len(target) > 1 and not np.any(np.diff(
+        (target == target[-1]).astype(int)) < 0)
+
+
 def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, float]:
     """Energy (needs the train's mass), comfort, switches, limits; stopping and
-    punctuality for runs to a station (profile.kind ato)."""
+    punctuality for runs on a line with a stop beyond the departure point."""
     line = run_line(parameters)
-    to_station = line is not None and parameters.get("profile.kind") == "ato"
+    to_station = line is not None and line.stop_position > 0.0
     if "speed_limit" in series and not np.any(np.isfinite(series["speed_limit"])):
         series = {name: values for name, values in series.items() if name != "speed_limit"}
     indices = operation_indices(
@@ -92,7 +103,7 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
         efficiency=parameters.get("plant.efficiency", 0.9),
         stop_position=line.stop_position if to_station else None,
         planned_run_time=line.planned_run_time if to_station else None)
-    if to_station and parameters.get("profile.approach_step", 0.0) > 0.0:
+    if parameters.get("profile.approach_step", 0.0) > 0.0:
         steps = stepped_approach(series, parameters, line)
         error = np.abs(series["target"] - series["speed"])[~steps]
         indices["max_abs_error_outside_steps_kmh"] = float(error.max()) * MS_TO_KMH \
@@ -101,26 +112,27 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
     return indices
 
 
-def stepped_approach(series: dict[str, np.ndarray], parameters: dict, line: Line) -> np.ndarray:
-    """Steps where seed 003's stepped approach held the target below the ATO curve
-    (rebuilt from the run's parameters and line): the stairs sit at least a step
-    below the curve, the extrapolated targets within centimetres per second of it."""
-    curve = ato_curve(parameters, line)
-    planned = np.interp(series["position"], curve.positions, curve.speeds)
-    planned[series["position"] >= curve.positions[-1]] = 0.0
+def stepped_approach(series: dict[str, np.ndarray], parameters: dict, line: Line | None
+                     ) -> np.ndarray:
+    """Steps where seed 003's stepped approach held the target below the plan (the run
+    context's, rebuilt from the run's parameters and line): the stairs sit at least a
+    step below it, the extrapolated targets within centimetres per second of it."""
+    plan = RunContext({**defaults(), **parameters}, line).plan
+    planned = np.array([plan.speed(t, s) for t, s in zip(series["t"], series["position"])])
     return series["target"] < planned - 0.2 * parameters["profile.approach_step"]
 
 
 def observer_b0(parameters: dict) -> float | None:
-    """The input gain of the run's third-order observer, per s^2 (None: no such observer)."""
-    kind = parameters.get("controller.kind")
-    if kind == "han_adrc":
-        return parameters["adrc.b0"]
-    if kind == "nladrc":
-        return parameters["nladrc.b"]
-    if kind == "discrete_adrc":  # its b0 is per step^2
-        return parameters["dadrc.b0"] / parameters["run.period"] ** 2
-    return None
+    """The input gain of the run's third-order observer, per s^2 (None: no such observer,
+    or a bag without parameters)."""
+    if CONTROLLERS.kind_parameter.name not in parameters:
+        return None
+    values = {**defaults(), **parameters}
+    try:
+        gain = CONTROLLERS.chosen(values).observer_gain
+    except ScenarioError:  # a kind this version does not know
+        return None
+    return gain(values) if gain is not None else None
 
 
 def total_disturbance(series: dict[str, np.ndarray], b0: float) -> np.ndarray:

@@ -7,7 +7,7 @@ from functools import lru_cache
 
 import yaml
 
-from .params import config_dir
+from .paths import config_dir
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,11 @@ the readiness gate and the run-event protocol, and a clean life cycle."""
 from __future__ import annotations
 
 import importlib
+import json
 import signal
 import sys
 import time
+from pathlib import Path
 from typing import Any, Callable
 
 import rclpy
@@ -19,7 +21,11 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from ato_nodes.core.params import SPEC_BY_NAME, ParamSpec, ScenarioError, for_node, parse_fault
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.faults import parse_fault
+from ato_nodes.core.scenario import complete, train_preset
+from ato_nodes.core.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
+from ato_nodes.core.scoring import LINE_BASE64, encode_line
 from ato_nodes.core.topics import Topic, topic_map
 
 QOS = {
@@ -38,6 +44,14 @@ HOUSEKEEPING_PERIOD = 0.02
 HOUSEKEEPING_CALLBACKS = 16
 
 
+def parameter_file_folders() -> list[Path]:
+    """The folders of the --params-file arguments this process was given (relative
+    file parameters in a scenario are relative to the scenario's folder)."""
+    argv = sys.argv
+    return [Path(argv[i + 1]).resolve().parent for i, arg in enumerate(argv[:-1])
+            if arg == "--params-file"]
+
+
 def message_class(type_name: str) -> type:
     package, _, name = type_name.split("/")
     return getattr(importlib.import_module(f"{package}.msg"), name)
@@ -45,10 +59,10 @@ def message_class(type_name: str) -> type:
 
 def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
     descriptor = ParameterDescriptor(name=spec.name, description=spec.description)
-    if spec.low is not None and spec.kind is float:
+    if spec.low is not None and spec.value_type is float:
         descriptor.floating_point_range = [FloatingPointRange(
             from_value=float(spec.low), to_value=float(spec.high))]
-    elif spec.low is not None and spec.kind is int:
+    elif spec.low is not None and spec.value_type is int:
         descriptor.integer_range = [IntegerRange(
             from_value=int(spec.low), to_value=int(spec.high), step=1)]
     if spec.choices:
@@ -61,6 +75,7 @@ class AtoNode(Node):
     publishers and subscriptions exist, and override `on_event()`."""
 
     role: str = ""
+    exit_status = 0  # set by a node that ends the run for a reason of its own
 
     def __init__(self, use_sim_time: bool = True):
         super().__init__(self.role)
@@ -78,19 +93,43 @@ class AtoNode(Node):
         self._wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
         fault = parse_fault(self.values["run.fault"])
         self._fault = fault[1:] if fault and fault[0] == self.role else None
+        self.announce_parameters()
 
     # Parameters -----------------------------------------------------------
-    def _declare_parameters(self) -> dict[str, Any]:
+    def _declare_parameters(self) -> NodeValues:
+        """Declare this node's parameters, then complete them as a scenario is completed
+        (core.scenario.complete): a train preset fills the plant.* values not given, and
+        relative file paths resolve from the parameter file's folder, else msg_config/.
+        So a node started from a scenario file by any launcher runs the same train; the
+        completed values are set back, so `ros2 param get` shows what the node uses."""
         overrides = set(self._parameter_overrides)
         unknown = sorted(name for name in overrides
                          if name not in SPEC_BY_NAME and name != "use_sim_time")
         if unknown:
             raise ScenarioError(f"unknown parameter {unknown[0]!r}")
-        values = {}
+        declared, given = {}, {}
         for spec in for_node(self.role):
             value = self.declare_parameter(spec.name, spec.default, _descriptor(spec)).value
-            values[spec.name] = spec.check(value, self.role)
+            declared[spec.name] = spec.check(value, self.role)
+            if spec.name in overrides:
+                given[spec.name] = declared[spec.name]
+        if given.get("plant.train"):
+            train_preset(given["plant.train"])  # an unknown train: one line, exit 2
+        values = NodeValues(self.role, complete(given, [*parameter_file_folders(), Path.cwd()]))
+        changed = [Parameter(name, value=value) for name, value in values.items()
+                   if value != declared[name]]
+        if changed:
+            self.set_parameters(changed)
         return values
+
+    def announce_parameters(self) -> None:
+        """Tell the run which values this node runs with: the supervisor checks that the
+        shared ones agree across nodes, the recorder keeps them in the bag (with the
+        line's text, so the bag scores anywhere)."""
+        values = dict(self.values)
+        if values.get("line.file"):
+            values[LINE_BASE64] = encode_line(Path(values["line.file"]).read_text())
+        self.announce(f"parameters {self.role} {json.dumps(values)}")
 
     # Topics ---------------------------------------------------------------
     def publisher(self, key: str):
@@ -240,5 +279,6 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
         if node is not None:
             node.close()
             node.destroy_node()
+            status = status or node.exit_status
         rclpy.try_shutdown()
     sys.exit(status)

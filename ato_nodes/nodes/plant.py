@@ -14,7 +14,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from ato_nodes.core.loop import PlantStage
-from ato_nodes.core.params import steps
+from ato_nodes.core.schema import steps
 from ato_nodes.nodes.base import AtoNode, run_node
 
 

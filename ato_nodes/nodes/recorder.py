@@ -5,20 +5,25 @@ Each message is stamped with the simulated time of its step (the k-th message
 of a topic belongs to step k), so a run's bag is identical however the
 messages interleaved. The bag is closed in every exit path (end of run,
 SIGINT, SIGTERM, a failing node), so it stays readable up to the last step
-received.
+received. The bag's metadata keeps the parameters the loop's nodes announced
+(each its own, with the line's text), so it can be scored and re-run alone.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.core.params import ScenarioError
+from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.topics import step_topics
 from ato_nodes.bagio import PARAMETERS_KEY
 from ato_nodes.nodes.base import AtoNode, run_node
+
+
+RUN_NODES = ("profile", "plant", "controller")  # whose parameters describe the run
 
 
 class RecorderNode(AtoNode):
@@ -35,8 +40,7 @@ class RecorderNode(AtoNode):
         self.expected = None
         self.writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
-        if self.values["recorder.run_parameters"]:
-            self.writer.set_custom_data(PARAMETERS_KEY, self.values["recorder.run_parameters"])
+        self.run_parameters: dict[str, dict] = {}  # node -> the values it announced
         typestore = get_typestore(Stores.ROS2_JAZZY)
         self.counts: dict[str, int] = {}
         for topic in step_topics():
@@ -60,7 +64,11 @@ class RecorderNode(AtoNode):
         return record
 
     def on_event(self, word: str, argument: str) -> None:
-        if word == "finished":
+        if word == "parameters":
+            node, _, values = argument.partition(" ")
+            if node in RUN_NODES:
+                self.run_parameters[node] = json.loads(values)
+        elif word == "finished":
             self.expected = int(argument.split()[0])
             self._check_complete()
 
@@ -72,6 +80,10 @@ class RecorderNode(AtoNode):
     def close(self) -> None:
         if self.writer is not None:
             writer, self.writer = self.writer, None
+            if self.run_parameters:  # what the loop's nodes ran with: the bag explains itself
+                merged = {name: value for node in RUN_NODES
+                          for name, value in self.run_parameters.get(node, {}).items()}
+                writer.set_custom_data(PARAMETERS_KEY, json.dumps(merged))
             writer.close()
 
 

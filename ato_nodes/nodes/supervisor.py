@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from ato_nodes.core.params import steps
+from ato_nodes.core.schema import steps
 from ato_nodes.nodes.base import AtoNode, run_node
 
 PARTICIPANTS = ("profile", "plant", "controller", "recorder")
@@ -32,14 +32,18 @@ class SupervisorNode(AtoNode):
         self.finished_steps = 0
         self.diverged = False
         self.failed = False
+        self.announced: dict[str, dict] = {}
         self.interactive = sys.stderr.isatty()
         self.last_line = 0.0
         self.create_timer(PROGRESS_PERIOD, self.on_tick, clock=self._wall_clock)
 
     def on_event(self, word: str, argument: str) -> None:
-        if word == "ready":
+        if word == "parameters":
+            node, _, values = argument.partition(" ")
+            self.check_agreement(node, json.loads(values))
+        elif word == "ready":
             self.waiting.discard(argument)
-            if not self.waiting and self.started is None:
+            if not self.waiting and self.started is None and not self.failed:
                 self.started = time.monotonic()
                 self.announce("start")
         elif word == "finished":
@@ -50,6 +54,25 @@ class SupervisorNode(AtoNode):
             self.report(int(argument))
             self.announce("shutdown")
             self.context.try_shutdown()
+
+    def check_agreement(self, node: str, values: dict) -> None:
+        """A parameter several nodes declare must have one value in all of them (a
+        scenario that gives it under one node only would run two different trains)."""
+        for other, known in self.announced.items():
+            for name in values.keys() & known.keys():
+                if values[name] != known[name]:
+                    self.refuse(f"{name} is {known[name]!r} in {other} but {values[name]!r} in "
+                                f"{node}; give shared parameters under /** in the parameter file")
+                    return
+        self.announced[node] = values
+
+    def refuse(self, message: str) -> None:
+        """End the run before it starts: one line, exit status 2."""
+        print(f"supervisor: error: {message}", file=sys.stderr, flush=True)
+        self.exit_status = 2
+        self.failed = True
+        self.announce("shutdown")
+        self.context.try_shutdown()
 
     def on_tick(self) -> None:
         now = time.monotonic()

@@ -1,0 +1,17 @@
+"""The registered controllers and target profiles: add a kind here (one line) and in
+its own module (its parameters, its factory, its outputs); nothing else changes."""
+
+from __future__ import annotations
+
+from . import adrc, pid, profiles
+from .registry import Registry
+from .spec import PROFILE_NODES
+
+CONTROLLERS = Registry("controller", "han_adrc", ("controller",), (
+    adrc.HAN_ADRC, adrc.NLADRC, adrc.DISCRETE_ADRC, adrc.LINEAR_ADRC,
+    pid.PID_CONTROLLER,
+))
+
+PROFILES = Registry("profile", "seed000", PROFILE_NODES, (
+    profiles.SEED000, profiles.STEP, profiles.TABLE, profiles.ATO,
+))

@@ -1,0 +1,207 @@
+"""Scenario files, train presets and --set overrides: from what a user gives to the
+complete, checked values of a run.
+
+Scenario files are ROS 2 parameter files (node name -> ros__parameters, with
+`/**` for the parameters several nodes share), so the same file feeds
+`--params-file` and the in-process simulation. Everything is checked here,
+before any process starts; every problem is one ScenarioError line.
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import ScenarioError
+from .faults import parse_fault
+from .line import load_line
+from .paths import config_dir, resolve_file
+from .schema import (FILE_PARAMETERS, NODES, SPEC_BY_NAME, SPECS, NodeValues, defaults,
+                     shared)
+
+
+def _unknown(name: str, where: str) -> ScenarioError:
+    close = difflib.get_close_matches(name, SPEC_BY_NAME, n=1)
+    hint = f" (did you mean {close[0]}?)" if close else ""
+    return ScenarioError(f"{where}: unknown parameter {name!r}{hint}")
+
+
+def scenario_names() -> list[str]:
+    return sorted(p.stem for p in (config_dir() / "scenarios").glob("*.yaml"))
+
+
+def resolve_scenario(name_or_file: str) -> Path:
+    path = Path(name_or_file)
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"scenario file {name_or_file} does not exist")
+        return path
+    candidate = config_dir() / "scenarios" / f"{name_or_file}.yaml"
+    if candidate.is_file():
+        return candidate
+    raise ScenarioError(f"unknown scenario {name_or_file!r}; known: {', '.join(scenario_names())}")
+
+
+def load_scenario(name_or_file: str) -> dict[str, Any]:
+    """All parameters of a scenario: defaults overlaid with the file's values, checked."""
+    path = resolve_scenario(name_or_file)
+    try:
+        document = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" line {mark.line + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or "not valid YAML"
+        raise ScenarioError(f"{path}{at}: malformed YAML ({problem})") from None
+    except OSError as exc:
+        raise ScenarioError(f"cannot read scenario {path}: {exc.strerror}") from None
+    if not isinstance(document, dict):
+        raise ScenarioError(f"{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)")
+    given = {}
+    for node, section in document.items():
+        if node != "/**" and node not in NODES:
+            raise ScenarioError(f"{path}: unknown node {node!r}; nodes are /**, {', '.join(NODES)}")
+        if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
+            raise ScenarioError(f"{path}: {node} needs a 'ros__parameters:' mapping")
+        for name, value in _flatten(section["ros__parameters"]).items():
+            spec = SPEC_BY_NAME.get(name)
+            if spec is None:
+                raise _unknown(name, str(path))
+            if node != "/**" and node not in spec.nodes:
+                raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, "
+                                    f"not {node}")
+            if node != "/**" and shared(spec):  # the other nodes would never see it
+                raise ScenarioError(f"{path}: {name} is shared by {', '.join(spec.nodes)}: "
+                                    f"give it under /**, not under {node}")
+            value = spec.check(value, str(path))
+            if name in given and given[name] != value:
+                raise ScenarioError(f"{path}: {name} is given twice, as {given[name]!r} and "
+                                    f"{value!r}")
+            given[name] = value
+    return validate(complete(given, [path.parent]), str(path))
+
+
+def complete(given: dict[str, Any], bases: list[Path]) -> dict[str, Any]:
+    """Every value of a run from the given ones: the defaults, then the train preset's
+    plant.* values (plant.train), then the given values; relative file parameters
+    made absolute, from the first of `bases` that holds them, else from msg_config/.
+    The nodes complete what their parameter file gives them the same way."""
+    given = dict(given)
+    for name in FILE_PARAMETERS:
+        if given.get(name):
+            given[name] = resolve_file(given[name], bases)
+    values = defaults()
+    if given.get("plant.train"):
+        values.update(train_preset(given["plant.train"]))
+    values.update(given)
+    return values
+
+
+def train_names() -> list[str]:
+    return sorted(p.stem for p in (config_dir() / "trains").glob("*.yaml"))
+
+
+def train_preset(name: str) -> dict[str, Any]:
+    """The plant.* values of msg_config/trains/NAME.yaml (a flat mapping), checked."""
+    path = config_dir() / "trains" / f"{name}.yaml"
+    if not path.is_file():
+        raise ScenarioError(f"unknown train {name!r}; known: {', '.join(train_names())}")
+    try:
+        document = yaml.safe_load(path.read_text())
+    except yaml.YAMLError:
+        raise ScenarioError(f"{path}: malformed YAML") from None
+    if not isinstance(document, dict):
+        raise ScenarioError(f"{path}: a train preset is a mapping of plant.* values")
+    values = {}
+    for key, value in document.items():
+        spec = SPEC_BY_NAME.get(key)
+        if spec is None or not key.startswith("plant.") or key == "plant.train":
+            raise ScenarioError(f"{path}: {key!r} is not a plant parameter")
+        values[key] = spec.check(value, str(path))
+    return {**values, "plant.train": name}
+
+
+def _flatten(mapping: dict, prefix: str = "") -> dict[str, Any]:
+    """ROS parameter files may nest dotted names; flatten them back."""
+    flat = {}
+    for key, value in mapping.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """`name=value` with the value read as YAML (numbers, true/false, strings)."""
+    name, sep, raw = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise ScenarioError(f"--set expects name=value, got {text!r}")
+    spec = SPEC_BY_NAME.get(name)
+    if spec is None:
+        raise _unknown(name, "--set")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError:
+        value = raw
+    if spec.value_type is str and value is not None and not isinstance(value, str):
+        value = raw.strip()
+    return name, spec.check(value, "--set")
+
+
+def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
+    if isinstance(overrides, dict):
+        checked = {}
+        for name, value in overrides.items():
+            spec = SPEC_BY_NAME.get(name)
+            if spec is None:
+                raise _unknown(name, "override")
+            checked[name] = spec.check(value, "override")
+        overrides = checked
+    else:
+        overrides = dict(parse_override(text) for text in overrides)
+    for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
+        if overrides.get(name):
+            overrides[name] = resolve_file(overrides[name], [Path.cwd()])
+    merged = {**values, **overrides}
+    if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
+        merged.update(train_preset(overrides["plant.train"]))
+        merged.update(overrides)
+    return validate(merged, "parameters")
+
+
+def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
+    """Check a run's values as a whole before anything starts, by building what the
+    nodes will build: the line (errors name file and line), the context's plan and the
+    controller (errors name the parameter)."""
+    if values["run.duration"] < values["run.period"]:
+        raise ScenarioError(f"{where}: run.duration must be at least one run.period")
+    try:
+        parse_fault(values["run.fault"])
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    from .loop import ControllerStage, ProfileStage  # the loop needs the schema: no cycle
+    line = load_line(values["line.file"]) if values["line.file"] else None
+    try:
+        ProfileStage(NodeValues("profile", values), line)
+        ControllerStage(NodeValues("controller", values), line)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    return values
+
+
+def ros_parameter_file(values: dict[str, Any]) -> dict[str, Any]:
+    """The values as a ROS 2 parameter file: shared parameters under /**, the others
+    under the one node that declares each."""
+    document: dict[str, Any] = {"/**": {"ros__parameters": {}}}
+    for node in NODES:
+        document[node] = {"ros__parameters": {}}
+    for spec in SPECS:
+        if spec.nodes:
+            section = "/**" if shared(spec) else spec.nodes[0]
+            document[section]["ros__parameters"][spec.name] = values[spec.name]
+    return document

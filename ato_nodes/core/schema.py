@@ -1,0 +1,125 @@
+"""The parameter schema shared by the ROS nodes and the in-process simulation.
+
+Every parameter has one global name, a default, a type, a range or a set of
+choices, a description (with its unit) and the nodes that declare it. The
+run, line, plant and orchestration parameters are listed here; each
+controller and profile kind brings its own group through its registry entry
+(core/components.py). A parameter declared by several nodes is shared: a
+scenario gives it under `/**`, so every node sees the same value.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .components import CONTROLLERS, PROFILES
+from .errors import ScenarioError
+from .limiter import LIMITER_PARAMETERS
+from .spec import PLANT_NODES, PROFILE_NODES, ParamSpec, param
+
+NODES = ("profile", "plant", "controller", "supervisor", "recorder")
+LOOP_NODES = ("profile", "plant", "controller")
+KMH = 1.0 / 3.6
+
+BASE: tuple[ParamSpec, ...] = (
+    param("run.period", 0.05, "control period and lockstep step, s", NODES, 1e-4, 10.0),
+    param("run.duration", 2400.0, "simulated run length, s", NODES, 1e-3, 1e7),
+    param("run.real_time", False, "pace /clock at wall speed instead of as fast as possible",
+          "plant"),
+    param("run.fault", "", "fault injection for testing supervision: NODE:crash:STEP or "
+          "NODE:hang:STEP (NODE one of profile, plant, controller, recorder)", NODES),
+    param("line.file", "", "line file (msg_config/lines/*.yaml): gradients, curves, tunnels, "
+          "limits, neutral sections, stations; relative to the scenario file, else to "
+          "msg_config/; empty = open track", LOOP_NODES),
+    param("profile.approach_step", 0.0, "seed 003's stepped approach: when the target is more "
+          "than this above the speed, approach it in stairs of this size, m/s (0 = off)",
+          PROFILE_NODES, 0.0, 100.0),
+    param("plant.train", "", "train preset (msg_config/trains/NAME.yaml) whose plant.* values "
+       "the scenario starts from; the scenario's own plant.* values override it", PLANT_NODES),
+    param("plant.gamma", 0.11, "rotating-mass coefficient", PLANT_NODES, 0.0, 1.0),
+    param("plant.gravity", 9.8, "g, m/s^2 (seed 000's xi = 0.0098 / (1 + gamma))", PLANT_NODES, 9.0, 10.5),
+    param("plant.davis_a", 0.16, "basic resistance a, N/kN", PLANT_NODES, 0.0, 100.0),
+    param("plant.davis_b", 0.0053, "basic resistance b, N/kN per m/s", PLANT_NODES, 0.0, 10.0),
+    param("plant.davis_c", 0.0018, "basic resistance c, N/kN per (m/s)^2", PLANT_NODES, 0.0, 1.0),
+    param("plant.mass", 388.4, "train mass, t (converts kN and kW envelopes to N/kN)", PLANT_NODES,
+       1.0, 1e5),
+    param("plant.disturbance.amplitude", 1.0 / 3.6, "phi(t) amplitude, m/s^2", PLANT_NODES, 0.0, 10.0),
+    param("plant.disturbance.frequency", 0.77, "phi(t) angular frequency, rad/s", PLANT_NODES, 0.0, 1e3),
+    param("plant.disturbance.phase", 0.0, "phi(t) phase, rad", PLANT_NODES, -10.0, 10.0),
+    param("plant.envelope", False, "apply the traction/brake force and power limits", PLANT_NODES),
+    param("plant.max_traction_force", 220.0, "traction force limit, kN", PLANT_NODES, 0.0, 1e5),
+    param("plant.max_traction_power", 8760.0, "traction power limit, kW", PLANT_NODES, 0.0, 1e6),
+    param("plant.max_brake_force", 213.6, "service brake force limit, kN", PLANT_NODES, 0.0, 1e5),
+    param("plant.max_brake_power", 12000.0, "brake power limit, kW", PLANT_NODES, 0.0, 1e6),
+    param("plant.actuator_lag", 0.0, "first-order traction/brake lag, s (0 = none)", PLANT_NODES,
+       0.0, 10.0),
+    param("plant.dead_time", 0.0, "traction/brake dead time, s (rounded to whole periods)",
+       PLANT_NODES, 0.0, 10.0),
+    param("plant.length", 0.0, "train length, m (mass belt over the line's sections; the ATO "
+       "curve raises a limit once the tail has passed the change)", PLANT_NODES,
+       0.0, 2000.0),
+    param("plant.pantograph_offset", 0.0, "pantograph distance behind the head, m (neutral "
+       "sections cut traction while it is inside them)", PLANT_NODES, 0.0, 2000.0),
+    param("plant.hold_at_standstill", False, "the train cannot roll backwards: speed floors at 0 "
+       "(brakes hold a stopped train)", PLANT_NODES),
+    param("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
+       "the scorer from the bag's run parameters", PLANT_NODES, 0.01, 1.0),
+    param("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", PLANT_NODES,
+       0.0, 10.0),
+    param("plant.speed_quantum", 0.0, "speed sensor resolution, m/s (0 = exact)", PLANT_NODES,
+       0.0, 10.0),
+    param("plant.noise_seed", 0, "seed of the speed sensor noise (same seed, same run)", PLANT_NODES,
+       0, 2**31 - 1),
+    param("plant.substeps", 1, "RK4 sub-steps per control period", PLANT_NODES, 1, 10000),
+    param("plant.max_speed", 200.0, "speed beyond which a run counts as diverged and ends, m/s",
+       PLANT_NODES, 1.0, 1e4),
+    param("plant.initial_speed", 0.0, "speed at t = 0, m/s", PLANT_NODES, 0.0, 300.0),
+    param("plant.initial_position", 0.0, "position at t = 0, m", PLANT_NODES, -1e7, 1e7),
+    param("controller.preview", 0, "steps of target preview: the profile sends the controller "
+          "r_k .. r_k+N (the planned target; along the planned trajectory for position-indexed "
+          "targets) and the controller tracks r_k+N (0 = r_k, the papers' setting)",
+          ("profile", "controller"), 0, 1000),
+    *LIMITER_PARAMETERS,
+    param("supervisor.ready_timeout", 30.0, "wall seconds to wait for every edge to match",
+          "supervisor", 0.1, 3600.0),
+    param("supervisor.report", "", "path of the JSON run report the supervisor writes",
+          "supervisor"),
+    param("recorder.output", "", "bag directory to create (must not exist)", "recorder"),
+)
+
+SPECS: tuple[ParamSpec, ...] = (*BASE, *PROFILES.parameters(), *CONTROLLERS.parameters())
+SPEC_BY_NAME = {spec.name: spec for spec in SPECS}
+if len(SPEC_BY_NAME) != len(SPECS):
+    raise ValueError("a parameter name is defined twice in the schema")
+FILE_PARAMETERS = ("profile.table.file", "line.file")  # resolved to absolute paths
+
+
+def defaults() -> dict[str, Any]:
+    return {spec.name: spec.default for spec in SPECS}
+
+
+def for_node(node: str) -> list[ParamSpec]:
+    return [spec for spec in SPECS if node in spec.nodes]
+
+
+def shared(spec: ParamSpec) -> bool:
+    """Declared by several nodes: it must reach them all alike (under /** in a file)."""
+    return len(spec.nodes) > 1
+
+
+class NodeValues(dict):
+    """A node's parameter values: exactly what the node declares. Reading anything
+    else is a start-up error, in the node and in simulate() alike."""
+
+    def __init__(self, node: str, values: dict[str, Any]):
+        super().__init__({spec.name: values[spec.name] for spec in for_node(node)})
+        self.node = node
+
+    def __missing__(self, name: str):
+        raise ScenarioError(f"{self.node}: parameter {name!r} is not declared by the {self.node} "
+                            f"node")
+
+
+def steps(values) -> int:
+    """Number of lockstep steps of a run."""
+    return int(round(values["run.duration"] / values["run.period"]))
