@@ -16,6 +16,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.topics import step_topics
 
+pytestmark = pytest.mark.integration
+
 ROOT = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
 STEP_TOPICS = {topic.name: topic.type for topic in step_topics()}

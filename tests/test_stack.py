@@ -23,6 +23,8 @@ from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
 from ato_nodes.core.topics import step_topics
 
+pytestmark = pytest.mark.integration
+
 ROOT = Path(__file__).resolve().parents[1]
 RUN_STACK = [sys.executable, str(ROOT / "scripts" / "run_stack.py")]
 SCORE_BAG = [sys.executable, str(ROOT / "scripts" / "score_bag.py")]

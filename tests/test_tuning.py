@@ -15,6 +15,8 @@ from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings, evaluate_in_process,
                               evaluate_in_stack)
 
+pytestmark = pytest.mark.integration
+
 ROOT = Path(__file__).resolve().parents[1]
 TUNE = [sys.executable, str(ROOT / "scripts" / "tune.py")]
 

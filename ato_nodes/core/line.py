@@ -140,7 +140,7 @@ def parse_line(text: str, path: str | Path = "<line>") -> Line:
         if required not in fields:
             raise ScenarioError(f"{path}: missing {required!r}")
     length = _number(path, fields["length"], "length", positive=True)
-    sections = {kind: _sections(path, kind, fields.get(kind), length) for kind in SECTION_KEYS}
+    sections = {name: _sections(path, name, fields.get(name), length) for name in SECTION_KEYS}
     _check_limits_cover(path, fields["speed_limits"], sections["speed_limits"], length)
     stations = _stations(path, fields.get("stations"), length)
     run_time = fields.get("planned_run_time")
@@ -202,7 +202,7 @@ def _sections(path: Path, kind: str, node: yaml.Node | None, length: float) -> t
         value = 0.0
         if value_key is not None:
             value = _number(path, entry[value_key], value_key,
-                            positive=kind in ("curves", "speed_limits"))
+                            positive=value_key in ("radius", "limit"))
         sections.append(Section(start, end, value))
         previous_end = end
     return tuple(sections)

@@ -18,6 +18,7 @@ import yaml
 from .errors import ScenarioError
 from .faults import parse_fault
 from .line import load_line
+from .loop import ControllerStage, ProfileStage
 from .paths import config_dir, resolve_file
 from .schema import (FILE_PARAMETERS, NODES, SPEC_BY_NAME, SPECS, NodeValues, defaults,
                      shared)
@@ -184,7 +185,6 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
         parse_fault(values["run.fault"])
     except ScenarioError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
-    from .loop import ControllerStage, ProfileStage  # the loop needs the schema: no cycle
     line = load_line(values["line.file"]) if values["line.file"] else None
     try:
         ProfileStage(NodeValues("profile", values), line)

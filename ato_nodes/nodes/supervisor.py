@@ -67,15 +67,23 @@ class SupervisorNode(AtoNode):
         self.announced[node] = values
 
     def refuse(self, message: str) -> None:
-        """End the run before it starts: one line, exit status 2."""
+        """End the run before it starts: one line, exit status 2. The nodes are told to
+        shut down once each of them hears the run events (see on_tick)."""
         print(f"supervisor: error: {message}", file=sys.stderr, flush=True)
         self.exit_status = 2
         self.failed = True
-        self.announce("shutdown")
-        self.context.try_shutdown()
+
+    def shut_down_when_heard(self) -> None:
+        if (self.events_out.get_subscription_count() >= len(PARTICIPANTS) + 1 or
+                time.monotonic() - self.created > self.values["supervisor.ready_timeout"]):
+            self.announce("shutdown")
+            self.context.try_shutdown()
 
     def on_tick(self) -> None:
         now = time.monotonic()
+        if self.failed:
+            self.shut_down_when_heard()
+            return
         if self.started is None:
             if now - self.created > self.values["supervisor.ready_timeout"]:
                 self.get_logger().error("nodes not ready after "

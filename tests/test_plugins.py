@@ -1,0 +1,101 @@
+"""The plug-in seam: registries, run context, preview, named outputs, eager stages."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.components import CONTROLLERS, PROFILES
+from ato_nodes.core.context import RunContext
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.loop import SERIES, ControllerStage, ProfileStage, simulate
+from ato_nodes.core.scenario import apply_overrides, load_scenario, validate
+from ato_nodes.core.schema import SPECS, NodeValues, defaults
+
+
+def values(scenario="seed000", *overrides):
+    return apply_overrides(load_scenario(scenario), list(overrides))
+
+
+def test_every_registered_kind_builds_and_steps_with_its_declared_outputs():
+    for kind, component in CONTROLLERS.components.items():
+        stage = ControllerStage(NodeValues("controller", values(
+            "seed000", f"controller.kind={kind}", "run.duration=1", "controller.preview=2")))
+        stage.horizons.append([1.0, 1.1, 1.2])
+        stage.speeds.append(0.5)
+        (out,) = stage.ready()
+        assert np.isfinite(out.u) and len(out.extras) == len(component.outputs), kind
+        assert not set(component.output_names) & set(SERIES), kind  # no clash with the loop's
+
+
+def test_a_parameter_default_is_written_once_in_the_schema():
+    names = [spec.name for spec in SPECS]
+    assert len(names) == len(set(names))
+    for component in (*CONTROLLERS.components.values(), *PROFILES.components.values()):
+        prefix = {spec.name.rsplit(".", 1)[0] for spec in component.parameters}
+        assert len(prefix) <= 1, component.kind  # one group per kind
+
+
+def test_configuration_objects_have_no_defaults_of_their_own():
+    from ato_nodes.core.adrc import DiscreteADRCGains, HanADRCGains, LinearADRCGains
+    from ato_nodes.core.pid import PIDGains
+    from ato_nodes.core.plant import TrainParameters
+    from ato_nodes.core.profiles import Seed000Profile
+    for cls in (HanADRCGains, DiscreteADRCGains, LinearADRCGains, PIDGains, TrainParameters,
+                Seed000Profile):
+        assert all(f.default is dataclasses.MISSING for f in dataclasses.fields(cls)), cls
+
+
+def test_a_node_reads_only_what_it_declares():
+    controller = NodeValues("controller", defaults())
+    assert controller["plant.mass"] == 388.4  # the nominal train is in its context
+    with pytest.raises(ScenarioError, match="'recorder.output' is not declared by the "
+                                            "controller node"):
+        controller["recorder.output"]
+
+
+def test_a_missing_parameter_fails_at_start_up_the_same_way_in_simulate():
+    bad = {**values("seed000"), "profile.kind": "table"}
+    with pytest.raises(ScenarioError, match="profile.table.file is empty") as checked:
+        validate(bad, "here")
+    with pytest.raises(ScenarioError) as simulated:
+        simulate(bad)
+    assert str(checked.value) == f"here: {simulated.value}"
+
+
+@pytest.mark.parametrize("scenario", ["seed000", "seed004-metro"])
+def test_the_controller_receives_a_preview_of_20_steps_of_the_plan(scenario):
+    run = values(scenario, "run.duration=20", "controller.preview=20")
+    series = simulate(run)
+    preview, context = series["preview"], RunContext(run)
+    assert preview.shape == (len(series["t"]), 21)
+    np.testing.assert_array_equal(preview[:, 0], series["target"])
+    position = series["position"]
+    for k in range(3, len(position)):
+        predicted = position[k - 2] + 2 * (position[k - 2] - position[k - 3])
+        assert list(preview[k]) == context.horizon(k, predicted, 20), k
+    if not context.plan.position_indexed:  # time-indexed: exactly r(t_k) .. r(t_k+20)
+        h = run["run.period"]
+        expected = [[context.plan.speed((k + i) * h) for i in range(21)]
+                    for k in range(len(position))]
+        np.testing.assert_array_equal(preview, expected)
+
+
+def test_a_position_indexed_horizon_follows_the_planned_trajectory():
+    context = RunContext(values("seed004-metro"))
+    horizon = context.horizon(100, 500.0, 50)
+    h, position = context.period, 500.0
+    for i in range(1, 51):  # ds/dt = v(s), Heun: the positions the planned train passes
+        v = horizon[i - 1]
+        position += 0.5 * h * (v + context.plan.speed(0.0, position + h * v))
+        assert horizon[i] == context.plan.speed(0.0, position)
+    assert horizon[0] == context.plan.speed(0.0, 500.0)
+
+
+def test_the_profile_sends_each_step_its_horizon_and_stairs_only_the_first_entry():
+    stage = ProfileStage(NodeValues("profile", values(
+        "seed003-maglev", "controller.preview=3")))
+    assert [len(horizon) for horizon in stage.on_position(100.0)] == [4, 4, 4]
+    later = stage.on_position(100.0)[0]  # standing 100 m in: a stair one step above 0
+    planned = stage.context.horizon(3, 100.0, 3)
+    assert later[0] == stage.approach_step < planned[0] and later[1:] == planned[1:]

@@ -1,0 +1,100 @@
+"""The plug-in seam through the real graph: the PID baseline, a 20-step preview, and
+nodes started straight from a shipped scenario file with no launcher in between."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ato_nodes.bagio import read_parameters, read_series
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.scoring import score_series
+from ato_nodes.core.schema import NODES
+from ato_nodes.launch import DomainLock, Stack, node_environment
+
+pytestmark = pytest.mark.integration
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def assert_bag_equals_in_process(bag, values):
+    """Every series bit for bit; the bag's time is its nanosecond stamps (k h rounded to
+    1 ns), so the time-weighted indices agree to the last few bits."""
+    expected, recorded = simulate(values), read_series(bag)
+    np.testing.assert_allclose(recorded["t"], expected["t"], rtol=0, atol=1e-12)
+    for name, series in expected.items():
+        if name != "t":
+            np.testing.assert_array_equal(recorded[name], series, err_msg=name)
+    assert score_series(recorded, read_parameters(bag)) == pytest.approx(
+        score_series(expected, values), rel=1e-12, nan_ok=True)
+
+
+@pytest.mark.parametrize("scenario, duration", [
+    ("seed000", 60), ("seed004-metro", 200), ("seed003-maglev", 120)])
+def test_the_pid_baseline_runs_through_the_stack_bit_identical_to_in_process(
+        tmp_path, scenario, duration):
+    values = apply_overrides(load_scenario(scenario), [
+        "controller.kind=pid", "controller.preview=2", f"run.duration={duration}"])
+    outcome = Stack(values, tmp_path / "bag", quiet=True, timeout=120).run()
+    assert outcome.ok, outcome.message
+    recorded = read_series(tmp_path / "bag")
+    assert {"feedforward", "proportional", "integral", "derivative"} <= set(recorded)
+    assert_bag_equals_in_process(tmp_path / "bag", values)
+
+
+def test_a_20_step_preview_reaches_the_controller_in_the_stack_as_in_process(tmp_path):
+    values = apply_overrides(load_scenario("seed004-metro"), [
+        "controller.preview=20", "run.duration=40"])
+    outcome = Stack(values, tmp_path / "bag", quiet=True, timeout=120).run()
+    assert outcome.ok, outcome.message
+    assert read_series(tmp_path / "bag")["preview"].shape == (400, 21)
+    assert_bag_equals_in_process(tmp_path / "bag", values)
+
+
+def start_nodes_directly(parameter_file: Path, bag: Path, report: Path):
+    """`python -m ato_nodes.nodes.<node> --ros-args --params-file FILE` for each node, as a
+    standard launch file or `ros2 run` starts them; returns {node: exit status}."""
+    lock = DomainLock()
+    env = node_environment(lock.domain_id)
+    try:
+        processes = {node: subprocess.Popen(
+            [sys.executable, "-m", f"ato_nodes.nodes.{node}", "--ros-args", "--params-file",
+             str(parameter_file), "-p", f"recorder.output:={bag}", "-p",
+             f"supervisor.report:={report}"], env=env, cwd=ROOT, stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for node in NODES}
+        errors = {}
+        for node, process in processes.items():
+            errors[node] = process.communicate(timeout=120)[1]
+        return {node: process.returncode for node, process in processes.items()}, errors
+    finally:
+        for process in processes.values():
+            if process.poll() is None:
+                process.kill()
+        lock.release()
+
+
+def test_nodes_started_from_a_shipped_scenario_file_run_its_train_on_its_line(tmp_path):
+    scenario = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
+    codes, errors = start_nodes_directly(scenario, tmp_path / "direct", tmp_path / "r.json")
+    assert set(codes.values()) == {0}, errors
+    launched = tmp_path / "launched"
+    assert Stack(load_scenario("seed004-metro"), launched, quiet=True, timeout=120).run().ok
+    direct = read_parameters(tmp_path / "direct")
+    assert direct["plant.train"] == "metro-b" and direct["plant.mass"] == 194.3
+    assert direct["line.file"].endswith("msg_config/lines/metro-interstation.yaml")
+    assert score_series(read_series(tmp_path / "direct"), direct) == \
+        score_series(read_series(launched), read_parameters(launched))
+    assert json.loads((tmp_path / "r.json").read_text())["steps"] == 2000
+
+
+def test_a_shared_parameter_given_to_one_node_only_is_refused_before_the_run(tmp_path):
+    scenario = tmp_path / "one-node.yaml"
+    scenario.write_text("plant:\n  ros__parameters:\n    plant.train: metro-b\n")
+    codes, errors = start_nodes_directly(scenario, tmp_path / "bag", tmp_path / "r.json")
+    assert codes["supervisor"] == 2
+    (line,) = errors["supervisor"].strip().splitlines()
+    assert "plant.train is '' in" in line and "metro-b" in line and "/**" in line
+    assert not (tmp_path / "r.json").exists()
