@@ -5,9 +5,11 @@ file without metadata.yaml. Topics are found by role (target speed, true
 state, measured speed, command, controller state, position) under the names
 of the topic map, or under other names given as a role -> topic mapping.
 Every series is sampled at the time stamps of the speed source (the true
-state, else the measured speed), holding the latest value at or before each
-stamp: for the stack's own bags, whose topics share one stamp per step, that
-is exact pairing by step.
+state, else the measured speed). Where a topic shares those stamps (the
+stack's own bags: one stamp per step on every topic) only the steps every
+topic has are read, and the run says how many it left out: a gap is never
+filled. A topic of someone else's bag with stamps of its own is sampled at
+the latest message at or before each stamp.
 """
 
 from __future__ import annotations
@@ -180,27 +182,40 @@ def _assemble(path, found, stamps, raws, types) -> Run:
     if clock_role == "measured_speed":
         notes.append("no true state: the speed is the measured speed")
     base = np.array(stamps[clock_role], dtype=np.int64)
-    order = np.argsort(base, kind="stable")
-    base = base[order]
-    series: dict[str, np.ndarray] = {"t": base * 1e-9}
-    for role in sorted(usable, key=lambda r: r != clock_role):  # the stamps' source first
-        msgtype, fields = ROLES[role]
-        decoded = [TYPESTORE.deserialize_cdr(raw, msgtype) for raw in raws[role]]
+    clock_order = np.argsort(base, kind="stable")
+    base = base[clock_order]
+    keep = np.ones(len(base), dtype=bool)
+    picks = {clock_role: clock_order}
+    short = []
+    for role in usable - {clock_role}:
         role_stamps = np.array(stamps[role], dtype=np.int64)
         role_order = np.argsort(role_stamps, kind="stable")
-        # latest value at or before each base stamp (same stamps: same step)
-        if role == clock_role:
-            pick = role_order
-        else:
-            positions = np.searchsorted(role_stamps[role_order], base, side="right") - 1
-            valid = positions >= 0
-            base, series = _trim(base, series, valid)
-            pick = role_order[positions[valid]]
-        series.update(_columns(fields, [decoded[i] for i in pick]))
+        ordered = role_stamps[role_order]
+        at = np.minimum(np.searchsorted(ordered, base), len(ordered) - 1)
+        exact = ordered[at] == base
+        if exact.any():  # one stamp per step: a step without this topic is not scored
+            if not exact.all():
+                short.append(found[role])
+            keep &= exact
+            picks[role] = role_order[at]
+        else:  # someone else's bag, stamps not shared: the latest message at or before
+            latest = np.searchsorted(ordered, base, side="right") - 1
+            keep &= latest >= 0
+            picks[role] = role_order[np.maximum(latest, 0)]
+            notes.append(f"{found[role]} has no message at the speed source's stamps: "
+                         "sampled at the latest one before each")
+    if not keep.all():
+        notes.append(f"{np.count_nonzero(~keep)} of {len(base)} steps lack a message on "
+                     f"{', '.join(sorted(short)) or 'a topic'}: only the {np.count_nonzero(keep)} "
+                     "steps every topic has are read (no gap is filled)")
+    series: dict[str, np.ndarray] = {"t": base[keep] * 1e-9}
+    for role in sorted(usable, key=lambda r: r != clock_role):  # the stamps' source first
+        msgtype, fields = ROLES[role]
+        chosen = picks[role][keep]
+        decoded = {i: TYPESTORE.deserialize_cdr(raws[role][i], msgtype) for i in set(chosen)}
+        series.update(_columns(fields, [decoded[i] for i in chosen]))
     if "speed" not in series:
         series["speed"] = series["measured_speed"]
-    length = min(len(values) for values in series.values())
-    series = {name: values[:length] for name, values in series.items()}
     return Run(path, series, read_parameters(path), {r: found[r] for r in usable}, missing, notes)
 
 
@@ -218,13 +233,6 @@ def _columns(fields, messages) -> dict[str, np.ndarray]:
         return {fields[1]: np.array([row[:width] for row in rows]).reshape(len(rows), width)}
     return {name: np.array([_field(message, path) for message in messages], dtype=float)
             for name, path in fields}
-
-
-def _trim(base, series, valid):
-    """Drop the leading base stamps before a role's first message."""
-    if valid.all():
-        return base, series
-    return base[valid], {name: values[valid] for name, values in series.items()}
 
 
 def read_messages(bag: str | Path, topics: list[str] | None = None
@@ -249,6 +257,16 @@ def read_messages(bag: str | Path, topics: list[str] | None = None
         raise _unreadable(path, exc) from None
     selected.sort(key=lambda message: message[1])  # stable: ties keep the recorded order
     return types, selected
+
+
+def message_counts(bag: str | Path) -> dict[str, int]:
+    """Messages per topic, as the bag's metadata.yaml states them."""
+    try:
+        metadata = yaml.safe_load((Path(bag) / "metadata.yaml").read_text())
+        return {entry["topic_metadata"]["name"]: int(entry["message_count"]) for entry in
+                metadata["rosbag2_bagfile_information"]["topics_with_message_count"]}
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
+        raise BagError(f"{bag}: no readable metadata.yaml ({exc})") from None
 
 
 def read_series(bag: str | Path, mapping: dict[str, str] | None = None) -> dict[str, np.ndarray]:

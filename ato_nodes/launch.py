@@ -17,6 +17,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ from typing import Any
 
 import yaml
 
+from ato_nodes.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.scenario import ros_parameter_file
 from ato_nodes.core.schema import NODES
 
@@ -33,6 +35,11 @@ DOMAIN_IDS = range(1, 102)  # 0 is left for the user's own ROS graph
 STOP_GRACE = 5.0           # s for nodes to exit after SIGINT before SIGTERM / SIGKILL
 POLL = 0.05                # s between checks of the children
 PR_SET_PDEATHSIG = 1
+STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 class DomainLock:
@@ -53,14 +60,36 @@ class DomainLock:
             raise RuntimeError(f"ROS domain {domain_id} is in use by another run")
         raise RuntimeError("no free ROS domain id")
 
+    def fileno(self) -> int:
+        return self._socket.fileno()
+
     def release(self) -> None:
         self._socket.close()
 
 
-def _die_with_parent() -> None:
-    """Child side of fork: get SIGTERM if the launcher itself is killed."""
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+def _death_signal(signum: int):
+    """Child side of fork: get `signum` if the launcher itself dies."""
+    def arm() -> None:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signum)
+    return arm
+
+
+# If the launcher dies (even by SIGKILL) the nodes go too: SIGKILL for those with
+# nothing to save, SIGTERM for the recorder, which then drains and closes its bag.
+# Each node also holds the domain's lock port (inherited), so a node that outlives
+# its launcher keeps its domain from the next run.
+DEATH_SIGNAL = {role: signal.SIGTERM if role == "recorder" else signal.SIGKILL
+                for role in NODES}
+WORKDIR_PREFIX = "ato-run-"
+
+
+def _remove_stale_workdirs() -> None:
+    """Temporary run directories of launchers that were killed (their pid is gone)."""
+    for path in Path(tempfile.gettempdir()).glob(f"{WORKDIR_PREFIX}*-*"):
+        pid = path.name[len(WORKDIR_PREFIX):].split("-", 1)[0]
+        if pid.isdigit() and not Path(f"/proc/{pid}").exists():
+            shutil.rmtree(path, ignore_errors=True)
 
 
 def node_environment(domain_id: int) -> dict[str, str]:
@@ -98,7 +127,8 @@ class Stack:
         self.timeout = timeout
         self.lock = DomainLock(domain_id)
         self.processes: dict[str, subprocess.Popen] = {}
-        self.workdir = Path(tempfile.mkdtemp(prefix="ato-run-"))
+        _remove_stale_workdirs()
+        self.workdir = Path(tempfile.mkdtemp(prefix=f"{WORKDIR_PREFIX}{os.getpid()}-"))
         self.report_path = self.workdir / "report.json"
         self.params_path = self.workdir / "params.yaml"
         self.values["recorder.output"] = str(self.bag.resolve())
@@ -114,7 +144,8 @@ class Stack:
                        "--params-file", str(self.params_path)]
             self.processes[role] = subprocess.Popen(
                 command, env=env, cwd=REPO_ROOT, stdin=subprocess.DEVNULL, stdout=output,
-                stderr=output, start_new_session=True, preexec_fn=_die_with_parent)
+                stderr=output, start_new_session=True, pass_fds=(self.lock.fileno(),),
+                preexec_fn=_death_signal(DEATH_SIGNAL[role]))
 
     def stop(self) -> None:
         """SIGINT every live node (the recorder closes its bag), then escalate."""
@@ -152,6 +183,15 @@ class Stack:
                 return RunOutcome("timeout", f"run did not finish within {self.timeout:g} s")
             time.sleep(POLL)
 
+    def _repair(self) -> str:
+        """A bag whose recorder was killed is made complete again; what that kept."""
+        if not needs_repair(self.bag):
+            return ""
+        try:
+            return repair(self.bag).describe()
+        except RepairError as exc:
+            return f"bag not repaired: {exc}"
+
     def _finish(self) -> RunOutcome:
         """The supervisor ended the run; the other nodes are exiting on 'shutdown'."""
         if not self.report_path.exists():
@@ -164,7 +204,12 @@ class Stack:
         return RunOutcome("completed", report=report)
 
     def run(self) -> RunOutcome:
+        """Start, watch, stop. SIGTERM interrupts a run as Ctrl-C does; once the run is
+        stopping, further signals wait until every node is stopped and the bag is
+        complete (repaired if its writer died)."""
         started = time.monotonic()
+        main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, _interrupt) if main else None
         try:
             try:
                 self._start()
@@ -172,12 +217,23 @@ class Stack:
             except KeyboardInterrupt:
                 outcome = RunOutcome("interrupted", "interrupted by the user")
             finally:
-                self.stop()
-                self.lock.release()
+                blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if main else None
+                try:
+                    self.stop()
+                    self.lock.release()
+                    outcome.message = "; ".join(filter(None, [outcome.message, self._repair()]))
+                finally:
+                    if main:  # a Ctrl-C pressed while stopping is spent, not re-raised
+                        handlers = {n: signal.signal(n, signal.SIG_IGN) for n in STOP_SIGNALS}
+                        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+                        for number, handler in handlers.items():
+                            signal.signal(number, handler)
             if self.report_path.exists() and not outcome.report:
                 outcome.report = json.loads(self.report_path.read_text())
         finally:
             shutil.rmtree(self.workdir, ignore_errors=True)  # thousands of runs when tuning
+            if main:
+                signal.signal(signal.SIGTERM, previous)
         outcome.domain_id = self.lock.domain_id
         outcome.wall_time = time.monotonic() - started
         return outcome

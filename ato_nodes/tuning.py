@@ -14,8 +14,11 @@ from __future__ import annotations
 
 import csv
 import difflib
+import fcntl
+import hashlib
 import json
 import math
+import os
 import shutil
 import sys
 import threading
@@ -97,6 +100,7 @@ class Evaluation:
     wall_time: float
     indices: dict[str, Any] = field(default_factory=dict)
     message: str = ""
+    conditions: str = ""        # what makes the fitness mean what it means (see conditions())
 
 
 INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
@@ -208,20 +212,61 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
     return Evaluation(index, overrides, value, status, elapsed, indices, message)
 
 
-class EvaluationLog:
-    """evaluations.jsonl: one line per finished evaluation, flushed at once."""
+def conditions(values: dict[str, Any], settings: TuningSettings) -> str:
+    """A digest of everything that makes a logged fitness mean what it means: every
+    parameter of the base run, the text of its line and table files, the fitness,
+    requirements, search space, algorithm and how candidates are run."""
+    files = {}
+    for name in ("line.file", "profile.table.file"):
+        if values.get(name):
+            try:
+                files[name] = hashlib.sha256(Path(values[name]).read_bytes()).hexdigest()
+            except OSError:
+                files[name] = "unreadable"
+    text = json.dumps({"values": values, "files": files, "settings": settings.describe()},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
-    def __init__(self, path: Path, resume: bool):
+
+class EvaluationLog:
+    """evaluations.jsonl: one line per finished evaluation, flushed at once. On resume
+    every line must have been evaluated under the same conditions; a last line cut
+    short (the process was killed while writing it) is dropped and evaluated again."""
+
+    def __init__(self, path: Path, resume: bool, expected_conditions: str):
         self.path = path
         self.done: dict[int, Evaluation] = {}
         if resume and path.exists():
-            for line in path.read_text().splitlines():
-                if line.strip():
+            lines = path.read_text().splitlines()
+            for number, line in enumerate(lines, 1):
+                if not line.strip():
+                    continue
+                try:
                     record = Evaluation(**json.loads(line))
-                    self.done[record.index] = record
+                except (json.JSONDecodeError, TypeError) as exc:
+                    if number == len(lines):  # cut short: evaluate it again
+                        print(f"warning: {path} line {number} is incomplete; it is evaluated "
+                              "again", file=sys.stderr)
+                        break
+                    raise ScenarioError(f"{path} line {number} is not an evaluation record "
+                                        f"({exc.__class__.__name__}); remove that line or tune "
+                                        "into a new --out") from None
+                if record.conditions != expected_conditions:
+                    raise ScenarioError(
+                        f"{path} line {number} was evaluated under other conditions (the "
+                        "scenario, its line or table file, --set, the fitness, requirements or "
+                        "search space changed); tune into a new --out")
+                self.done[record.index] = record
+            self._rewrite()  # without a cut-short last line
         elif path.exists():
             path.unlink()
         self.lock = threading.Lock()
+
+    def _rewrite(self) -> None:
+        temporary = self.path.with_suffix(".jsonl.tmp")
+        temporary.write_text("".join(json.dumps(asdict(record)) + "\n"
+                                     for record in self.done.values()))
+        temporary.replace(self.path)
 
     def cached(self, index: int, params: dict[str, Any]) -> Evaluation | None:
         record = self.done.get(index)
@@ -281,15 +326,26 @@ class Tuner:
                                 f"{', '.join(FITNESS)}")
         self.values, self.settings, self.out = values, settings, out
         self.progress = progress
-        out.mkdir(parents=True, exist_ok=True)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ScenarioError(f"cannot create {out}: {exc.strerror or exc}") from None
+        self.directory_lock = _hold_directory(out)
+        self.conditions = conditions(values, settings)
         settings_file = out / "tuning.json"
+        described = {**settings.describe(), "conditions": self.conditions}
         if resume and settings_file.exists():
-            if json.loads(settings_file.read_text()) != json.loads(
-                    json.dumps(settings.describe())):
-                raise ScenarioError(f"{out} holds a tuning with other settings; "
-                                    "resume it with the same options")
-        settings_file.write_text(json.dumps(settings.describe(), indent=2))
-        self.log = EvaluationLog(out / "evaluations.jsonl", resume)
+            try:
+                before = json.loads(settings_file.read_text())
+            except json.JSONDecodeError:
+                raise ScenarioError(f"{settings_file} is not valid JSON; tune into a new "
+                                    "--out") from None
+            if before != json.loads(json.dumps(described)):
+                raise ScenarioError(f"{out} holds a tuning with other settings or conditions "
+                                    "(scenario, files, --set); resume it with the same options "
+                                    "or tune into a new --out")
+        settings_file.write_text(json.dumps(described, indent=2))
+        self.log = EvaluationLog(out / "evaluations.jsonl", resume, self.conditions)
         self.evaluate = evaluate or (evaluate_in_process if settings.in_process
                                      else self._evaluate_in_stack)
         algorithm = create(settings.algorithm, **settings.options)
@@ -299,6 +355,10 @@ class Tuner:
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
         self.started = time.monotonic()
         self.best = math.inf
+
+    def _stamped(self, record: Evaluation) -> Evaluation:
+        record.conditions = self.conditions
+        return record
 
     def _evaluate_in_stack(self, values, overrides, objective, index) -> Evaluation:
         bag = self.out / "runs" / f"candidate-{index:05d}"
@@ -329,7 +389,7 @@ class Tuner:
                 pending[pool.submit(self.evaluate, self.values, overrides,
                                     self.settings.objective, index)] = index
         for future in as_completed(pending):
-            record = future.result()
+            record = self._stamped(future.result())
             self.fresh += 1
             self.log.append(record)
             results[record.index] = record
@@ -386,6 +446,25 @@ class Tuner:
                    "wall_time": time.monotonic() - self.started}
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         plot_convergence([self.out], self.out / "convergence.png")
+
+
+def _hold_directory(out: Path):
+    """An exclusive lock on OUT for this tuning's lifetime (released when the process
+    ends, however it ends): two tunings never write one directory."""
+    handle = (out / ".lock").open("a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip() or "another process"
+        handle.close()
+        raise ScenarioError(f"{out} is being written by another tuning (pid {holder}); wait "
+                            "for it or use another --out") from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(str(os.getpid()))
+    handle.flush()
+    return handle
 
 
 def _best_indices(log: EvaluationLog, best: dict[str, Any]) -> dict[str, Any]:

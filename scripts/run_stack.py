@@ -16,7 +16,7 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.bagio import BagError, read_parameters, read_series
+from ato_nodes.bagio import BagError, message_counts, read_run
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.schema import steps
@@ -75,12 +75,19 @@ def main() -> None:
                "message": outcome.message, "domain_id": outcome.domain_id,
                "wall_time": outcome.wall_time, **outcome.report}
     if bag.exists():
-        (bag / "params.yaml").write_text(stack.params_yaml)
         try:
-            summary["indices"] = score_series(read_series(bag), read_parameters(bag))
+            run = read_run(bag)
+            summary["recorded"] = message_counts(bag)
+            summary["scored_steps"] = len(run.series["t"])
+            summary["notes"] = run.notes
+            summary["indices"] = score_series(run.series, run.parameters)
         except BagError as exc:
             summary["message"] += f"; bag not scored: {exc}"
-        (bag / "summary.json").write_text(json.dumps(summary, indent=2))
+        try:
+            (bag / "params.yaml").write_text(stack.params_yaml)
+            (bag / "summary.json").write_text(json.dumps(summary, indent=2))
+        except OSError as exc:
+            summary["message"] += f"; summary not written: {exc.strerror or exc}"
     if not outcome.ok:
         steps_recorded = summary.get("indices", {}).get("steps", 0)
         print(f"error: {outcome.message}; {steps_recorded} steps recorded in {bag}",

@@ -26,7 +26,7 @@ import _cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.tuning import FITNESS, Requirement, SearchSpace, Tuner, TuningSettings
+from ato_nodes.tuning import FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningSettings
 
 
 def parse_args() -> argparse.Namespace:
@@ -82,6 +82,9 @@ def main() -> None:
               "continue with --resume", file=sys.stderr)
         sys.exit(130)
     summary = json.loads((args.out / "summary.json").read_text())
+    if result.best_f >= PENALTY:
+        _cli.fail(f"every one of the {result.evaluations} candidates failed "
+                  f"({summary['failed_evaluations']}); see {args.out / 'evaluations.jsonl'}", 1)
     print(f"best {args.fitness} {result.best_f:.6g} after {result.evaluations} evaluations, "
           f"{result.iterations} iterations ({summary['stop_reason']})")
     for name, value in summary["best_params"].items():

@@ -26,8 +26,12 @@ BASE: tuple[ParamSpec, ...] = (
     param("run.duration", 2400.0, "simulated run length, s", NODES, 1e-3, 1e7),
     param("run.real_time", False, "pace /clock at wall speed instead of as fast as possible",
           "plant"),
-    param("run.fault", "", "fault injection for testing supervision: NODE:crash:STEP or "
-          "NODE:hang:STEP (NODE one of profile, plant, controller, recorder)", NODES),
+    param("run.record_lag", 1.0, "the plant runs at most this far (simulated time) ahead of "
+          "what the recorder has on disk, so a killed recorder loses at most this much, s "
+          "(0 = no limit)", ("plant", "recorder"), 0.0, 1e7),
+    param("run.fault", "", "fault injection for testing supervision: NODE:KIND:STEP, KIND one "
+          "of crash, hang, kill, diskfull (NODE one of profile, plant, controller, recorder)",
+          NODES),
     param("line.file", "", "line file (msg_config/lines/*.yaml): gradients, curves, tunnels, "
           "limits, neutral sections, stations; relative to the scenario file, else to "
           "msg_config/; empty = open track", LOOP_NODES),
@@ -118,6 +122,15 @@ class NodeValues(dict):
     def __missing__(self, name: str):
         raise ScenarioError(f"{self.node}: parameter {name!r} is not declared by the {self.node} "
                             f"node")
+
+
+def recording_steps(values) -> tuple[int, int | None]:
+    """(steps per flushed block of the bag, steps the plant may run ahead of the last
+    flushed block, None = no limit): blocks of half run.record_lag (0.5 s without a
+    limit), so the plant always has a block of room and never waits for ever."""
+    lag, period = values["run.record_lag"], values["run.period"]
+    block = max(1, round((lag if lag > 0 else 1.0) / 2 / period))
+    return block, (max(round(lag / period), 2 * block) if lag > 0 else None)
 
 
 def steps(values) -> int:

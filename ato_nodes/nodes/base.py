@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
+import resource
 import signal
 import sys
 import time
@@ -14,11 +16,13 @@ from typing import Any, Callable
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from ato_nodes.core.errors import ScenarioError
@@ -42,6 +46,7 @@ READINESS_POLL = 0.01  # s of wall time between checks of the graph
 # served by the standard executor at least this often, s of wall time.
 HOUSEKEEPING_PERIOD = 0.02
 HOUSEKEEPING_CALLBACKS = 16
+FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
 
 
 def parameter_file_folders() -> list[Path]:
@@ -76,6 +81,7 @@ class AtoNode(Node):
 
     role: str = ""
     exit_status = 0  # set by a node that ends the run for a reason of its own
+    stop_requested = False  # SIGINT or SIGTERM: leave the spin loop, then on_stop()
 
     def __init__(self, use_sim_time: bool = True):
         super().__init__(self.role)
@@ -171,12 +177,22 @@ class AtoNode(Node):
             self.announce(f"ready {self.role}")
 
     def inject_fault(self, step: int) -> None:
-        """run.fault: from the given step on, crash (an uncaught exception) or hang
-        (deaf to SIGINT and SIGTERM, so the launcher has to escalate to SIGKILL)."""
+        """run.fault: from the given step on, crash (an uncaught exception), hang (deaf
+        to SIGINT and SIGTERM, so the launcher has to escalate to SIGKILL), kill (the
+        process SIGKILLs itself: no clean-up of any kind) or diskfull (every further
+        write to a file fails, as on a full disk)."""
         if self._fault is None or step < self._fault[1]:
             return
-        if self._fault[0] == "crash":
+        kind, self._fault = self._fault[0], None if self._fault[0] == "diskfull" else self._fault
+        if kind == "crash":
             raise RuntimeError(f"{self.role}: injected crash at step {step} (run.fault)")
+        if kind == "kill":
+            os.kill(os.getpid(), signal.SIGKILL)
+        if kind == "diskfull":  # writes beyond the files' current sizes fail with EFBIG
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (0, resource.getrlimit(
+                resource.RLIMIT_FSIZE)[1]))
+            return
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         while True:
@@ -195,6 +211,12 @@ class AtoNode(Node):
 
     def on_event(self, word: str, argument: str) -> None:
         """Run events other than 'shutdown' (which every node obeys by exiting)."""
+
+    def on_stop(self) -> None:
+        """After a signal, before exit: what this node published reaches its subscribers
+        (reliable, keep-all: the recorder gets every step that left this node)."""
+        for publisher, _ in self._outgoing:
+            publisher.wait_for_all_acked(Duration(seconds=FLUSH_TIMEOUT))
 
     def close(self) -> None:
         """Release what must be released before exit (the recorder closes its bag)."""
@@ -224,46 +246,89 @@ def spin_lockstep(node: AtoNode, executor: SingleThreadedExecutor) -> None:
     HOUSEKEEPING_PERIOD, so /clock, published every step, costs no callback.
     """
     context = node.context
-    inputs = [(sub.handle, sub.msg_type, sub.raw, callback)
-              for sub, callback in node.lockstep_inputs]
-    wait_set = _rclpy.WaitSet(len(inputs), 0, 0, 0, 0, 0, context.handle)
+    lockstep = LockstepInputs(node)
     next_housekeeping = 0.0
-    while context.ok():
+    while context.ok() and not node.stop_requested:
         now = time.monotonic()
         if now >= next_housekeeping:
             _housekeeping(executor)
             next_housekeeping = now + HOUSEKEEPING_PERIOD
             continue
-        if not inputs:
+        if not lockstep.inputs:
             time.sleep(next_housekeeping - now)
             continue
+        lockstep.take(next_housekeeping - now)
+
+
+class LockstepInputs:
+    """A wait set of a node's per-step subscriptions: wait, then take and handle every
+    queued message of each ready one (in arrival order per topic)."""
+
+    def __init__(self, node: AtoNode):
+        self.inputs = [(sub.handle, sub.msg_type, sub.raw, callback)
+                       for sub, callback in node.lockstep_inputs]
+        self.wait_set = _rclpy.WaitSet(len(self.inputs), 0, 0, 0, 0, 0, node.context.handle)
+
+    def take(self, timeout: float) -> int:
+        """Wait up to `timeout` s; the number of messages handled."""
+        wait_set = self.wait_set
         wait_set.clear_entities()
-        for handle, _, _, _ in inputs:
+        for handle, _, _, _ in self.inputs:
             wait_set.add_subscription(handle)
-        wait_set.wait(int((next_housekeeping - now) * 1e9))
+        wait_set.wait(int(timeout * 1e9))
         ready = wait_set.get_ready_entities("subscription")
-        for handle, msg_type, raw, callback in inputs:
+        handled = 0
+        for handle, msg_type, raw, callback in self.inputs:
             if handle.pointer in ready:
                 taken = handle.take_message(msg_type, raw)
                 while taken is not None:
                     callback(taken[0])
+                    handled += 1
                     taken = handle.take_message(msg_type, raw)
+        return handled
+
+    def drain(self, quiet: float, limit: float) -> None:
+        """Handle what still arrives until nothing has for `quiet` s (`limit` s at most)."""
+        deadline = time.monotonic() + limit
+        last = time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - last < quiet:
+            if self.take(quiet / 4):
+                last = time.monotonic()
+
+
+def _request_stop(node_holder: list) -> Callable:
+    def handler(signum, frame) -> None:
+        if node_holder:
+            node_holder[0].stop_requested = True
+        else:  # still starting: nothing to flush
+            raise KeyboardInterrupt
+    return handler
 
 
 def run_node(factory: Callable[[], AtoNode]) -> None:
     """Life cycle of a node process: init, spin until shutdown or signal, clean exit.
 
-    Bad parameters end the process with one line on stderr and exit status 2.
+    SIGINT and SIGTERM do not tear the ROS context down under the node (rclpy's own
+    handlers would): they end the spin loop, then the node's on_stop() runs with the
+    context alive (its data is flushed to the subscribers; the recorder drains what is
+    still arriving and closes its bag), then the node exits. Bad parameters end the
+    process with one line on stderr and exit status 2.
     """
-    rclpy.init(args=sys.argv)
+    rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    holder: list[AtoNode] = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _request_stop(holder))
     node = None
     status = 0
     try:
         node = factory()
+        holder.append(node)
         # rclpy.experimental.EventsExecutor (7.1.6) fires no timers and ignores SIGINT here.
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         spin_lockstep(node, executor)
+        if node.stop_requested and rclpy.ok():
+            node.on_stop()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ScenarioError, rclpy.exceptions.ParameterException, ValueError) as exc:

@@ -14,7 +14,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
 from ato_nodes.core.loop import PlantStage
-from ato_nodes.core.schema import steps
+from ato_nodes.core.schema import recording_steps, steps
 from ato_nodes.nodes.base import AtoNode, run_node
 
 
@@ -35,7 +35,11 @@ class PlantNode(AtoNode):
         self.state_pub = self.publisher("state")
         self.speed_msg, self.position_msg = Float64(), Float64()
         self.clock_msg, self.state_msg = Clock(), Twist()
+        _, self.record_window = recording_steps(self.values)
+        self.recorded_steps = 0
+        self.held = False  # the next step waits for the recorder
         self.subscription("command", self.on_command)
+        self.subscription("recorded", self.on_recorded)
         self.ready_when_matched()
 
     def on_event(self, word: str, argument: str) -> None:
@@ -74,7 +78,18 @@ class PlantNode(AtoNode):
             delay = self.started_at + self.step_index * self.period - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
+        if self.record_window is not None and \
+                self.step_index > self.recorded_steps + self.record_window:
+            self.held = True  # resumed by on_recorded
+            return
         self.publish_step()
+
+    def on_recorded(self, msg) -> None:
+        """The recorder's steps on disk: a step held back for it may go now."""
+        self.recorded_steps = msg.data
+        if self.held and self.step_index <= self.recorded_steps + self.record_window:
+            self.held = False
+            self.publish_step()
 
 
 def main() -> None:

@@ -4,26 +4,44 @@ MCAP bag, as the raw CDR bytes received.
 Each message is stamped with the simulated time of its step (the k-th message
 of a topic belongs to step k), so a run's bag is identical however the
 messages interleaved. The bag is closed in every exit path (end of run,
-SIGINT, SIGTERM, a failing node), so it stays readable up to the last step
-received. The bag's metadata keeps the parameters the loop's nodes announced
-(each its own, with the line's text), so it can be scored and re-run alone.
+SIGINT, SIGTERM, a failing node): on a signal it first takes what DDS still
+delivers (the other nodes flush their data to it as they stop), then closes. The
+bag's metadata keeps the parameters the loop's nodes announced (each its own,
+with the line's text), so it can be scored and re-run alone; they are also
+written to parameters.json in the bag as soon as they are known.
+
+Against a hard kill (SIGKILL, power loss) the MCAP chunk is closed and handed to
+the operating system every half run.record_lag of simulated time (0.5 s), and
+the plant never runs more than run.record_lag (1 s) ahead of what is on disk, so
+a killed recorder loses at most that, however loaded the machine; ato_nodes.bagrepair makes what is on disk a complete bag again
+(the launcher runs it; scripts/repair_bag.py for a bag left by anything else).
+A write that fails (a full disk) ends the recording with one line and exit
+status 1; what was written before stays readable after the repair.
 """
 
 from __future__ import annotations
 
 import json
+import signal
+import sys
 from pathlib import Path
+
+from std_msgs.msg import UInt64
 
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.schema import recording_steps
 from ato_nodes.core.topics import step_topics
 from ato_nodes.bagio import PARAMETERS_KEY
-from ato_nodes.nodes.base import AtoNode, run_node
+from ato_nodes.nodes.base import AtoNode, LockstepInputs, run_node
 
 
 RUN_NODES = ("profile", "plant", "controller")  # whose parameters describe the run
+DRAIN_QUIET = 0.5   # s: after a signal, record until nothing has arrived for this long
+DRAIN_LIMIT = 4.0   # s at most (the launcher escalates to SIGTERM after 5 s)
+SIDECAR = "parameters.json"
 
 
 class RecorderNode(AtoNode):
@@ -37,6 +55,10 @@ class RecorderNode(AtoNode):
         if Path(output).exists():
             raise ScenarioError(f"recorder.output {output} exists already")
         self.period_ns = self.values["run.period"] * 1e9
+        self.flush_steps, _ = recording_steps(self.values)
+        self.flushed_pub = self.publisher("recorded")
+        self.flushed_msg = UInt64()
+        self.output = Path(output)
         self.expected = None
         self.writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
         self.writer.open()
@@ -50,24 +72,60 @@ class RecorderNode(AtoNode):
         self.ready_when_matched()
 
     def _make_callback(self, name, connection):
-        counts, period_ns = self.counts, self.period_ns
+        counts, period_ns, flush_steps = self.counts, self.period_ns, self.flush_steps
 
         def record(data: bytes) -> None:
             if self.writer is None:  # closed: the run is complete or ending
                 return
             k = counts[name]
-            self.inject_fault(k)
-            self.writer.write(connection, round(k * period_ns), data)
-            counts[name] = k + 1
+            if name == "/clock":
+                self.inject_fault(k)
+            try:
+                self.writer.write(connection, round(k * period_ns), data)
+                counts[name] = k + 1
+                # the last topic to complete a block of steps flushes it
+                if (k + 1) % flush_steps == 0 and min(counts.values()) == k + 1:
+                    self.flush(k + 1)
+            except OSError as exc:
+                self.write_failed(exc)
+                return
             if self.expected is not None:
                 self._check_complete()
         return record
+
+    def flush(self, steps: int) -> None:
+        """Close the MCAP chunk being filled and hand it to the operating system, then
+        tell the plant how many steps are on disk (it runs at most run.record_lag
+        ahead), so a hard kill loses at most that. (rosbags 0.11's MCAP writer closes
+        chunks only at 1 MiB; its close_chunk() and file are used here.)"""
+        storage = self.writer.storage
+        if storage.chunk.bio.tell():
+            storage.close_chunk()
+        storage.bio.flush()
+        self.flushed_msg.data = steps
+        self.flushed_pub.publish(self.flushed_msg)
+
+    def write_failed(self, exc: OSError) -> None:
+        """A full disk (or any failed write): stop recording, keep what is on disk."""
+        self.get_logger().error(f"cannot write the bag: {exc.strerror or exc}; recording "
+                                f"stopped at {min(self.counts.values())} steps")
+        print(f"recorder: error: cannot write the bag {self.output}: {exc.strerror or exc}",
+              file=sys.stderr, flush=True)
+        writer, self.writer = self.writer, None
+        try:
+            writer.abort()
+        except OSError:
+            pass
+        self.exit_status = 1
+        self.stop_requested = True
 
     def on_event(self, word: str, argument: str) -> None:
         if word == "parameters":
             node, _, values = argument.partition(" ")
             if node in RUN_NODES:
                 self.run_parameters[node] = json.loads(values)
+                if self.run_parameters.keys() == set(RUN_NODES):
+                    self._write_sidecar()
         elif word == "finished":
             self.expected = int(argument.split()[0])
             self._check_complete()
@@ -77,14 +135,36 @@ class RecorderNode(AtoNode):
             self.close()
             self.announce(f"recorded {self.expected}")
 
+    def merged_parameters(self) -> dict:
+        return {name: value for node in RUN_NODES
+                for name, value in self.run_parameters.get(node, {}).items()}
+
+    def _write_sidecar(self) -> None:
+        temporary = self.output / (SIDECAR + ".tmp")
+        try:
+            temporary.write_text(json.dumps(self.merged_parameters()))
+            temporary.replace(self.output / SIDECAR)
+        except OSError as exc:
+            self.write_failed(exc)
+
+    def on_stop(self) -> None:
+        """A signal: record what is still on its way, then close (in close())."""
+        LockstepInputs(self).drain(DRAIN_QUIET, DRAIN_LIMIT)
+
     def close(self) -> None:
-        if self.writer is not None:
-            writer, self.writer = self.writer, None
+        """Close the bag; signals wait until it is closed (a bag half-closed is lost)."""
+        if self.writer is None:
+            return
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        try:
             if self.run_parameters:  # what the loop's nodes ran with: the bag explains itself
-                merged = {name: value for node in RUN_NODES
-                          for name, value in self.run_parameters.get(node, {}).items()}
-                writer.set_custom_data(PARAMETERS_KEY, json.dumps(merged))
-            writer.close()
+                self.writer.set_custom_data(PARAMETERS_KEY, json.dumps(self.merged_parameters()))
+            self.writer.close()
+            self.writer = None
+        except OSError as exc:
+            self.write_failed(exc)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
 
 
 def main() -> None:

@@ -59,8 +59,8 @@ class SupervisorNode(AtoNode):
         """A parameter several nodes declare must have one value in all of them (a
         scenario that gives it under one node only would run two different trains)."""
         for other, known in self.announced.items():
-            for name in values.keys() & known.keys():
-                if values[name] != known[name]:
+            for name in values:  # in schema order: a train preset before what it sets
+                if name in known and values[name] != known[name]:
                     self.refuse(f"{name} is {known[name]!r} in {other} but {values[name]!r} in "
                                 f"{node}; give shared parameters under /** in the parameter file")
                     return

@@ -1,0 +1,138 @@
+"""Making a bag whose writer died (SIGKILL, power loss, a full disk) complete again.
+
+A recorder killed hard leaves an MCAP file without its summary and footer and no
+metadata.yaml: no rosbag2 reader opens it. The recorder closes a chunk every
+second of simulated time, so the file holds every message up to at most that
+before the kill. `repair()` reads the file record by record up to the first
+incomplete one, writes a complete bag from what it holds (same topics, types,
+stamps and bytes; the run's parameters from parameters.json), checks that the
+new bag reads back with every message, and only then replaces the old file.
+The like of `ros2 bag reindex`, for the MCAP layout this project records.
+"""
+
+from __future__ import annotations
+
+import shutil
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+PARAMETERS_KEY = "ato_nodes.parameters"
+SIDECAR = "parameters.json"
+FOOTER_MAGIC = b"\x89MCAP0\r\n"
+
+
+class RepairError(ValueError):
+    """A bag that cannot be repaired (one-line message)."""
+
+
+@dataclass
+class RepairReport:
+    bag: Path
+    repaired: bool
+    messages: dict[str, int] = field(default_factory=dict)  # topic -> messages kept
+
+    def describe(self) -> str:
+        if not self.repaired:
+            return f"{self.bag}: complete, nothing to repair"
+        counts = ", ".join(f"{topic} {count}" for topic, count in sorted(self.messages.items()))
+        return f"{self.bag}: repaired, {sum(self.messages.values())} messages kept ({counts})"
+
+
+def _mcap_file(bag: Path) -> Path:
+    files = sorted(bag.glob("*.mcap"))
+    if len(files) != 1:
+        raise RepairError(f"{bag}: expected one .mcap file, found {len(files)}")
+    return files[0]
+
+
+def needs_repair(bag: str | Path) -> bool:
+    """A bag directory without metadata.yaml, or whose MCAP file was never finished."""
+    bag = Path(bag)
+    if not bag.is_dir() or not list(bag.glob("*.mcap")):
+        return False
+    if not (bag / "metadata.yaml").exists():
+        return True
+    with _mcap_file(bag).open("rb") as handle:
+        handle.seek(0, 2)
+        if handle.tell() < len(FOOTER_MAGIC):
+            return True
+        handle.seek(-len(FOOTER_MAGIC), 2)
+        return handle.read() != FOOTER_MAGIC
+
+
+def _readable_records(path: Path):
+    """Schemas, channels and messages of an MCAP file, up to its first broken record."""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    with path.open("rb") as handle:
+        try:
+            for record in StreamReader(handle, skip_magic=False).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    messages.append(record)
+        except (McapError, EOFError, ValueError, OSError, KeyError, IndexError, struct.error):
+            pass  # the incomplete end: everything before it is kept
+    return schemas, channels, messages
+
+
+def repair(bag: str | Path) -> RepairReport:
+    bag = Path(bag)
+    if not needs_repair(bag):
+        return RepairReport(bag, False)
+    broken = _mcap_file(bag)
+    schemas, channels, messages = _readable_records(broken)
+    if not channels:
+        raise RepairError(f"{bag}: {broken.name} holds no readable channel; nothing to keep")
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    staging = bag.parent / f".{bag.name}.repairing"
+    shutil.rmtree(staging, ignore_errors=True)
+    staging.mkdir()
+    try:
+        writer = Writer(staging / bag.name, version=9, storage_plugin=StoragePlugin.MCAP)
+        writer.open()
+        sidecar = bag / SIDECAR
+        if sidecar.exists():
+            writer.set_custom_data(PARAMETERS_KEY, sidecar.read_text())
+        connections = {}
+        for channel_id, channel in sorted(channels.items()):
+            schema = schemas.get(channel.schema_id)
+            if schema is None:
+                continue
+            if schema.name not in typestore.fielddefs:  # a type of someone else's: its text
+                typestore.register(get_types_from_msg(schema.data.decode(), schema.name))
+            connections[channel_id] = writer.add_connection(channel.topic, schema.name,
+                                                            typestore=typestore)
+        kept: dict[str, int] = {connection.topic: 0 for connection in connections.values()}
+        for message in messages:
+            connection = connections.get(message.channel_id)
+            if connection is not None:
+                writer.write(connection, message.log_time, message.data)
+                kept[connection.topic] += 1
+        writer.close()
+        written = staging / bag.name
+        check = sum(1 for _ in _readable_records(_mcap_file(written))[2])
+        if check != sum(kept.values()):
+            raise RepairError(f"{bag}: the repaired bag reads back {check} messages, not "
+                              f"{sum(kept.values())}; the original is left as it was")
+        new_mcap = _mcap_file(written)
+        new_mcap.replace(bag / new_mcap.name)  # the data first, then the metadata naming it
+        (written / "metadata.yaml").replace(bag / "metadata.yaml")
+        if broken.name != new_mcap.name:
+            broken.unlink()
+    except OSError as exc:
+        raise RepairError(f"{bag}: cannot write the repaired bag: {exc.strerror or exc}") \
+            from None
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return RepairReport(bag, True, kept)

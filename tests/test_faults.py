@@ -1,0 +1,164 @@
+"""Nothing recorded is lost: killed, frozen and disk-starved recorders, a killed
+launcher, SIGTERM, and tunings that must not mix or share their logs."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from ato_nodes.bagio import read_run
+from ato_nodes.launch import DOMAIN_LOCK_PORT
+from test_stack import (ROOT, alive, children, message_counts, run_stack, start_stack,
+                        wait_for_children, wait_for_stepping)
+
+pytestmark = pytest.mark.integration
+TUNE = [sys.executable, str(ROOT / "scripts" / "tune.py")]
+
+
+def opens_everywhere(bag: Path) -> dict[str, int]:
+    """The bag opens in rosbags and in mcap's reader with the same messages; its counts."""
+    counts = message_counts(bag)
+    with AnyReader([bag]) as reader:
+        assert sum(1 for _ in reader.messages()) == sum(counts.values())
+    (mcap_file,) = bag.glob("*.mcap")
+    with mcap_file.open("rb") as handle:
+        assert sum(1 for _ in make_reader(handle).iter_messages()) == sum(counts.values())
+    return counts
+
+
+def holds_what_its_summary_says(bag: Path) -> None:
+    summary = json.loads((bag / "summary.json").read_text())
+    assert summary["recorded"] == message_counts(bag)
+    assert summary["scored_steps"] == len(read_run(bag).series["t"]) == \
+        summary["indices"]["steps"]
+
+
+def test_a_sigkilled_recorder_loses_at_most_a_second_and_its_bag_is_repaired(tmp_path):
+    bag = tmp_path / "killed"
+    result = run_stack("--duration", "60", "--out", str(bag), "--set",
+                       "run.fault=recorder:kill:500", timeout=120)
+    assert result.returncode == 1 and "node 'recorder' exited" in result.stderr
+    assert "repaired" in result.stderr and "Traceback" not in result.stderr
+    counts = opens_everywhere(bag)
+    # killed on taking step 500 of /clock; the plant never ran more than run.record_lag
+    # (1 s = 20 steps) ahead of the last block on disk: at most 1 s of simulated time lost
+    assert 500 - 20 <= min(counts.values()) <= max(counts.values()) <= 500 + 2
+    holds_what_its_summary_says(bag)
+
+
+def test_a_frozen_recorder_and_ctrl_c_still_leave_a_readable_bag(tmp_path):
+    bag = tmp_path / "frozen"
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
+    nodes = wait_for_children(process, roles=("recorder",))
+    wait_for_stepping(process)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and sum(
+            path.stat().st_size for path in bag.glob("*.mcap")) < 20000:
+        time.sleep(0.05)  # until chunks are on disk
+    os.kill(nodes["recorder"], signal.SIGSTOP)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in stderr
+    assert "repaired" in stderr
+    assert min(opens_everywhere(bag).values()) > 0
+    holds_what_its_summary_says(bag)
+
+
+def test_a_full_disk_is_one_line_and_keeps_what_was_written(tmp_path):
+    bag = tmp_path / "full"
+    result = run_stack("--duration", "60", "--out", str(bag), "--set",
+                       "run.fault=recorder:diskfull:300", timeout=120)
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    errors = [line for line in result.stderr.splitlines() if line.startswith("recorder:")]
+    assert len(errors) == 1 and "cannot write the bag" in errors[0]
+    assert 280 <= min(opens_everywhere(bag).values()) <= 300
+
+
+def test_an_interrupted_run_records_every_step_the_loop_made(tmp_path):
+    """SIGINT while stepping flat out: the nodes flush, the recorder drains, so every
+    topic ends within the two steps the targets run ahead, and the summary says so."""
+    bag = tmp_path / "interrupted"
+    process = start_stack("--duration", "2400", "--out", str(bag))
+    wait_for_stepping(process)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in stderr
+    counts = opens_everywhere(bag)
+    assert max(counts.values()) - min(counts.values()) <= 3
+    holds_what_its_summary_says(bag)
+
+
+def test_a_deaf_node_dies_with_a_killed_launcher_and_keeps_its_domain_till_then(tmp_path):
+    bag = tmp_path / "orphan"
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag), "--set",
+                          "run.fault=controller:hang:40")
+    nodes = wait_for_children(process, roles=("profile", "plant", "controller", "supervisor",
+                                               "recorder"))
+    banner = wait_for_stepping(process)[0]
+    domain = int(banner.split("ROS_DOMAIN_ID=")[1].split(",")[0])
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=10)
+    deadline = time.monotonic() + 30
+    while any(alive(pid) for pid in nodes.values()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [role for role, pid in nodes.items() if alive(pid)]
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", DOMAIN_LOCK_PORT + domain))  # the domain is free again
+    probe.close()
+    assert (bag / "metadata.yaml").exists()  # the recorder closed its bag on SIGTERM
+
+
+def test_sigterm_interrupts_a_run_like_ctrl_c_and_removes_its_temporary_files(tmp_path):
+    bag = tmp_path / "terminated"
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
+    wait_for_stepping(process)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in stderr
+    assert not list(Path("/tmp").glob(f"ato-run-{process.pid}-*"))
+    holds_what_its_summary_says(bag)
+
+
+def tune(out: Path, *extra: str, wait: bool = True):
+    command = [*TUNE, "--algorithm", "pso", "--scenario", "seed000", "--in-process",
+               "--params", "adrc.mu1=600:60000", "--evaluations", "40", "--population", "4",
+               "--set", "run.duration=5", "--out", str(out), "--quiet", *extra]
+    if wait:
+        return subprocess.run(command, capture_output=True, text=True, timeout=120)
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_a_tuning_resumed_under_other_conditions_is_refused(tmp_path):
+    out = tmp_path / "tuning"
+    assert tune(out).returncode == 0
+    changed = tune(out, "--resume", "--set", "run.duration=6")
+    assert changed.returncode == 2 and "other settings or conditions" in changed.stderr
+    log = out / "evaluations.jsonl"
+    lines = log.read_text().splitlines()
+    record = json.loads(lines[3])
+    record["conditions"] = "0" * 16  # evaluated under something else
+    lines[3] = json.dumps(record)
+    log.write_text("\n".join(lines) + "\n")
+    mixed = tune(out, "--resume")
+    assert mixed.returncode == 2 and "line 4 was evaluated under other conditions" in \
+        mixed.stderr and len(mixed.stderr.strip().splitlines()) == 1
+
+
+def test_two_tunings_never_share_an_output_directory(tmp_path):
+    out = tmp_path / "shared"
+    first = tune(out, "--set", "run.duration=60", wait=False)
+    deadline = time.monotonic() + 60
+    while not (out / "evaluations.jsonl").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    second = tune(out, "--resume")
+    assert second.returncode == 2 and "being written by another tuning" in second.stderr
+    first.send_signal(signal.SIGINT)
+    first.communicate(timeout=60)
