@@ -42,6 +42,14 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def _stopped(pid: int) -> bool:
+    """The process is stopped by a signal (state T) or traced (t)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] in ("T", "t")
+    except (OSError, IndexError):
+        return False
+
+
 class DomainLock:
     """A ROS domain id reserved for one run by holding a localhost TCP port."""
 
@@ -92,11 +100,24 @@ def _remove_stale_workdirs() -> None:
             shutil.rmtree(path, ignore_errors=True)
 
 
+# What could carry a run's traffic off this host: static peers, a discovery server, a
+# DDS profile file of the user's (which may define other transports and peers).
+OFF_HOST = ("ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER", "ROS_LOCALHOST_ONLY",
+            "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+
+
+def isolate_to_this_host(env: dict[str, str]) -> None:
+    """Runs stay on this host, whatever the environment says: discovery on localhost
+    only, and none of the settings that add peers or transports."""
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    for name in OFF_HOST:
+        env.pop(name, None)
+
+
 def node_environment(domain_id: int) -> dict[str, str]:
     env = dict(os.environ)
     env["ROS_DOMAIN_ID"] = str(domain_id)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated; conflicts with the discovery range
+    isolate_to_this_host(env)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO_ROOT), env.get("PYTHONPATH")]))
     env["PYTHONUNBUFFERED"] = "1"
     return env
@@ -148,10 +169,12 @@ class Stack:
                 preexec_fn=_death_signal(DEATH_SIGNAL[role]))
 
     def stop(self) -> None:
-        """SIGINT every live node (the recorder closes its bag), then escalate."""
+        """SIGINT every live node (the recorder drains and closes its bag), SIGCONT so a
+        frozen one handles it too, then escalate."""
         for process in self.processes.values():
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
+                process.send_signal(signal.SIGCONT)
         deadline = time.monotonic() + STOP_GRACE
         for sig in (signal.SIGTERM, signal.SIGKILL):
             for process in self.processes.values():
@@ -166,10 +189,19 @@ class Stack:
     def _watch(self) -> RunOutcome:
         started = time.monotonic()
         early_exit: dict[str, float] = {}
+        stopped_since: dict[str, float] = {}
         while True:
             codes = {role: process.poll() for role, process in self.processes.items()}
             if codes["supervisor"] == 0:
                 return self._finish()
+            for role, process in self.processes.items():  # frozen: SIGSTOP, a debugger
+                if _stopped(process.pid):
+                    if time.monotonic() - stopped_since.setdefault(role, time.monotonic()) \
+                            > STOP_GRACE:
+                        return RunOutcome("failed", f"node '{role}' is stopped (SIGSTOP or a "
+                                          "debugger) and the run cannot go on", failed_node=role)
+                else:
+                    stopped_since.pop(role, None)
             for role, code in codes.items():
                 if code not in (None, 0):
                     return RunOutcome("failed", f"node '{role}' exited with status {code}",

@@ -122,6 +122,9 @@ class Requirement:
             requirement = cls(name.strip(), float(limit)) if sep else cls._bad(text)
         except ValueError:
             return cls._bad(text)
+        if not math.isfinite(requirement.limit):
+            raise ScenarioError(f"--require: the limit of {requirement.name} must be a finite "
+                                f"number, not {limit.strip()!r}")
         if requirement.name not in INDEX_NAMES:
             close = difflib.get_close_matches(requirement.name, INDEX_NAMES, n=1)
             hint = f" (did you mean {close[0]}?)" if close else ""

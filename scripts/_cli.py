@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import os
 import signal
 import sys
 from pathlib import Path
@@ -13,3 +15,33 @@ signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `score_bag.py ... | head` ends 
 def fail(message: str, status: int = 2) -> None:
     print(f"error: {message}", file=sys.stderr)
     sys.exit(status)
+
+
+def new_directory(path: Path, what: str = "--out") -> None:
+    """Fail (one line, exit 2) unless `path` can be created as a new directory: checked
+    before anything starts, not when the first file is written."""
+    if any(len(part.encode()) > 255 for part in path.parts):
+        fail(f"{what} {path}: a name in it is longer than 255 bytes")
+    if path.exists() or path.is_symlink():
+        fail(f"{what} {path} exists already; choose another")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        fail(f"{what} {path}: cannot create {path.parent}: {exc.strerror or exc}")
+    if not path.parent.is_dir() or not os.access(path.parent, os.W_OK | os.X_OK):
+        fail(f"{what} {path}: {path.parent} is not a writable directory")
+
+
+def seconds(value: float | None, what: str) -> None:
+    """A wall-time option: positive and finite, or not given."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        fail(f"{what} must be a positive number of seconds, not {value}")
+
+
+def interrupted_quietly(main):
+    """Run a script's main(); a Ctrl-C outside its own handling is one line, exit 130."""
+    try:
+        main()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        sys.exit(130)

@@ -14,6 +14,7 @@ Without --domain-id the environment's ROS_DOMAIN_ID is used, as ros2 does.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import threading
@@ -21,6 +22,8 @@ import time
 from pathlib import Path
 
 import _cli
+
+from ato_nodes.launch import DomainLock, isolate_to_this_host
 
 from ato_nodes.bagio import BagError, read_messages
 
@@ -47,13 +50,23 @@ def parse_args() -> argparse.Namespace:
 
 def main() -> None:
     args = parse_args()
-    if args.rate < 0 or args.start < 0 or (args.end is not None and args.end <= args.start):
-        _cli.fail("--rate and --start must not be negative and --end must exceed --start")
-    if args.domain_id is not None:
-        if not 0 <= args.domain_id <= 232:
-            _cli.fail(f"--domain-id {args.domain_id} is outside 0-232")
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    finite = all(math.isfinite(x) and abs(x) < 1e9 for x in (
+        args.rate, args.start, args.end if args.end is not None else 0.0))
+    if not finite or args.rate < 0 or args.start < 0 or (
+            args.end is not None and args.end <= args.start):
+        _cli.fail("--rate and --start must be finite and not negative, and --end must exceed "
+                  "--start (seconds, below 1e9)")
+    domain = args.domain_id if args.domain_id is not None else int(
+        os.environ.get("ROS_DOMAIN_ID", "0") or 0)
+    if not 0 <= domain <= 232:
+        _cli.fail(f"ROS domain {domain} is outside 0-232")
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    isolate_to_this_host(os.environ)
+    try:  # a run's domain is its own: never replay into it
+        lock = DomainLock(domain)
+    except RuntimeError:
+        _cli.fail(f"ROS domain {domain} is in use by a run of this project; replay into "
+                  "another --domain-id")
     try:
         types, messages = read_messages(args.bag, args.topics)
     except BagError as exc:

@@ -18,7 +18,7 @@ import _cli
 
 from ato_nodes.bagio import BagError, message_counts, read_run
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
 from ato_nodes.core.schema import steps
 from ato_nodes.core.scoring import format_indices, score_series
 
@@ -50,6 +50,7 @@ def main() -> None:
             overrides.append(f"run.duration={args.duration}")
         if args.real_time:
             overrides.append("run.real_time=true")
+        check_given_once(overrides)
         values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         _cli.fail(str(exc))
@@ -57,9 +58,8 @@ def main() -> None:
         _cli.fail(f"--domain-id {args.domain_id} is outside 0-232")
     name = Path(args.scenario).stem
     bag = args.out or Path("bags") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    if bag.exists():
-        _cli.fail(f"{bag} exists already; choose another --out")
-    bag.parent.mkdir(parents=True, exist_ok=True)
+    _cli.new_directory(bag)
+    _cli.seconds(args.timeout, "--timeout")
 
     from ato_nodes.launch import Stack  # imports nothing of ROS itself; kept lazy for speed
     try:
@@ -101,4 +101,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    _cli.interrupted_quietly(main)

@@ -25,7 +25,7 @@ import _cli
 
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
 from ato_nodes.tuning import FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningSettings
 
 
@@ -63,7 +63,9 @@ def main() -> None:
     args = parse_args()
     if args.evaluations < 1 or args.workers < 1 or (args.population or 2) < 2:
         _cli.fail("--evaluations and --workers must be positive and --population at least 2")
+    _cli.seconds(args.timeout, "--timeout")
     try:
+        check_given_once(args.set)
         values = apply_overrides(load_scenario(args.scenario), args.set)
         space = SearchSpace.parse(args.params)
         options = {"population_size": args.population} if args.population else {}
@@ -97,4 +99,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    _cli.interrupted_quietly(main)

@@ -54,7 +54,7 @@ def test_a_sigkilled_recorder_loses_at_most_a_second_and_its_bag_is_repaired(tmp
     holds_what_its_summary_says(bag)
 
 
-def test_a_frozen_recorder_and_ctrl_c_still_leave_a_readable_bag(tmp_path):
+def test_a_frozen_recorder_and_ctrl_c_leave_a_complete_bag(tmp_path):
     bag = tmp_path / "frozen"
     process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
     nodes = wait_for_children(process, roles=("recorder",))
@@ -67,8 +67,20 @@ def test_a_frozen_recorder_and_ctrl_c_still_leave_a_readable_bag(tmp_path):
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 130 and "Traceback" not in stderr
-    assert "repaired" in stderr
+    assert "repaired" not in stderr  # woken (SIGCONT) with the SIGINT, it closed its bag
     assert min(opens_everywhere(bag).values()) > 0
+    holds_what_its_summary_says(bag)
+
+
+def test_a_frozen_node_is_named_and_ends_the_run(tmp_path):
+    bag = tmp_path / "stalled"
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
+    nodes = wait_for_children(process, roles=("controller",))
+    wait_for_stepping(process)
+    os.kill(nodes["controller"], signal.SIGSTOP)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 1 and "node 'controller' is stopped" in stderr
+    assert "Traceback" not in stderr
     holds_what_its_summary_says(bag)
 
 
@@ -127,10 +139,10 @@ def test_sigterm_interrupts_a_run_like_ctrl_c_and_removes_its_temporary_files(tm
     holds_what_its_summary_says(bag)
 
 
-def tune(out: Path, *extra: str, wait: bool = True):
+def tune(out: Path, *extra: str, duration: float = 5, wait: bool = True):
     command = [*TUNE, "--algorithm", "pso", "--scenario", "seed000", "--in-process",
                "--params", "adrc.mu1=600:60000", "--evaluations", "40", "--population", "4",
-               "--set", "run.duration=5", "--out", str(out), "--quiet", *extra]
+               "--set", f"run.duration={duration}", "--out", str(out), "--quiet", *extra]
     if wait:
         return subprocess.run(command, capture_output=True, text=True, timeout=120)
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -139,7 +151,7 @@ def tune(out: Path, *extra: str, wait: bool = True):
 def test_a_tuning_resumed_under_other_conditions_is_refused(tmp_path):
     out = tmp_path / "tuning"
     assert tune(out).returncode == 0
-    changed = tune(out, "--resume", "--set", "run.duration=6")
+    changed = tune(out, "--resume", duration=6)
     assert changed.returncode == 2 and "other settings or conditions" in changed.stderr
     log = out / "evaluations.jsonl"
     lines = log.read_text().splitlines()
@@ -154,11 +166,82 @@ def test_a_tuning_resumed_under_other_conditions_is_refused(tmp_path):
 
 def test_two_tunings_never_share_an_output_directory(tmp_path):
     out = tmp_path / "shared"
-    first = tune(out, "--set", "run.duration=60", wait=False)
+    first = tune(out, duration=60, wait=False)
     deadline = time.monotonic() + 60
     while not (out / "evaluations.jsonl").exists() and time.monotonic() < deadline:
         time.sleep(0.05)
-    second = tune(out, "--resume")
+    second = tune(out, "--resume", duration=60)
     assert second.returncode == 2 and "being written by another tuning" in second.stderr
     first.send_signal(signal.SIGINT)
     first.communicate(timeout=60)
+
+
+INTRUDER = """
+import sys, time, rclpy
+from std_msgs.msg import Float64
+from ato_nodes.nodes.base import QOS
+rclpy.init()
+node = rclpy.create_node("intruder")
+publisher = node.create_publisher(Float64, "/train/measured_speed", QOS["data"])
+print("publishing", flush=True)
+while True:
+    publisher.publish(Float64(data=99.0))
+    time.sleep(0.05)
+"""
+
+
+def domain_of(banner: str) -> int:
+    return int(banner.split("ROS_DOMAIN_ID=")[1].split(",")[0])
+
+
+def test_another_publisher_in_a_runs_domain_ends_the_run_and_is_named(tmp_path):
+    bag = tmp_path / "intruded"
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
+    domain = domain_of(wait_for_stepping(process)[0])
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE":
+           "LOCALHOST", "PYTHONPATH": str(ROOT)}
+    intruder = subprocess.Popen([sys.executable, "-c", INTRUDER], env=env,
+                                stdout=subprocess.PIPE, text=True)
+    try:
+        assert intruder.stdout.readline().strip() == "publishing"
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        intruder.kill()
+        intruder.wait()
+    assert process.returncode == 1 and "exited with status 1" in stderr  # the first to see it
+    assert "/train/measured_speed has 2 publishers, not 1: another process publishes in " \
+        "this run's ROS domain" in stderr
+    assert "Traceback" not in stderr
+    holds_what_its_summary_says(bag)
+
+
+def test_replay_into_a_running_runs_domain_is_refused(tmp_path):
+    process = start_stack("--duration", "600", "--real-time", "--out", str(tmp_path / "run"))
+    domain = domain_of(wait_for_stepping(process)[0])
+    try:
+        replay = subprocess.run([sys.executable, str(ROOT / "scripts" / "replay_bag.py"),
+                                 str(tmp_path), "--domain-id", str(domain)],
+                                capture_output=True, text=True, timeout=60)
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=60)
+    assert replay.returncode == 2 and f"ROS domain {domain} is in use by a run" in replay.stderr
+
+
+def test_runs_stay_on_this_host_whatever_the_environment(tmp_path):
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
+           "ROS_STATIC_PEERS": "127.0.0.2", "ROS_LOCALHOST_ONLY": "0"}
+    process = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
+                                "--duration", "600", "--real-time", "--out",
+                                str(tmp_path / "run")], env=env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        nodes = wait_for_children(process, roles=("plant", "controller"))
+        for pid in nodes.values():
+            environ = dict(entry.split("=", 1) for entry in Path(f"/proc/{pid}/environ")
+                           .read_bytes().decode().split("\0") if "=" in entry)
+            assert environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+            assert "ROS_STATIC_PEERS" not in environ and "ROS_LOCALHOST_ONLY" not in environ
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=60)

@@ -18,14 +18,17 @@ wholly on one section and varies linearly while it straddles a change:
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from . import yamlfile
 from .errors import ScenarioError
 
+MAX_LENGTH = 2.0e6         # m: longer than any line; bounds what the ATO curve allocates
 CURVE_CONSTANT = 600.0     # A of w_r = A / R, N/kN m
 TUNNEL_CONSTANT = 0.00013  # w_s = 0.00013 L_s, N/kN per m of tunnel
 
@@ -110,12 +113,7 @@ TOP_KEYS = {"name", "length", "planned_run_time", "stations", *SECTION_KEYS}
 
 
 def load_line(path: str | Path) -> Line:
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ScenarioError(f"cannot read line file {path}: {exc.strerror}") from None
-    return parse_line(text, path)
+    return parse_line(yamlfile.read_text(path, "line file"), Path(path))
 
 
 @functools.lru_cache(maxsize=32)
@@ -123,6 +121,7 @@ def parse_line(text: str, path: str | Path = "<line>") -> Line:
     """A line from the text of a line file; `path` names it in error messages.
     Cached (a Line is immutable): a run's validation, profile, plant and scorer all
     read the same line, ~15 ms of YAML each, in every tuning evaluation."""
+    yamlfile.check_structure(text, str(path))
     try:
         root = yaml.compose(text)
     except yaml.YAMLError as exc:
@@ -140,6 +139,9 @@ def parse_line(text: str, path: str | Path = "<line>") -> Line:
         if required not in fields:
             raise ScenarioError(f"{path}: missing {required!r}")
     length = _number(path, fields["length"], "length", positive=True)
+    if length > MAX_LENGTH:
+        raise _error(path, fields["length"], f"length {length:g} m is beyond {MAX_LENGTH:g} m "
+                     "(the longest line a run may have)")
     sections = {name: _sections(path, name, fields.get(name), length) for name in SECTION_KEYS}
     _check_limits_cover(path, fields["speed_limits"], sections["speed_limits"], length)
     stations = _stations(path, fields.get("stations"), length)
@@ -158,8 +160,13 @@ def _error(path: Path, node: yaml.Node, message: str) -> ScenarioError:
 
 def _number(path: Path, node: yaml.Node, name: str, positive: bool = False) -> float:
     value = yaml.safe_load(yaml.serialize(node))
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _error(path, node, f"{name} must be a number, not {value!r}")
+    if isinstance(value, str):  # YAML 1.1 reads 1e9 (no dot) as text
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _error(path, node, f"{name} must be a finite number, not {value!r}")
     if positive and not value > 0:
         raise _error(path, node, f"{name} must be positive, not {value}")
     return float(value)

@@ -15,6 +15,7 @@ from typing import Any
 
 import yaml
 
+from . import yamlfile
 from .errors import ScenarioError
 from .faults import parse_fault
 from .line import load_line
@@ -49,15 +50,7 @@ def resolve_scenario(name_or_file: str) -> Path:
 def load_scenario(name_or_file: str) -> dict[str, Any]:
     """All parameters of a scenario: defaults overlaid with the file's values, checked."""
     path = resolve_scenario(name_or_file)
-    try:
-        document = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" line {mark.line + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or "not valid YAML"
-        raise ScenarioError(f"{path}{at}: malformed YAML ({problem})") from None
-    except OSError as exc:
-        raise ScenarioError(f"cannot read scenario {path}: {exc.strerror}") from None
+    document = yamlfile.load(path, "scenario")
     if not isinstance(document, dict):
         raise ScenarioError(f"{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)")
     given = {}
@@ -109,10 +102,7 @@ def train_preset(name: str) -> dict[str, Any]:
     path = config_dir() / "trains" / f"{name}.yaml"
     if not path.is_file():
         raise ScenarioError(f"unknown train {name!r}; known: {', '.join(train_names())}")
-    try:
-        document = yaml.safe_load(path.read_text())
-    except yaml.YAMLError:
-        raise ScenarioError(f"{path}: malformed YAML") from None
+    document = yamlfile.load(path, "train preset")
     if not isinstance(document, dict):
         raise ScenarioError(f"{path}: a train preset is a mapping of plant.* values")
     values = {}
@@ -151,7 +141,22 @@ def parse_override(text: str) -> tuple[str, Any]:
         value = raw
     if spec.value_type is str and value is not None and not isinstance(value, str):
         value = raw.strip()
+    elif spec.value_type is float and isinstance(value, str):  # YAML 1.1 reads 1e-9 as text
+        try:
+            value = float(value)
+        except ValueError:
+            pass
     return name, spec.check(value, "--set")
+
+
+def check_given_once(texts: list[str]) -> None:
+    """A user's --set list names each parameter once (which should win is not clear)."""
+    seen = set()
+    for text in texts:
+        name = text.partition("=")[0].strip()
+        if name in seen:
+            raise ScenarioError(f"--set: {name} is given twice")
+        seen.add(name)
 
 
 def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
@@ -164,7 +169,7 @@ def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any
             checked[name] = spec.check(value, "override")
         overrides = checked
     else:
-        overrides = dict(parse_override(text) for text in overrides)
+        overrides = dict(parse_override(text) for text in overrides)  # the last one wins
     for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
         if overrides.get(name):
             overrides[name] = resolve_file(overrides[name], [Path.cwd()])

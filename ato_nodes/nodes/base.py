@@ -41,6 +41,7 @@ QOS = {
                          durability=DurabilityPolicy.TRANSIENT_LOCAL),
 }
 READINESS_POLL = 0.01  # s of wall time between checks of the graph
+INTRUDER_POLL = 0.5    # s of wall time between checks for foreign publishers during a run
 # The lockstep data path bypasses the executor (see spin_lockstep); everything
 # else (events, /clock for the node's sim time, timers, parameter services) is
 # served by the standard executor at least this often, s of wall time.
@@ -170,11 +171,32 @@ class AtoNode(Node):
                 missing.append(f"{topic.name} (publisher)")
         return missing
 
+    def intruders(self) -> list[str]:
+        """Per-step inputs with more publishers than the topic map has: another process
+        publishes into this run's domain (its data would mix into the run)."""
+        return [f"{topic.name} has {sub.get_publisher_count()} publishers, not "
+                f"{len(topic.publishers)}" for sub, topic in self._incoming
+                if sub.get_publisher_count() > len(topic.publishers)]
+
     def _check_ready(self) -> None:
+        if self._check_intruders():
+            return
         if not self.unmatched_edges():
             self._ready_timer.cancel()
             self.destroy_timer(self._ready_timer)
             self.announce(f"ready {self.role}")
+            self.create_timer(INTRUDER_POLL, self._check_intruders, clock=self._wall_clock)
+
+    def _check_intruders(self) -> bool:
+        """Stop the run (this node exits with status 1, named by the launcher) if another
+        process publishes on one of its inputs."""
+        found = self.intruders()
+        if found and not self.stop_requested:
+            print(f"{self.role}: error: {found[0]}: another process publishes in this run's "
+                  "ROS domain", file=sys.stderr, flush=True)
+            self.exit_status = 1
+            self.stop_requested = True
+        return bool(found)
 
     def inject_fault(self, step: int) -> None:
         """run.fault: from the given step on, crash (an uncaught exception), hang (deaf

@@ -1,0 +1,114 @@
+"""Careless or hostile input: one line and exit 2 before anything starts, bounded in
+what it may read and expand to (no ROS graph is started here)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPTS = ROOT / "scripts"
+BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{chr(98 + i)}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, "
+    f"*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}]\n"
+    for i in range(9))  # 9 * 8^9 = 1.2e9 elements once expanded
+
+
+def script(name: str, *args, timeout=60):
+    return subprocess.run([sys.executable, str(SCRIPTS / name), *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+def one_line_exit_2(result, *words):
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, result.stderr
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+def line_file(tmp_path: Path, body: str = "", length: str = "1000") -> Path:
+    path = tmp_path / "line.yaml"
+    path.write_text(f"name: t\nlength: {length}\nspeed_limits:\n"
+                    f"  - {{start: 0, end: {length}, limit: 20}}\nstations:\n"
+                    f"  - {{name: B, position: 900}}\n{body}")
+    return path
+
+
+@pytest.mark.parametrize("text, words", [
+    (BOMB, ["anchors and aliases"]),
+    ("/**:\n  ros__parameters:\n    run.duration: 5\n    run.duration: 6\n", ["given twice"]),
+    ("/**: " + "[" * 60 + "]" * 60 + "\n", ["nested deeper"]),
+])
+def test_scenario_files_that_would_exhaust_or_mislead(tmp_path, text, words):
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(text)
+    one_line_exit_2(script("run_stack.py", "--scenario", scenario, "--out", tmp_path / "b"),
+                    str(scenario), *words)
+
+
+def test_a_binary_scenario_file(tmp_path):
+    scenario = tmp_path / "s.yaml"
+    scenario.write_bytes(bytes(range(256)) * 4)
+    one_line_exit_2(script("run_stack.py", "--scenario", scenario), "not UTF-8")
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda tmp: "/dev/zero", ["not a regular file"]),
+    (lambda tmp: line_file(tmp, length="1e9"), ["beyond"]),
+    (lambda tmp: line_file(tmp, "gradients:\n  - {start: 0, end: 500, grade: .nan}\n"),
+     ["finite number"]),
+    (lambda tmp: line_file(tmp, "x: &x 1\n"), ["anchors and aliases"]),
+])
+def test_line_files_that_would_exhaust_or_mislead(tmp_path, make, words):
+    result = script("run_stack.py", "--scenario", "seed004-metro", "--set",
+                    f"line.file={make(tmp_path)}", "--out", tmp_path / "b")
+    one_line_exit_2(result, *words)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--set", "run.period=1e-9"], ["run.period = 1e-09 is out of range"]),
+    (["--set", "adrc.mu1=1", "--set", "adrc.mu1=2"], ["adrc.mu1 is given twice"]),
+    (["--timeout", "-1"], ["--timeout must be a positive"]),
+    (["--timeout", "nan"], ["--timeout must be a positive"]),
+    (["--out", "/proc/version/bag"], ["/proc/version"]),
+    (["--out", "bags/" + "x" * 300], ["longer than 255"]),
+])
+def test_run_stack_options(args, words):
+    one_line_exit_2(script("run_stack.py", *args), *words)
+
+
+def test_tuning_options_and_logs(tmp_path):
+    base = ["--algorithm", "pso", "--scenario", "seed000", "--in-process", "--params",
+            "adrc.mu1=600:60000", "--evaluations", "8", "--population", "4", "--set",
+            "run.duration=1", "--quiet"]
+    one_line_exit_2(script("tune.py", *base, "--out", tmp_path / "a", "--require",
+                           "max_jerk<=nan"), "finite")
+    one_line_exit_2(script("tune.py", *base, "--out", tmp_path / "a", "--timeout", "0"),
+                    "--timeout")
+    out = tmp_path / "t"
+    assert script("tune.py", *base, "--out", out).returncode == 0
+    log = out / "evaluations.jsonl"
+    lines = log.read_text().splitlines()
+    lines[2] = lines[2][:30]
+    log.write_text("\n".join(lines) + "\n")
+    one_line_exit_2(script("tune.py", *base, "--out", out, "--resume"),
+                    f"{log} line 3 is not an evaluation record")
+    log.write_text("\n".join(lines[:2] + [lines[3][:40]]) + "\n")  # cut short at the end
+    resumed = script("tune.py", *base, "--out", out, "--resume")
+    assert resumed.returncode == 0 and "line 3 is incomplete" in resumed.stderr
+
+
+def test_replay_times_must_be_finite(tmp_path):
+    one_line_exit_2(script("replay_bag.py", tmp_path, "--start", "nan"), "finite")
+    one_line_exit_2(script("replay_bag.py", tmp_path, "--end", "1e300"), "finite")
+
+
+def test_bags_with_broken_metadata_or_embedded_line_are_one_line(tmp_path):
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
+    (bag / "bag.mcap").write_bytes(b"\x89MCAP0\r\n")
+    one_line_exit_2(script("score_bag.py", bag), str(bag))
