@@ -96,5 +96,6 @@ def test_a_shared_parameter_given_to_one_node_only_is_refused_before_the_run(tmp
     codes, errors = start_nodes_directly(scenario, tmp_path / "bag", tmp_path / "r.json")
     assert codes["supervisor"] == 2
     (line,) = errors["supervisor"].strip().splitlines()
-    assert "plant.train is '' in" in line and "metro-b" in line and "/**" in line
+    assert "plant.train is" in line and "'metro-b' in plant" in line and "'' in" in line
+    assert "give shared parameters under /**" in line
     assert not (tmp_path / "r.json").exists()

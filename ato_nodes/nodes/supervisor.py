@@ -58,6 +58,8 @@ class SupervisorNode(AtoNode):
     def check_agreement(self, node: str, values: dict) -> None:
         """A parameter several nodes declare must have one value in all of them (a
         scenario that gives it under one node only would run two different trains)."""
+        if self.failed:
+            return
         for other, known in self.announced.items():
             for name in values:  # in schema order: a train preset before what it sets
                 if name in known and values[name] != known[name]:
