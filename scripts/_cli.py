@@ -10,6 +10,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `score_bag.py ... | head` ends quietly
+# Ctrl-C means interrupt, even when started from a shell's background job (which
+# hands its children SIGINT ignored)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def fail(message: str, status: int = 2) -> None:

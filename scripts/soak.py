@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Soak the recorder's promises: runs interrupted at random (seeded) moments.
+
+    python scripts/soak.py [--sigint 100] [--sigkill 20] [--seed 1] [--out bags/soak]
+
+Each SIGINT run is `run_stack.py --duration 100` interrupted after a random delay
+(start-up, stepping, the end of the run, the final scoring); each SIGKILL run has
+one random node killed while stepping. Every bag must open in rosbags and in
+mcap's reader with the same messages, and hold exactly what its summary.json
+says (per-topic counts, scored steps). Prints one line per run and a tally;
+exit status 1 if any run broke a promise. Not a test: it takes minutes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import _cli
+
+from ato_nodes.bagio import BagError, message_counts, read_run
+
+ROOT = Path(__file__).resolve().parents[1]
+NODES = ("profile", "plant", "controller", "supervisor", "recorder")
+
+
+def node_pids(launcher: int) -> dict[str, int]:
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+                cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == launcher:
+                module = next((a.decode() for a in cmdline if a.startswith(b"ato_nodes.nodes.")),
+                              None)
+                if module:
+                    found[module.rsplit(".", 1)[1]] = int(entry.name)
+    return found
+
+
+def check(bag: Path) -> tuple[bool, str]:
+    """(promise kept, what the bag holds)."""
+    from mcap.reader import make_reader
+    from rosbags.highlevel import AnyReader
+    try:
+        counts = message_counts(bag)
+        with AnyReader([bag]) as reader:
+            in_rosbags = sum(1 for _ in reader.messages())
+        (mcap_file,) = bag.glob("*.mcap")
+        with mcap_file.open("rb") as handle:
+            in_mcap = sum(1 for _ in make_reader(handle).iter_messages())
+        summary = json.loads((bag / "summary.json").read_text())
+        scored = len(read_run(bag).series["t"])
+    except (BagError, OSError, ValueError, KeyError) as exc:
+        return False, f"unreadable: {exc}"
+    kept = (in_rosbags == in_mcap == sum(counts.values()) and summary.get("recorded") == counts
+            and summary.get("scored_steps") == scored)
+    spread = f"{min(counts.values())}-{max(counts.values())}" if counts else "0"
+    return kept, (f"{len(counts)} topics, {spread} messages each, {scored} steps scored, "
+                  f"summary {'agrees' if kept else 'DISAGREES'}")
+
+
+def one_run(bag: Path, rng: random.Random, kill: bool) -> tuple[bool, str]:
+    process = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
+                                "--duration", "100", "--out", str(bag), "--quiet"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               cwd=ROOT)
+    delay = rng.uniform(0.2, 4.5)
+    victim = rng.choice(NODES)
+    deadline = time.monotonic() + delay
+    while time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.01)
+    what = f"{'SIGKILL ' + victim if kill else 'SIGINT'} at {delay:.2f} s"
+    if process.poll() is None:
+        if kill:
+            pid = node_pids(process.pid).get(victim)
+            if pid is None:
+                what += " (not running)"
+            else:
+                os.kill(pid, signal.SIGKILL)
+        else:
+            process.send_signal(signal.SIGINT)
+    else:
+        what += " (run already over)"
+    _, stderr = process.communicate(timeout=120)
+    if "Traceback" in stderr:
+        return False, f"{what}: exit {process.returncode}, TRACEBACK"
+    if not bag.exists():
+        return True, f"{what}: exit {process.returncode}, no bag (interrupted before the recorder started)"
+    kept, holds = check(bag)
+    return kept, f"{what}: exit {process.returncode}, {holds}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sigint", type=int, default=100)
+    parser.add_argument("--sigkill", type=int, default=20)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--out", type=Path, default=Path("bags/soak"))
+    parser.add_argument("--keep", action="store_true", help="keep the bags")
+    args = parser.parse_args()
+    _cli.new_directory(args.out)
+    args.out.mkdir()
+    rng = random.Random(args.seed)
+    broken = 0
+    plan = [False] * args.sigint + [True] * args.sigkill
+    for index, kill in enumerate(plan):
+        bag = args.out / f"run-{index:03d}"
+        kept, line = one_run(bag, rng, kill)
+        broken += not kept
+        print(f"{index:3d} {'ok    ' if kept else 'BROKEN'} {line}", flush=True)
+        if kept and not args.keep:
+            shutil.rmtree(bag, ignore_errors=True)
+    print(f"{len(plan) - broken} of {len(plan)} runs kept every promise "
+          f"({args.sigint} SIGINT, {args.sigkill} SIGKILL of a random node, seed {args.seed})")
+    sys.exit(1 if broken else 0)
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)
