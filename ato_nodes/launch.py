@@ -76,8 +76,11 @@ class DomainLock:
 
 
 def _death_signal(signum: int):
-    """Child side of fork: get `signum` if the launcher itself dies."""
+    """Child side of fork: get `signum` if the launcher itself dies; SIGINT and SIGTERM
+    held (blocked) until the node has its own handlers (run_node unblocks them), so a
+    stop that comes while it is still importing is kept, not a traceback."""
     def arm() -> None:
+        signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(PR_SET_PDEATHSIG, signum)
     return arm

@@ -10,9 +10,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `score_bag.py ... | head` ends quietly
+
+
+def _interrupted_while_starting(signum, frame) -> None:
+    """Ctrl-C before main() runs (while importing): nothing started, nothing to keep."""
+    os.write(2, b"interrupted\n")
+    os._exit(130)
+
+
 # Ctrl-C means interrupt, even when started from a shell's background job (which
-# hands its children SIGINT ignored)
-signal.signal(signal.SIGINT, signal.default_int_handler)
+# hands its children SIGINT ignored); interrupted_quietly() takes over in main().
+signal.signal(signal.SIGINT, _interrupted_while_starting)
 
 
 def fail(message: str, status: int = 2) -> None:
@@ -43,6 +51,7 @@ def seconds(value: float | None, what: str) -> None:
 
 def interrupted_quietly(main):
     """Run a script's main(); a Ctrl-C outside its own handling is one line, exit 130."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         main()
     except KeyboardInterrupt:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -70,17 +71,24 @@ def main() -> None:
     print(f"scenario {name}: {steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
     outcome = stack.run()
+    pressed = []  # a Ctrl-C while the bag is scored: the summary is written first
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: pressed.append(True))
 
     summary = {"scenario": name, "bag": str(bag), "status": outcome.status,
                "message": outcome.message, "domain_id": outcome.domain_id,
                "wall_time": outcome.wall_time, **outcome.report}
     if bag.exists():
         try:
-            run = read_run(bag)
             summary["recorded"] = message_counts(bag)
-            summary["scored_steps"] = len(run.series["t"])
-            summary["notes"] = run.notes
-            summary["indices"] = score_series(run.series, run.parameters)
+            summary["scored_steps"] = 0
+            if any(summary["recorded"].values()):
+                run = read_run(bag)
+                summary["scored_steps"] = len(run.series["t"])
+                summary["notes"] = run.notes
+                summary["indices"] = score_series(run.series, run.parameters)
+            else:
+                summary["notes"] = ["the run ended before its first step: the bag is empty"]
         except BagError as exc:
             summary["message"] += f"; bag not scored: {exc}"
         try:
@@ -88,6 +96,9 @@ def main() -> None:
             (bag / "summary.json").write_text(json.dumps(summary, indent=2))
         except OSError as exc:
             summary["message"] += f"; summary not written: {exc.strerror or exc}"
+    if pressed:
+        print(f"interrupted; {summary.get('scored_steps', 0)} steps in {bag}", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
     if not outcome.ok:
         steps_recorded = summary.get("indices", {}).get("steps", 0)
         print(f"error: {outcome.message}; {steps_recorded} steps recorded in {bag}",

@@ -61,7 +61,7 @@ def check(bag: Path) -> tuple[bool, str]:
         with mcap_file.open("rb") as handle:
             in_mcap = sum(1 for _ in make_reader(handle).iter_messages())
         summary = json.loads((bag / "summary.json").read_text())
-        scored = len(read_run(bag).series["t"])
+        scored = len(read_run(bag).series["t"]) if any(counts.values()) else 0
     except (BagError, OSError, ValueError, KeyError) as exc:
         return False, f"unreadable: {exc}"
     kept = (in_rosbags == in_mcap == sum(counts.values()) and summary.get("recorded") == counts
@@ -73,7 +73,7 @@ def check(bag: Path) -> tuple[bool, str]:
 
 def one_run(bag: Path, rng: random.Random, kill: bool) -> tuple[bool, str]:
     process = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
-                                "--duration", "100", "--out", str(bag), "--quiet"],
+                                "--duration", "100", "--out", str(bag)],
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                                cwd=ROOT)
     delay = rng.uniform(0.2, 4.5)

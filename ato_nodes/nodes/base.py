@@ -318,12 +318,12 @@ class LockstepInputs:
                 last = time.monotonic()
 
 
-def _request_stop(node_holder: list) -> Callable:
+def _request_stop(node_holder: list, pending: list) -> Callable:
     def handler(signum, frame) -> None:
         if node_holder:
             node_holder[0].stop_requested = True
-        else:  # still starting: nothing to flush
-            raise KeyboardInterrupt
+        else:  # still being built (the recorder may have opened its bag): stop once built
+            pending.append(signum)
     return handler
 
 
@@ -338,13 +338,17 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
     """
     rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     holder: list[AtoNode] = []
+    pending: list[int] = []
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, _request_stop(holder))
+        signal.signal(signum, _request_stop(holder, pending))
+    # the launcher starts nodes with both held, so that none is lost while importing
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
     node = None
     status = 0
     try:
         node = factory()
         holder.append(node)
+        node.stop_requested = node.stop_requested or bool(pending)
         # rclpy.experimental.EventsExecutor (7.1.6) fires no timers and ignores SIGINT here.
         executor = SingleThreadedExecutor()
         executor.add_node(node)
