@@ -244,7 +244,8 @@ class Stack:
         complete (repaired if its writer died)."""
         started = time.monotonic()
         main = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGTERM, _interrupt) if main else None
+        previous = {number: signal.signal(number, _interrupt) for number in STOP_SIGNALS} \
+            if main else {}
         try:
             try:
                 self._start()
@@ -258,17 +259,17 @@ class Stack:
                     self.lock.release()
                     outcome.message = "; ".join(filter(None, [outcome.message, self._repair()]))
                 finally:
-                    if main:  # a Ctrl-C pressed while stopping is spent, not re-raised
-                        handlers = {n: signal.signal(n, signal.SIG_IGN) for n in STOP_SIGNALS}
+                    if main:  # a Ctrl-C pressed while stopping is spent, not re-raised;
+                        # the caller's handlers are back before any signal can come
+                        for number, handler in previous.items():
+                            signal.signal(number, signal.SIG_IGN)
                         signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-                        for number, handler in handlers.items():
+                        for number, handler in previous.items():
                             signal.signal(number, handler)
             if self.report_path.exists() and not outcome.report:
                 outcome.report = json.loads(self.report_path.read_text())
         finally:
             shutil.rmtree(self.workdir, ignore_errors=True)  # thousands of runs when tuning
-            if main:
-                signal.signal(signal.SIGTERM, previous)
         outcome.domain_id = self.lock.domain_id
         outcome.wall_time = time.monotonic() - started
         return outcome

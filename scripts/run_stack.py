@@ -70,10 +70,10 @@ def main() -> None:
         _cli.fail(str(exc))
     print(f"scenario {name}: {steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
-    outcome = stack.run()
-    pressed = []  # a Ctrl-C while the bag is scored: the summary is written first
+    pressed = []  # a Ctrl-C after the run (while the bag is scored): the summary first
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: pressed.append(True))
+    outcome = stack.run()  # interrupted by either signal meanwhile (its own handlers)
 
     summary = {"scenario": name, "bag": str(bag), "status": outcome.status,
                "message": outcome.message, "domain_id": outcome.domain_id,
