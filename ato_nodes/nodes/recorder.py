@@ -69,6 +69,7 @@ class RecorderNode(AtoNode):
             connection = self.writer.add_connection(topic.name, topic.type, typestore=typestore)
             self.counts[topic.name] = 0
             self.subscription(topic.key, self._make_callback(topic.name, connection), raw=True)
+        self.flush(0)  # the topics are on disk before any step: a kill leaves a bag to repair
         self.ready_when_matched()
 
     def _make_callback(self, name, connection):
