@@ -47,6 +47,8 @@ class RunContext:
         trajectory ds/dt = v(s) from `position` (Heun's method, one step per period)."""
         plan, h = self.plan, self.period
         speeds = [plan.speed(step * h, position)]
+        if not count:  # the papers' setting, every step of every run: kept cheap
+            return speeds
         if not plan.position_indexed:
             speeds.extend(plan.speed((step + i) * h, position) for i in range(1, count + 1))
             return speeds
