@@ -144,11 +144,13 @@ class Stack:
     """One run of the node graph. Use as a context manager or call run()."""
 
     def __init__(self, values: dict[str, Any], bag: Path, domain_id: int | None = None,
-                 quiet: bool = False, timeout: float | None = None):
+                 quiet: bool = False, timeout: float | None = None,
+                 cancel: threading.Event | None = None):
         self.values = dict(values)
         self.bag = Path(bag)
         self.quiet = quiet
         self.timeout = timeout
+        self.cancel = cancel  # set by another thread (a tuner stopping): stop now
         self.lock = DomainLock(domain_id)
         self.processes: dict[str, subprocess.Popen] = {}
         _remove_stale_workdirs()
@@ -216,7 +218,30 @@ class Stack:
                                       failed_node=role)
             if self.timeout is not None and time.monotonic() - started > self.timeout:
                 return RunOutcome("timeout", f"run did not finish within {self.timeout:g} s")
+            if self.cancel is not None and self.cancel.is_set():
+                return RunOutcome("interrupted", "stopped by its tuning")
             time.sleep(POLL)
+
+    def _stall(self) -> str:
+        """Where a run that timed out stood: the topic with the fewest recorded messages
+        names the node the loop waited for (the recorder, when every topic is level:
+        the plant waits for it, run.record_lag)."""
+        from ato_nodes.bagio import BagError, message_counts
+        from ato_nodes.core.topics import step_topics
+        try:
+            counts = message_counts(self.bag)
+        except BagError:
+            return ""
+        if not counts:
+            return ""
+        publishers = {topic.name: topic.publishers[0] for topic in step_topics()}
+        fewest = min(counts.values())
+        if max(counts.values()) - fewest <= 2:
+            return f"; every topic stops near step {fewest}: the recorder stopped taking steps"
+        behind = sorted({publishers.get(name, "?") for name, count in counts.items()
+                         if count == fewest})
+        return (f"; the loop stalled at step {fewest}, waiting for "
+                f"{', '.join(behind)} (its topics have the fewest messages)")
 
     def _repair(self) -> str:
         """A bag whose recorder was killed is made complete again; what that kept."""
@@ -258,6 +283,8 @@ class Stack:
                     self.stop()
                     self.lock.release()
                     outcome.message = "; ".join(filter(None, [outcome.message, self._repair()]))
+                    if outcome.status == "timeout":
+                        outcome.message += self._stall()
                 finally:
                     if main:  # a Ctrl-C pressed while stopping is spent, not re-raised;
                         # the caller's handlers are back before any signal can come

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import difflib
 import fcntl
+import functools
 import hashlib
 import json
 import math
@@ -172,14 +173,20 @@ def objective_of(objective: Objective | str) -> Objective:
 
 
 def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
-                        objective: Objective | str, index: int) -> Evaluation:
-    """One candidate with the core code in this process (a worker of the pool)."""
+                        objective: Objective | str, index: int,
+                        timeout: float | None = None) -> Evaluation:
+    """One candidate with the core code in this process (a worker of the pool); past
+    `timeout` wall seconds it ends as a timeout, as a stack candidate does."""
     started = time.perf_counter()
     try:
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    series = simulate(run_values)
+    try:
+        series = simulate(run_values, None if timeout is None else time.monotonic() + timeout)
+    except TimeoutError as exc:
+        return Evaluation(index, overrides, PENALTY, "timeout", time.perf_counter() - started,
+                          message=f"{exc} ({timeout:g} s)")
     indices = score_series(series, run_values)
     elapsed = time.perf_counter() - started
     if len(series["t"]) < steps(run_values) or not indices["finite"]:
@@ -190,7 +197,7 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
 
 def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
                       objective: Objective | str, index: int, bag: Path,
-                      timeout: float) -> Evaluation:
+                      timeout: float, cancel: threading.Event | None = None) -> Evaluation:
     """One candidate through the real node graph, scored from its bag."""
     from ato_nodes.bagio import BagError, read_parameters, read_series
     from ato_nodes.launch import Stack
@@ -200,7 +207,7 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    outcome = Stack(run_values, bag, quiet=True, timeout=timeout).run()
+    outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel).run()
     indices = {}
     if bag.exists():
         try:
@@ -349,11 +356,14 @@ class Tuner:
                                     "or tune into a new --out")
         settings_file.write_text(json.dumps(described, indent=2))
         self.log = EvaluationLog(out / "evaluations.jsonl", resume, self.conditions)
-        self.evaluate = evaluate or (evaluate_in_process if settings.in_process
-                                     else self._evaluate_in_stack)
+        self.in_process_pool = evaluate is None and settings.in_process
+        self.evaluate = evaluate or (
+            functools.partial(evaluate_in_process, timeout=settings.timeout)
+            if settings.in_process else self._evaluate_in_stack)
         algorithm = create(settings.algorithm, **settings.options)
         self.initial_evaluations = algorithm.initial_evaluations()
         self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
+        self.cancel = threading.Event()  # stops the stack candidates under way
         self.next_index = 0
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
         self.started = time.monotonic()
@@ -368,10 +378,11 @@ class Tuner:
         if bag.exists():  # a candidate interrupted before it was logged: run it again
             shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
-        return evaluate_in_stack(values, overrides, objective, index, bag, self.settings.timeout)
+        return evaluate_in_stack(values, overrides, objective, index, bag, self.settings.timeout,
+                                 self.cancel)
 
     def _pool(self) -> Executor:
-        if self.settings.in_process and self.evaluate is evaluate_in_process:
+        if self.in_process_pool:
             return ProcessPoolExecutor(self.settings.workers)
         return ThreadPoolExecutor(self.settings.workers)  # stack runs are processes already
 
@@ -412,11 +423,19 @@ class Tuner:
               f"ETA {eta:6.0f} s{status}", file=sys.stderr, flush=True)
 
     def run(self) -> Result:
+        """The tuning. Ctrl-C stops the candidates under way at once (their runs are
+        not logged; --resume evaluates them again) and re-raises."""
         s = self.settings
-        with self._pool() as pool:
+        pool = self._pool()
+        try:
             result = optimize(s.algorithm, lambda population: self._batch_fitness(pool, population),
                               s.space.lower, s.space.upper, s.evaluations, s.seed,
                               x0=s.space.start(self.values), **s.options)
+        except KeyboardInterrupt:
+            self.cancel.set()
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown(wait=True)
         self._write_outputs(result)
         return result
 

@@ -51,7 +51,7 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--in-process", action="store_true",
                         help="score candidates with the core code in worker processes, no ROS")
     parser.add_argument("--timeout", type=float, default=300.0,
-                        help="wall seconds before a stack candidate counts as hung")
+                        help="wall seconds before a candidate (stack or in-process) counts as hung")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--resume", action="store_true",
                         help="continue the tuning in --out from its evaluation log")

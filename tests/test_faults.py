@@ -249,3 +249,39 @@ def test_runs_stay_on_this_host_whatever_the_environment(tmp_path):
     finally:
         process.send_signal(signal.SIGINT)
         process.communicate(timeout=60)
+
+
+def test_an_in_process_candidate_past_its_timeout_is_a_timeout():
+    from ato_nodes.core.scenario import load_scenario
+    from ato_nodes.tuning import PENALTY, evaluate_in_process
+    record = evaluate_in_process(load_scenario("seed000"), {"adrc.mu1": 7000.0}, "itae", 0,
+                                 timeout=1e-9)
+    assert record.status == "timeout" and record.fitness == PENALTY
+
+
+def test_ctrl_c_of_a_stack_tuning_stops_its_candidates_at_once(tmp_path):
+    out = tmp_path / "stack-tuning"
+    command = [*TUNE, "--algorithm", "pso", "--scenario", "seed000", "--params",
+               "adrc.mu1=600:60000", "--evaluations", "4", "--population", "2",
+               "--workers", "2", "--set", "run.duration=2400", "--set", "run.real_time=true",
+               "--out", str(out), "--quiet"]
+    tuning = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True, cwd=ROOT)
+    deadline = time.monotonic() + 60
+    while len(list(out.glob("runs/*/*.mcap"))) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)  # both candidates are recording (real time: 40 minutes each)
+    tuning.send_signal(signal.SIGINT)
+    _, stderr = tuning.communicate(timeout=60)  # not the candidates' 40 minutes
+    assert tuning.returncode == 130 and "continue with --resume" in stderr
+    assert "Traceback" not in stderr
+    log = out / "evaluations.jsonl"
+    assert not log.exists() or log.read_text() == ""  # nothing half-evaluated logged
+    assert not [pid for pid in children(tuning.pid).values() if alive(pid)]
+
+
+def test_a_run_that_times_out_names_what_the_loop_waited_for(tmp_path):
+    result = run_stack("--duration", "60", "--timeout", "8", "--out", str(tmp_path / "hung"),
+                       "--set", "run.fault=controller:hang:100", timeout=120)
+    assert result.returncode == 1 and "did not finish within 8 s" in result.stderr
+    # the plant published step 99, the controller (hung) never answered it
+    assert "the loop stalled at step 99, waiting for controller (" in result.stderr

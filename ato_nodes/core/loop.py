@@ -23,6 +23,7 @@ the same calls in one process, so both give identical numbers.
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -182,11 +183,12 @@ SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", 
           "force", "resistance", "line_resistance", "speed_limit", "command")
 
 
-def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
+def simulate(values: dict[str, Any], deadline: float | None = None) -> dict[str, np.ndarray]:
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
-    ends early, as it does in the stack."""
+    ends early, as it does in the stack. Past `deadline` (time.monotonic()) it raises
+    TimeoutError (checked every 1024 steps)."""
     period = values["run.period"]
     line = load_line(values["line.file"]) if values["line.file"] else None
     profile = ProfileStage(NodeValues("profile", values), line)
@@ -194,6 +196,8 @@ def simulate(values: dict[str, Any]) -> dict[str, np.ndarray]:
     controller = ControllerStage(NodeValues("controller", values), line)
     rows, extras, horizons = [], [], []
     for k in range(steps(values)):
+        if deadline is not None and not k & 1023 and time.monotonic() > deadline:
+            raise TimeoutError(f"the simulation passed its deadline at step {k}")
         out = plant.outputs()
         controller.horizons.extend(profile.on_position(out.position))
         horizon = controller.horizons[0]
