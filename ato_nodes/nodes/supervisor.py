@@ -12,11 +12,14 @@ import sys
 import time
 from pathlib import Path
 
+from rclpy.duration import Duration
+
 from ato_nodes.core.schema import steps
 from ato_nodes.nodes.base import AtoNode, run_node
 
 PARTICIPANTS = ("profile", "plant", "controller", "recorder")
 PROGRESS_PERIOD = 0.5  # s of wall time
+SHUTDOWN_ACK_TIMEOUT = 2.0  # s the supervisor waits for every node to have 'shutdown'
 
 
 class SupervisorNode(AtoNode):
@@ -52,8 +55,7 @@ class SupervisorNode(AtoNode):
             self.finished_steps, self.diverged = int(count), reason == "diverged"
         elif word == "recorded":
             self.report(int(argument))
-            self.announce("shutdown")
-            self.context.try_shutdown()
+            self.shut_down_all()
 
     def check_agreement(self, node: str, values: dict) -> None:
         """A parameter several nodes declare must have one value in all of them (a
@@ -78,8 +80,15 @@ class SupervisorNode(AtoNode):
     def shut_down_when_heard(self) -> None:
         if (self.events_out.get_subscription_count() >= len(PARTICIPANTS) + 1 or
                 time.monotonic() - self.created > self.values["supervisor.ready_timeout"]):
-            self.announce("shutdown")
-            self.context.try_shutdown()
+            self.shut_down_all()
+
+    def shut_down_all(self) -> None:
+        """Tell every node to exit, and see it delivered before this node goes (a
+        transient-local message dies with its writer: nodes started without a launcher
+        to stop them would wait for ever)."""
+        self.announce("shutdown")
+        self.events_out.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_TIMEOUT))
+        self.context.try_shutdown()
 
     def on_tick(self) -> None:
         now = time.monotonic()
@@ -92,8 +101,7 @@ class SupervisorNode(AtoNode):
                                         f"{self.values['supervisor.ready_timeout']:g} s: "
                                         + ", ".join(sorted(self.waiting)))
                 self.failed = True
-                self.announce("shutdown")
-                self.context.try_shutdown()
+                self.shut_down_all()
             return
         if self.finished is not None:
             return
