@@ -24,6 +24,8 @@ import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scoring import run_line
 from ato_nodes.core.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
@@ -216,7 +218,20 @@ def _assemble(path, found, stamps, raws, types) -> Run:
         series.update(_columns(fields, [decoded[i] for i in chosen]))
     if "speed" not in series:
         series["speed"] = series["measured_speed"]
-    return Run(path, series, read_parameters(path), {r: found[r] for r in usable}, missing, notes)
+    return Run(path, series, _checked_parameters(path), {r: found[r] for r in usable}, missing,
+               notes)
+
+
+def _checked_parameters(path: Path) -> dict | None:
+    """The run's parameters, with the line the bag carries readable (else one line)."""
+    parameters = read_parameters(path)
+    if parameters:
+        try:
+            run_line(parameters)
+        except (ScenarioError, ValueError) as exc:  # bad base64 is a ValueError too
+            raise BagError(f"{path}: the run's line kept in the bag is unreadable "
+                           f"({str(exc).splitlines()[0]})") from None
+    return parameters
 
 
 def _columns(fields, messages) -> dict[str, np.ndarray]:

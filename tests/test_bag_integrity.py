@@ -97,3 +97,19 @@ def test_repair_script_is_one_line_and_exit_2_for_a_non_bag(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2 and "no readable channel" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_bag_whose_kept_line_is_broken_is_one_line_and_exit_2(tmp_path):
+    bag = tmp_path / "badline"
+    writer = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    writer.set_custom_data(PARAMETERS_KEY, json.dumps({"line.base64": "bm90IGEgbGluZQ==",
+                                                       "line.file": "elsewhere.yaml"}))
+    for topic in ("/ato/target_speed", "/train/measured_speed"):
+        connection = writer.add_connection(topic, "std_msgs/msg/Float64", typestore=TYPESTORE)
+        writer.write(connection, 0, float64(1.0))
+    writer.close()
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "score_bag.py"), str(bag)],
+                            capture_output=True, text=True)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert "line kept in the bag is unreadable" in result.stderr
