@@ -57,3 +57,5 @@ def interrupted_quietly(main):
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         sys.exit(130)
+    finally:  # its outcome is decided: a Ctrl-C while the interpreter exits changes nothing
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})

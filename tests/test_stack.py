@@ -162,7 +162,8 @@ def test_ctrl_c_leaves_a_readable_bag_with_every_step_so_far(tmp_path):
     assert set(counts) == STEP_TOPICS
     recorded = min(counts.values())
     assert recorded >= 40  # at least 3 s at 20 steps/s
-    assert max(counts.values()) - recorded <= 2  # a step cut in its middle; targets run 2 ahead
+    # a step cut between the plant's publish and the command: targets k+2, commands k-1
+    assert max(counts.values()) - recorded <= 3
     assert mcap_message_count(bag) == sum(counts.values())
     series = read_series(bag)
     expected = in_process(60)
