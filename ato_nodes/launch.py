@@ -42,6 +42,23 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
+def node_processes(launcher: int) -> dict[str, int]:
+    """The node processes a launcher process started, {role: pid} (from /proc)."""
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        module = next((a.decode() for a in cmdline if a.startswith(b"ato_nodes.nodes.")), None)
+        if module and int(stat.rsplit(")", 1)[1].split()[1]) == launcher:
+            found[module.rsplit(".", 1)[1]] = int(entry.name)
+    return found
+
+
 def _stopped(pid: int) -> bool:
     """The process is stopped by a signal (state T) or traced (t)."""
     try:
@@ -288,7 +305,7 @@ class Stack:
                 finally:
                     if main:  # a Ctrl-C pressed while stopping is spent, not re-raised;
                         # the caller's handlers are back before any signal can come
-                        for number, handler in previous.items():
+                        for number in previous:
                             signal.signal(number, signal.SIG_IGN)
                         signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
                         for number, handler in previous.items():

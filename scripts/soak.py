@@ -27,26 +27,10 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.bagio import BagError, message_counts, read_run
+from ato_nodes.launch import node_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
-
-
-def node_pids(launcher: int) -> dict[str, int]:
-    found = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-                cmdline = (entry / "cmdline").read_bytes().split(b"\0")
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == launcher:
-                module = next((a.decode() for a in cmdline if a.startswith(b"ato_nodes.nodes.")),
-                              None)
-                if module:
-                    found[module.rsplit(".", 1)[1]] = int(entry.name)
-    return found
 
 
 def check(bag: Path) -> tuple[bool, str]:
@@ -84,7 +68,7 @@ def one_run(bag: Path, rng: random.Random, kill: bool) -> tuple[bool, str]:
     what = f"{'SIGKILL ' + victim if kill else 'SIGINT'} at {delay:.2f} s"
     if process.poll() is None:
         if kill:
-            pid = node_pids(process.pid).get(victim)
+            pid = node_processes(process.pid).get(victim)
             if pid is None:
                 what += " (not running)"
             else:

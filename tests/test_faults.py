@@ -69,13 +69,19 @@ def test_a_sigkilled_recorder_loses_at_most_a_second_and_its_bag_is_repaired(tmp
         holds_what_its_summary_says(bag)
 
 
+def stepping_real_time_run(bag: Path, role: str) -> tuple[subprocess.Popen, int]:
+    """A 600 s real-time run that is stepping; the launcher and the pid of one node."""
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
+    nodes = wait_for_children(process, roles=(role,))
+    wait_for_stepping(process)
+    return process, nodes[role]
+
+
 def test_a_frozen_recorder_and_ctrl_c_leave_a_complete_bag(tmp_path):
     bag = tmp_path / "frozen"
-    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
-    nodes = wait_for_children(process, roles=("recorder",))
-    wait_for_stepping(process)
+    process, recorder = stepping_real_time_run(bag, "recorder")
     wait_for_chunks(bag)
-    os.kill(nodes["recorder"], signal.SIGSTOP)
+    os.kill(recorder, signal.SIGSTOP)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 130 and "Traceback" not in stderr
@@ -86,10 +92,8 @@ def test_a_frozen_recorder_and_ctrl_c_leave_a_complete_bag(tmp_path):
 
 def test_a_frozen_node_is_named_and_ends_the_run(tmp_path):
     bag = tmp_path / "stalled"
-    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
-    nodes = wait_for_children(process, roles=("controller",))
-    wait_for_stepping(process)
-    os.kill(nodes["controller"], signal.SIGSTOP)
+    process, controller = stepping_real_time_run(bag, "controller")
+    os.kill(controller, signal.SIGSTOP)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 1 and "node 'controller' is stopped" in stderr
     assert "Traceback" not in stderr
@@ -134,7 +138,8 @@ def test_a_deaf_node_dies_with_a_killed_launcher_and_keeps_its_domain_till_then(
     while any(alive(pid) for pid in nodes.values()) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not [role for role, pid in nodes.items() if alive(pid)]
-    probe = socket.socket()
+    probe = socket.socket()  # SO_REUSEADDR: a TIME_WAIT connection on the port (it is in the
+    probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # ephemeral range) is no lock
     probe.bind(("127.0.0.1", DOMAIN_LOCK_PORT + domain))  # the domain is free again
     probe.close()
     assert (bag / "metadata.yaml").exists()  # the recorder closed its bag on SIGTERM

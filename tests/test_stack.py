@@ -22,6 +22,7 @@ from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
 from ato_nodes.core.topics import step_topics
+from ato_nodes.launch import node_processes
 
 pytestmark = pytest.mark.integration
 
@@ -43,20 +44,7 @@ def start_stack(*args):
 
 def children(pid):
     """Node processes started by a run_stack.py process: {role: pid}."""
-    found = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        ppid = int(stat.rsplit(")", 1)[1].split()[1])
-        module = next((a.decode() for a in cmdline if a.startswith(b"ato_nodes.nodes.")), None)
-        if ppid == pid and module:
-            found[module.rsplit(".", 1)[1]] = int(entry.name)
-    return found
+    return node_processes(pid)
 
 
 def alive(pid):
