@@ -7,7 +7,7 @@ core (gains, train parameters, profiles) are built from the schema's values.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 from .errors import ScenarioError
@@ -64,7 +64,6 @@ def param(name: str, default: Any, description: str, nodes: str | tuple[str, ...
 
 def settings(cls, group: str, values) -> Any:
     """A configuration dataclass whose fields are the parameters `group.<field>`."""
-    from dataclasses import fields
     return cls(**{f.name: values[f"{group}.{f.name}"] for f in fields(cls)})
 
 
