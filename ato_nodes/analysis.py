@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ato_nodes.bagio import Run
+from ato_nodes.core.components import CONTROLLERS
+from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
 from ato_nodes.core.scoring import observer_b0, score_series, total_disturbance
 
@@ -132,10 +134,34 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
             with_command, time, lambda s: s["command"],
             ("time (s)", "u (N/kN)", "Control force (specific)"), out / "command.png")))
     for index, run in enumerate(runs):
-        figure = plot_observer(run, out / f"observer_{index + 1}.png")
-        if figure:
-            figures.append(figure)
+        for plot, name in ((plot_observer, "observer"), (plot_outputs, "outputs")):
+            figure = plot(run, out / f"{name}_{index + 1}.png")
+            if figure:
+                figures.append(figure)
     return figures
+
+
+def plot_outputs(run: Run, path: Path) -> Figure | None:
+    """Every named output the run's controller kind declares (with its unit), against
+    time; kinds with an extended state observer have plot_observer instead."""
+    try:
+        component = CONTROLLERS[(run.parameters or {}).get("controller.kind", "")]
+    except ScenarioError:
+        return None
+    outputs = [o for o in component.outputs if o.name in run.series]
+    if component.observer_gain is not None or not outputs:
+        return None
+    plt = _pyplot()
+    figure, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs) + 0.8),
+                                sharex=True, squeeze=False)
+    for axis, output in zip(axes[:, 0], outputs):
+        axis.plot(run.series["t"], run.series[output.name], lw=0.8)
+        axis.set_ylabel(f"{output.name}\n({output.unit})")
+        axis.set_title(output.description, fontsize=9, loc="left")
+        axis.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (s)")
+    figure.suptitle(f"Controller outputs ({component.kind}): {label(run)}")
+    return Figure(f"Controller outputs: {label(run)}", _save(figure, path))
 
 
 def plot_observer(run: Run, path: Path) -> Figure | None:

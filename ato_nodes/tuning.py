@@ -37,7 +37,7 @@ from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, ros_parameter_file
-from ato_nodes.core.schema import SPEC_BY_NAME, steps
+from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import INDEX_NAMES, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
@@ -227,7 +227,7 @@ def conditions(values: dict[str, Any], settings: TuningSettings) -> str:
     parameter of the base run, the text of its line and table files, the fitness,
     requirements, search space, algorithm and how candidates are run."""
     files = {}
-    for name in ("line.file", "profile.table.file"):
+    for name in FILE_PARAMETERS:
         if values.get(name):
             try:
                 files[name] = hashlib.sha256(Path(values[name]).read_bytes()).hexdigest()

@@ -1,6 +1,7 @@
 """The plug-in seam through the real graph: the PID baseline, a 20-step preview, and
 nodes started straight from a shipped scenario file with no launcher in between."""
 
+import hashlib
 import json
 import subprocess
 import sys
@@ -12,7 +13,7 @@ import pytest
 from ato_nodes.bagio import read_parameters, read_series
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.scoring import kept_file, score_series
 from ato_nodes.core.schema import NODES
 from ato_nodes.launch import DomainLock, Stack, node_environment
 
@@ -52,6 +53,21 @@ def test_a_20_step_preview_reaches_the_controller_in_the_stack_as_in_process(tmp
     assert outcome.ok, outcome.message
     assert read_series(tmp_path / "bag")["preview"].shape == (400, 21)
     assert_bag_equals_in_process(tmp_path / "bag", values)
+
+
+def test_the_gpc_with_online_correction_runs_through_the_stack_and_the_bag_keeps_its_model(
+        tmp_path):
+    values = apply_overrides(load_scenario("seed001-crh380al"), [
+        "run.duration=90", "gpc.correction_threshold=0.03"])  # samples join during the run
+    bag = tmp_path / "bag"
+    outcome = Stack(values, bag, quiet=True, timeout=120).run()
+    assert outcome.ok, outcome.message
+    assert read_series(bag)["samples_added"][-1] > 0
+    assert_bag_equals_in_process(bag, values)
+    parameters = read_parameters(bag)
+    assert kept_file(parameters, "gpc.model") == Path(values["gpc.model"]).read_bytes()
+    assert parameters["gpc.model.sha256"] == hashlib.sha256(
+        Path(values["gpc.model"]).read_bytes()).hexdigest()
 
 
 def start_nodes_directly(parameter_file: Path, bag: Path, report: Path):

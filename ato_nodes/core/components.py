@@ -3,13 +3,13 @@ its own module (its parameters, its factory, its outputs); nothing else changes.
 
 from __future__ import annotations
 
-from . import adrc, pid, profiles
+from . import adrc, gpc, pid, profiles
 from .registry import Registry
 from .spec import PROFILE_NODES
 
 CONTROLLERS = Registry("controller", "han_adrc", ("controller",), (
     adrc.HAN_ADRC, adrc.NLADRC, adrc.DISCRETE_ADRC, adrc.LINEAR_ADRC,
-    pid.PID_CONTROLLER,
+    pid.PID_CONTROLLER, gpc.GPC_CONTROLLER,
 ))
 
 PROFILES = Registry("profile", "seed000", PROFILE_NODES, (

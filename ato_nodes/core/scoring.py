@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import hashlib
 import math
 from pathlib import Path
 
@@ -24,6 +25,32 @@ LINE_BASE64 = "line.base64"
 
 def encode_line(text: str) -> str:
     return base64.b64encode(text.encode()).decode()
+
+
+# Other files a run reads, kept in the bag as <name>.sha256 and <name>.base64, so a
+# bag re-runs without them (the line is kept as LINE_BASE64, which the scorer reads).
+KEPT_FILES = ("profile.table.file", "gpc.model")
+
+
+def kept_files(values: dict) -> dict[str, str]:
+    kept = {}
+    for name in KEPT_FILES:
+        if values.get(name):
+            content = Path(values[name]).read_bytes()
+            kept[f"{name}.sha256"] = hashlib.sha256(content).hexdigest()
+            kept[f"{name}.base64"] = base64.b64encode(content).decode()
+    return kept
+
+
+def kept_file(parameters: dict, name: str) -> bytes | None:
+    """The content of a file the bag keeps (checked against its digest), None if the
+    bag keeps none under `name`."""
+    if not parameters.get(f"{name}.base64"):
+        return None
+    content = base64.b64decode(parameters[f"{name}.base64"])
+    if hashlib.sha256(content).hexdigest() != parameters.get(f"{name}.sha256"):
+        raise ValueError(f"the copy of {name} kept in the bag does not match its sha256")
+    return content
 
 
 def score_series(series: dict[str, np.ndarray], parameters: dict | None = None

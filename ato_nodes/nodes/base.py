@@ -29,7 +29,7 @@ from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.faults import parse_fault
 from ato_nodes.core.scenario import complete, train_preset
 from ato_nodes.core.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
-from ato_nodes.core.scoring import LINE_BASE64, encode_line
+from ato_nodes.core.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.topics import Topic, topic_map
 
 QOS = {
@@ -136,6 +136,7 @@ class AtoNode(Node):
         values = dict(self.values)
         if values.get("line.file"):
             values[LINE_BASE64] = encode_line(Path(values["line.file"]).read_text())
+        values.update(kept_files(values))
         self.announce(f"parameters {self.role} {json.dumps(values)}")
 
     # Topics ---------------------------------------------------------------

@@ -16,8 +16,8 @@ One interface for every algorithm (see base.py for the details):
   each algorithm's module documents its defaults (its paper's where the paper
   gives them) and every choice the paper leaves open.
 
-Algorithms: "pso" (seed 000), "bas" and "bas-pso" (seed 000), "apso"
-(seed 003), "ga-pso" (seed 004), "wso" (white shark, the improved shark
+Algorithms: "pso" (seed 000), "bas" and "bas-pso" (seed 000), "aw-pso"
+(seed 001, per-particle adaptive inertia), "apso" (seed 003), "ga-pso" (seed 004), "wso" (white shark, the improved shark
 optimizer seed 000 compares with), "kh" (krill herd, seed 002).
 """
 
@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any
 
 from .apso import AdaptivePSO
+from .awpso import AdaptiveWeightPSO
 from .base import Fitness, IterationRecord, Optimizer, Result, Seed, StopReason
 from .bas import BeetleAntennaeSearch, BeetleSwarm
 from .gapso import GeneticPSO
@@ -38,6 +39,7 @@ ALGORITHMS: dict[str, type[Optimizer]] = {
     "bas": BeetleAntennaeSearch,
     "bas-pso": BeetleSwarm,
     "apso": AdaptivePSO,
+    "aw-pso": AdaptiveWeightPSO,
     "ga-pso": GeneticPSO,
     "wso": WhiteShark,
     "kh": KrillHerd,
@@ -62,6 +64,6 @@ def optimize(name: str, fitness: Fitness, lower: Any, upper: Any, budget: int, s
         stall_iterations=stall_iterations, stall_tolerance=stall_tolerance)
 
 
-__all__ = ["ALGORITHMS", "AdaptivePSO", "BeetleAntennaeSearch", "BeetleSwarm", "GeneticPSO",
+__all__ = ["ALGORITHMS", "AdaptivePSO", "AdaptiveWeightPSO", "BeetleAntennaeSearch", "BeetleSwarm", "GeneticPSO",
            "IterationRecord", "KrillHerd", "Optimizer", "ParticleSwarm", "Result", "StopReason",
            "WhiteShark", "create", "optimize"]

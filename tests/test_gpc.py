@@ -1,0 +1,150 @@
+"""Seed 001's generalized predictive controller: prediction, constraints, offset-free
+tracking, online correction, and its one-line start-up errors."""
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.gpc import GPC, Arx, GPCSettings
+from ato_nodes.core.limiter import CommandLimiter
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.scenario import apply_overrides, load_scenario
+
+
+class FixedModel:
+    """A prediction model that always linearises to the same ARX model."""
+
+    def __init__(self, arx, history=6):
+        self.arx, self.delay, self.history = arx, arx.delay, history
+
+    def linearise(self, speeds, commands):
+        return self.arx
+
+    def observe(self, speeds, commands, error):
+        return False
+
+
+ARX = Arx(0.01, (1.6, -0.62), (0.004, 0.001), 2)
+
+
+def controller(arx=ARX, horizon=12, nu=3, constrained=True, rate=0.0, low=-1e6, high=1e6):
+    settings = GPCSettings(horizon, nu, 1.0, 1e-4, constrained, 0.0)
+    limiter = CommandLimiter(low, high, 0.3, rate)
+    gpc = GPC(settings, FixedModel(arx), 0.3, limiter, train=None, envelope=False)
+    gpc.start(10.0, 10.0)
+    gpc.speeds = [10.0, 10.1, 10.3, 10.4, 10.6, 10.7, 10.9]
+    gpc.commands = [5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0]
+    return gpc
+
+
+def simulate_arx(arx, speeds, commands, future):
+    """y(k+1..k+P) of the ARX model from the histories under the future commands."""
+    speeds, commands = list(speeds), list(commands) + list(future)
+    past = len(commands) - len(future)
+    out = []
+    for j in range(1, len(future) + 1):
+        value = arx.c + sum(a * speeds[-i] for i, a in enumerate(arx.a, 1))
+        value += sum(b * commands[past + j - arx.delay - i] for i, b in enumerate(arx.b, 1))
+        speeds.append(value)
+        out.append(value)
+    return np.array(out)
+
+
+def test_free_and_forced_responses_are_those_of_the_arx_model():
+    gpc = controller()
+    free, matrix = gpc._responses(ARX)
+    held = [gpc.commands[-1]] * 12
+    np.testing.assert_allclose(free, simulate_arx(ARX, gpc.speeds, gpc.commands, held))
+    for i in range(3):  # a unit move at k+i, held after it
+        moved = [u + (1.0 if m >= i else 0.0) for m, u in enumerate(held)]
+        response = simulate_arx(ARX, gpc.speeds, gpc.commands, moved) - free
+        np.testing.assert_allclose(matrix[:, i], response, atol=1e-12)
+    assert np.all(matrix[:ARX.delay] == 0.0)  # the input delay: no response before it
+
+
+def test_the_qp_keeps_the_moves_inside_the_jerk_limit_and_the_command_inside_its_bounds():
+    gpc = controller(rate=2.0, low=-20.0, high=12.0)
+    free, matrix = gpc._responses(ARX)
+    hessian = matrix.T @ matrix + 1e-4 * np.eye(3)
+    far_above = matrix.T @ (free - (free + 30.0))  # a target far above: wants full traction
+    move = gpc._solve(hessian, far_above, gpc.commands[-1], 10.0)
+    assert move == pytest.approx(2.0 * 0.3)  # the jerk limit binds
+    unconstrained = float(np.linalg.solve(hessian, -far_above)[0])
+    assert unconstrained > 0.6
+    near = matrix.T @ (free - (free + 0.01))  # a small move: no constraint active
+    assert gpc._solve(hessian, near, gpc.commands[-1], 10.0) == pytest.approx(
+        float(np.linalg.solve(hessian, -near)[0]), rel=1e-6)
+    gpc.commands[-1] = 11.9  # next to u_max: the QP stops at it
+    assert gpc._solve(hessian, far_above, 11.9, 10.0) == pytest.approx(0.1, abs=1e-6)
+
+
+def crh380al(*overrides):
+    return apply_overrides(load_scenario("seed001-crh380al"), [
+        "line.file=", "profile.kind=step", "profile.step.speed=50", "plant.initial_speed=45",
+        "run.duration=240", "plant.speed_noise=0", "plant.speed_quantum=0", *overrides])
+
+
+def test_the_fed_back_residual_makes_tracking_offset_free_under_a_model_error():
+    """The plant's running resistance 30 % above the nominal train's, which the
+    mechanistic prediction model uses."""
+    errors = {}
+    for bias_filter in (3.0, 0.0):
+        values = crh380al("gpc.prediction=mechanistic", f"gpc.bias_filter={bias_filter}")
+        plant = dict(values, **{name: 1.3 * values[name] for name in (
+            "plant.davis_a", "plant.davis_b", "plant.davis_c")})
+        series = simulate_with_other_plant(values, plant)
+        errors[bias_filter] = np.abs(series["target"] - series["speed"])[-100:].max()
+    assert errors[3.0] < 0.01 and errors[0.0] > 3 * errors[3.0]
+
+
+def simulate_with_other_plant(controller_values, plant_values):
+    """simulate() with the plant stage built from other values than the controller's
+    (the controller's nominal train is then wrong)."""
+    from ato_nodes.core import loop
+    original = loop.PlantStage
+
+    class OtherPlant(original):
+        def __init__(self, values, line=None):
+            super().__init__(loop.NodeValues("plant", plant_values), line)
+
+    loop.PlantStage = OtherPlant
+    try:
+        return simulate(controller_values)
+    finally:
+        loop.PlantStage = original
+
+
+def test_the_shipped_model_tracks_with_every_prediction_and_is_deterministic():
+    for prediction in ("lssvm", "mechanistic", "multimodel"):
+        values = crh380al(f"gpc.prediction={prediction}", "run.duration=90")
+        series = simulate(values)
+        error = np.abs(series["target"] - series["speed"])[100:]
+        assert error.max() < 0.5, prediction  # m/s, after the first 30 s
+        assert np.all(np.abs(np.diff(series["command"])) <= 40.0 * 0.3 + 1e-9)
+
+
+def test_online_correction_adds_samples_deterministically():
+    values = apply_overrides(load_scenario("seed001-crh380al"), [
+        "run.duration=120", "gpc.correction_threshold=0.03"])
+    first, second = simulate(values), simulate(values)
+    assert first["samples_added"][-1] > 0
+    assert np.all(np.diff(first["samples_added"]) >= 0)
+    for name in first:
+        np.testing.assert_array_equal(first[name], second[name], err_msg=name)
+    off = simulate(apply_overrides(values, ["gpc.correction=false"]))
+    assert off["samples_added"][-1] == 0
+
+
+@pytest.mark.parametrize("overrides, message", [
+    (["gpc.model=models/absent.npz"], "cannot read model file"),
+    (["run.period=0.2"], "identified at a 0.3 s period"),
+    (["plant.train=crh380a"], "identified on train 'crh380al'"),
+    (["controller.preview=10"], "needs controller.preview >= 20"),
+    (["gpc.prediction=mechanistic", "gpc.horizon=2", "controller.preview=2"],
+     "does not reach past the model's input delay"),
+    (["gpc.model="], "needs gpc.model"),
+])
+def test_bad_gpc_input_is_one_line_before_anything_starts(overrides, message):
+    with pytest.raises(ScenarioError, match=message) as caught:
+        apply_overrides(load_scenario("seed001-crh380al"), overrides)
+    assert "\n" not in str(caught.value)
