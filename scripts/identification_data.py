@@ -8,9 +8,10 @@ staircase target (core/identification.py: why this excitation) and sensor seed,
 recorded to ordinary bags under OUT:
   identification/  3,000 s: the 1,500 samples (900 training, 600 test)
   validation/      3,000 s: a run the model never saw (free-run prediction)
-  resistance/      1,500 s with 30 % more running resistance (the online-correction
-                   samples; a heavier train would change nothing but the envelope, as
-                   the command is a specific force, N/kN)
+  resistance/      1,500 s of a train whose running resistance is 30 % above the
+                   nominal (plant.resistance_factor; the online-correction samples).
+                   Not a heavier train: the command is a specific force (N/kN), so
+                   mass alone changes nothing but the envelope
 Then `scripts/identify.py OUT/identification --validation OUT/validation
 --correction OUT/resistance --out MODEL.npz`.
 """
@@ -25,13 +26,12 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.core.identification import excitation_table
-from ato_nodes.core.scenario import train_preset
 
 TOP_SPEED = 320.0 / 3.6  # m/s, the excitation's highest level
 RUNS = (  # name, staircase seed, duration s, extra overrides
     ("identification", 1, 3000.0, ()),
     ("validation", 2, 3000.0, ()),
-    ("resistance", 3, 1500.0, tuple(f"plant.davis_{c}={{davis_{c}}}" for c in "abc")),
+    ("resistance", 3, 1500.0, ("plant.resistance_factor=1.3",)),
 )
 
 
@@ -41,8 +41,6 @@ def main() -> None:
     args = parser.parse_args()
     _cli.new_directory(args.out)
     args.out.mkdir()
-    preset = train_preset("crh380al")
-    more = {f"davis_{c}": 1.3 * preset[f"plant.davis_{c}"] for c in "abc"}
     for name, seed, duration, extra in RUNS:
         table = args.out / f"{name}-target.csv"
         rows = excitation_table(seed, duration - 60.0, TOP_SPEED)
@@ -52,7 +50,7 @@ def main() -> None:
                    "--quiet", "--duration", str(max(duration, rows[-1][0] + 10.0)),
                    "--set", f"profile.table.file={table.resolve()}",
                    "--set", f"plant.noise_seed={seed}",
-                   *(arg for item in extra for arg in ("--set", item.format(**more)))]
+                   *(arg for item in extra for arg in ("--set", item))]
         print(" ".join(command[1:]), file=sys.stderr)
         result = subprocess.run(command, stdout=subprocess.DEVNULL)
         if result.returncode:

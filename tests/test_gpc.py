@@ -89,29 +89,10 @@ def test_the_fed_back_residual_makes_tracking_offset_free_under_a_model_error():
     mechanistic prediction model uses."""
     errors = {}
     for bias_filter in (3.0, 0.0):
-        values = crh380al("gpc.prediction=mechanistic", f"gpc.bias_filter={bias_filter}")
-        plant = dict(values, **{name: 1.3 * values[name] for name in (
-            "plant.davis_a", "plant.davis_b", "plant.davis_c")})
-        series = simulate_with_other_plant(values, plant)
+        series = simulate(crh380al("gpc.prediction=mechanistic", "plant.resistance_factor=1.3",
+                                   f"gpc.bias_filter={bias_filter}"))
         errors[bias_filter] = np.abs(series["target"] - series["speed"])[-100:].max()
     assert errors[3.0] < 0.01 and errors[0.0] > 3 * errors[3.0]
-
-
-def simulate_with_other_plant(controller_values, plant_values):
-    """simulate() with the plant stage built from other values than the controller's
-    (the controller's nominal train is then wrong)."""
-    from ato_nodes.core import loop
-    original = loop.PlantStage
-
-    class OtherPlant(original):
-        def __init__(self, values, line=None):
-            super().__init__(loop.NodeValues("plant", plant_values), line)
-
-    loop.PlantStage = OtherPlant
-    try:
-        return simulate(controller_values)
-    finally:
-        loop.PlantStage = original
 
 
 def test_the_shipped_model_tracks_with_every_prediction_and_is_deterministic():
@@ -139,8 +120,8 @@ def test_online_correction_adds_samples_deterministically():
     (["gpc.model=models/absent.npz"], "cannot read model file"),
     (["run.period=0.2"], "identified at a 0.3 s period"),
     (["plant.train=crh380a"], "identified on train 'crh380al'"),
-    (["controller.preview=10"], "needs controller.preview >= 20"),
-    (["gpc.prediction=mechanistic", "gpc.horizon=2", "controller.preview=2"],
+    (["gpc.horizon=20", "controller.preview=10"], "needs controller.preview >= 20"),
+    (["gpc.prediction=mechanistic", "gpc.horizon=1", "controller.preview=1"],
      "does not reach past the model's input delay"),
     (["gpc.model="], "needs gpc.model"),
 ])

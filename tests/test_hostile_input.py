@@ -112,3 +112,40 @@ def test_bags_with_broken_metadata_or_embedded_line_are_one_line(tmp_path):
     (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
     (bag / "bag.mcap").write_bytes(b"\x89MCAP0\r\n")
     one_line_exit_2(script("score_bag.py", bag), str(bag))
+
+
+@pytest.mark.parametrize("model, words", [
+    (b"PK\x03\x04 cut short", ["not a readable .npz"]),
+    (None, ["cannot read model file"]),
+])
+def test_a_bad_gpc_model_file_stops_run_stack_before_anything_starts(tmp_path, model, words):
+    path = tmp_path / "model.npz"
+    if model is not None:
+        path.write_bytes(model)
+    result = script("run_stack.py", "--scenario", "seed001-crh380al", "--set",
+                    f"gpc.model={path}", "--out", tmp_path / "bag")
+    one_line_exit_2(result, *words)
+    assert not (tmp_path / "bag").exists()
+
+
+def test_a_truncated_shipped_model_stops_run_stack(tmp_path):
+    shipped = (ROOT / "msg_config" / "models" / "crh380al-lssvm.npz").read_bytes()
+    path = tmp_path / "cut.npz"
+    path.write_bytes(shipped[:len(shipped) * 2 // 3])
+    one_line_exit_2(script("run_stack.py", "--scenario", "seed001-crh380al", "--set",
+                           f"gpc.model={path}", "--out", tmp_path / "bag"), "model file")
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--speed-lags", "0"], ["speed lag"]),
+    (["--train", "1600"], ["--train"]),
+    (["--out", "model.txt"], [".npz"]),
+])
+def test_identify_refuses_bad_options_in_one_line(tmp_path, args, words):
+    options = ["--out", tmp_path / "m.npz", *args] if "--out" not in args else args
+    one_line_exit_2(script("identify.py", tmp_path / "no-bag", *options), *words)
+
+
+def test_identify_refuses_a_missing_bag_in_one_line(tmp_path):
+    one_line_exit_2(script("identify.py", tmp_path / "no-bag", "--out", tmp_path / "m.npz"),
+                    "no-bag")

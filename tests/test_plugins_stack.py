@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.bagio import read_parameters, read_series
+from ato_nodes.analysis import write_report
+from ato_nodes.bagio import read_parameters, read_run, read_series
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import kept_file, score_series
@@ -68,6 +69,9 @@ def test_the_gpc_with_online_correction_runs_through_the_stack_and_the_bag_keeps
     assert kept_file(parameters, "gpc.model") == Path(values["gpc.model"]).read_bytes()
     assert parameters["gpc.model.sha256"] == hashlib.sha256(
         Path(values["gpc.model"]).read_bytes()).hexdigest()
+    markdown, _ = write_report([read_run(bag)], [], tmp_path / "report")
+    assert "## Controller outputs" in markdown.read_text()
+    assert (tmp_path / "report" / "outputs_1.png").stat().st_size > 0
 
 
 def start_nodes_directly(parameter_file: Path, bag: Path, report: Path):

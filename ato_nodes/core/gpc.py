@@ -147,28 +147,36 @@ class MultiModel:
 
 
 class MechanisticModel:
-    """The nominal train's equations (the run context's train): Euler over one period,
-    the first-order lag discretised exactly, the dead time as an input delay, the
-    resistance linearised at y(k)."""
+    """The nominal train's equations (the run context's train), discretised exactly for
+    a command held over the period (zero-order hold) through the first-order lag tau,
+    the dead time as an input delay, the resistance linearised at y(k) and held over
+    the period. With e = exp(-h/tau), c1 = tau (1 - e) / h, G = h xi and u_d(k) the
+    command acting over [k, k+1] (u(k - dead)):
+        F(k+1) = e F(k) + (1 - e) u_d(k)
+        y(k+1) = y(k) + G (c1 F(k) + (1 - c1) u_d(k) - w0(y(k)))
+    and, F eliminated,
+        y(k+1) = (1 + e) y(k) - e y(k-1) + G ((1 - c1) u_d(k) + (c1 - e) u_d(k-1)
+                 - w0(y(k)) + e w0(y(k-1)))."""
 
     def __init__(self, train, period: float):
         self.train, self.h = train, period
         self.dead = round(train.dead_time / period)
-        self.lag = math.exp(-period / train.actuator_lag) if train.actuator_lag > 0 else 0.0
-        self.delay = self.dead + (1 if self.lag else 0)
+        tau = train.actuator_lag
+        self.lag = math.exp(-period / tau) if tau > 0 else 0.0
+        self.c1 = tau * (1.0 - self.lag) / period if tau > 0 else 0.0
+        self.delay = self.dead
         self.history = self.dead + 3
 
     def linearise(self, speeds, commands) -> Arx:
-        train, h, e = self.train, self.h, self.lag
+        train, h, e, c1 = self.train, self.h, self.lag, self.c1
         v = speeds[-1]
         gain = h * train.xi
         slope = train.davis_b + 2.0 * train.davis_c * abs(v)  # dw0/dv, N/kN per m/s
         w0 = train.resistance(v) - slope * v  # w0(y) ~ w0 + slope y near v
         if e == 0.0:
             return Arx(-gain * w0, (1.0 - gain * slope,), (gain,), self.dead)
-        # F(k) = e F(k-1) + (1-e) u(k-1-dead); y(k+1) = y(k) + gain (F(k) - w0(y(k)))
         return Arx(-gain * w0 * (1.0 - e), (1.0 + e - gain * slope, -e + e * gain * slope),
-                   (gain * (1.0 - e),), self.dead + 1)
+                   (gain * (1.0 - c1), gain * (c1 - e)), self.dead)
 
     def observe(self, speeds, commands, error: float) -> bool:
         return False

@@ -23,6 +23,7 @@ the same calls in one process, so both give identical numbers.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -111,7 +112,10 @@ class PlantStage:
     """The train, its line and its speed sensor (noise and quantisation, seeded)."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
-        self.params = TrainParameters.from_values(values)
+        nominal = TrainParameters.from_values(values)
+        factor = values["plant.resistance_factor"]
+        self.params = dataclasses.replace(nominal, **{
+            name: factor * getattr(nominal, name) for name in ("davis_a", "davis_b", "davis_c")})
         if line is None and values["line.file"]:
             line = load_line(values["line.file"])
         self.train = PointMassTrain(

@@ -35,8 +35,10 @@ import hashlib
 import io
 import json
 import math
+import os
 import zipfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.linalg import cho_solve, solve_triangular
@@ -269,8 +271,17 @@ class ModelFile:
     arx_coefficients: np.ndarray
 
     def save(self, path) -> None:
+        """Written to a temporary file, then renamed over `path`: a reader sees the old
+        model or the new one, never half of one."""
         model = self.lssvm
-        np.savez(path, format=FORMAT,
+        path = Path(path)
+        partial = path.with_name(f".{path.name}.partial")
+        with open(partial, "wb") as handle:
+            self._write(handle, model)
+        os.replace(partial, path)
+
+    def _write(self, handle, model) -> None:
+        np.savez(handle, format=FORMAT,
                  layout=np.array([model.layout.speed_lags, model.layout.command_lags,
                                   model.layout.delay]),
                  mu=model.mu, delta=model.delta, offset=model.offset, scale=model.scale,

@@ -66,6 +66,9 @@ BASE: tuple[ParamSpec, ...] = (
        "sections cut traction while it is inside them)", PLANT_NODES, 0.0, 2000.0),
     param("plant.hold_at_standstill", False, "the train cannot roll backwards: speed floors at 0 "
        "(brakes hold a stopped train)", PLANT_NODES),
+    param("plant.resistance_factor", 1.0, "the real train's basic running resistance over the "
+       "nominal one (plant.davis_*), which the controller and the profile know: a model "
+       "error the ATO does not see (1 = the nominal train)", "plant", 0.1, 10.0),
     param("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
        "the scorer from the bag's run parameters", PLANT_NODES, 0.01, 1.0),
     param("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", PLANT_NODES,
