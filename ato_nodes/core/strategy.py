@@ -1,0 +1,241 @@
+"""Driving strategies along a line (seed 002), ROS-free: the energy-optimal limit by
+dynamic programming over (position, speed).
+
+The train is the project's mass belt (core.plant.TrainParameters, core.line.Line):
+basic resistance w0(v), the belt's gradient, curve and tunnel resistance, the
+traction and brake envelopes, traction cut while the pantograph is in a neutral
+section, speeds capped at the line limit over the belt minus a margin (seed 002's
+speed protection: limit - 7 km/h). In distance, over a stage of length ds with a
+specific force F (N/kN) held:
+
+    d(v^2/2)/ds = xi (F - w0(v) - w_line(s))          (xi = g/1000/(1 + gamma))
+
+integrated by Heun's method over the stage. Energy drawn: max(F, 0) m g / 1000 ds / eta
+(kJ); time: ds / mean speed.
+
+Dynamic programming (`solve`), backwards over stages of `ds` metres, on a grid of
+speeds; at every node, each control of CONTROLS (full, 3/4, 1/2 and 1/4 traction,
+cruise: F = the resistance, coasting, 1/4, 1/2 and full braking) leads to a next
+speed, at which the next stage's value is interpolated (no snapping of transitions
+to the grid, so coasting stays coasting). The cost is energy + lambda * time;
+lambda, the price of a second, is bisected (on a log scale) until the run meets the
+planned time. The terminal state is standstill at the stop mark. `solve(..., lam=None,
+energy_weight=0)` is the minimum-time (flat-out) run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .line import Line
+from .plant import TrainParameters
+
+KMH = 1.0 / 3.6
+MARGIN = 7.0 * KMH  # seed 002's speed protection: below the limit by this
+# (kind, fraction): traction and braking as fractions of the envelope at the speed
+CONTROLS = (("traction", 1.0), ("traction", 0.75), ("traction", 0.5), ("traction", 0.25),
+            ("cruise", 0.0), ("coast", 0.0), ("brake", 0.25), ("brake", 0.5),
+            ("brake", 1.0))
+MODE = {"traction": 1, "cruise": 0, "coast": 0, "brake": -1}
+
+
+@dataclass(frozen=True)
+class Track:
+    """The line as the DP sees it, one entry per stage [s_i, s_i + ds]."""
+
+    positions: np.ndarray   # stage starts, m
+    ds: float
+    line_resistance: np.ndarray  # N/kN, the belt's, at the stage's middle
+    cap: np.ndarray         # m/s, the highest allowed speed over the stage
+    powered: np.ndarray     # bool: traction available over the whole stage
+
+    @classmethod
+    def of(cls, line: Line, train: TrainParameters, ds: float = 100.0,
+           margin: float = MARGIN) -> Track:
+        stages = max(1, round(line.stop_position / ds))
+        ds = line.stop_position / stages
+        starts = np.arange(stages) * ds
+        resistance, cap, powered = [], [], []
+        for s in starts:
+            resistance.append(line.additional_resistance(s + ds / 2, train.length))
+            belt = [max(0.0, x) for x in (s - train.length, s, s + ds / 2, s + ds)]
+            cap.append(min(line.speed_limit(min(x, line.length)) for x in belt) - margin)
+            pantograph = [x - train.pantograph_offset for x in (s, s + ds / 2, s + ds)]
+            powered.append(not any(line.in_neutral_section(x) for x in pantograph))
+        return cls(starts, ds, np.array(resistance), np.array(cap), np.array(powered))
+
+
+@dataclass
+class Strategy:
+    """A driving strategy: per stage the control chosen and the speeds it gives."""
+
+    positions: np.ndarray   # m, stage boundaries (stages + 1)
+    speeds: np.ndarray      # m/s at the boundaries
+    forces: np.ndarray      # N/kN applied over each stage
+    modes: np.ndarray       # 1 traction, 0 cruise/coast, -1 brake, per stage
+    controls: list[tuple[str, float]]
+    energy_kwh: float
+    time: float             # s
+    lam: float              # kW: the price of a second that met the planned time
+
+    def traction_in(self, sections) -> float:
+        """Largest traction force in any stage that overlaps one of `sections`."""
+        worst = 0.0
+        for start, force in zip(self.positions[:-1], self.forces):
+            end = start + (self.positions[1] - self.positions[0])
+            if force > 0 and any(start < sec.end and end > sec.start for sec in sections):
+                worst = max(worst, force)
+        return worst
+
+
+class Problem:
+    """The train on the track: stage transitions for every control at every speed."""
+
+    def __init__(self, track: Track, train: TrainParameters, efficiency: float):
+        self.track, self.train, self.efficiency = track, train, efficiency
+        self.xi = train.xi
+        self.weight = train.mass * train.gravity  # kN
+
+    def forces(self, stage: int, v: np.ndarray) -> np.ndarray:
+        """(controls x speeds) specific force of every control at speeds v, N/kN; NaN
+        where the control is not available (traction in a neutral section)."""
+        brake, traction = self.limits(v)
+        resistance = self.resistance(v) + self.track.line_resistance[stage]
+        rows = []
+        for kind, fraction in CONTROLS:
+            if kind == "traction":
+                row = fraction * traction
+            elif kind == "brake":
+                row = fraction * brake
+            elif kind == "cruise":  # hold the speed if the envelope allows it
+                row = np.where((resistance <= traction) & (resistance >= brake), resistance,
+                               np.nan)
+            else:
+                row = np.zeros_like(v)
+            if not self.track.powered[stage]:
+                row = np.where(row > 0, np.nan, row)
+            rows.append(row)
+        return np.array(rows)
+
+    def limits(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = self.train
+        speed = np.maximum(np.abs(v), 1e-6)
+        traction = np.minimum(p.max_traction_force, p.max_traction_power / speed)
+        brake = np.minimum(p.max_brake_force, p.max_brake_power / speed)
+        return -brake * 1000.0 / self.weight, traction * 1000.0 / self.weight
+
+    def resistance(self, v: np.ndarray) -> np.ndarray:
+        p = self.train
+        return p.davis_a + p.davis_b * v + p.davis_c * v * v
+
+    def step(self, stage: int, v: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """Speed at the end of the stage from v under force (Heun on v^2/2; the
+        resistance at the predicted end speed too). 0 where the train stops short."""
+        ds, extra = self.track.ds, self.track.line_resistance[stage]
+        energy = 0.5 * v * v
+        first = self.xi * (force - self.resistance(v) - extra)
+        predicted = np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * first)))
+        second = self.xi * (force - self.resistance(predicted) - extra)
+        return np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * 0.5 * (first + second))))
+
+
+def _stage_costs(problem: Problem, stage: int, grid: np.ndarray, energy_weight: float,
+                 lam: float):
+    forces = problem.forces(stage, grid)
+    with np.errstate(invalid="ignore"):
+        following = problem.step(stage, grid[None, :], np.nan_to_num(forces))
+    cruise = [i for i, (kind, _) in enumerate(CONTROLS) if kind == "cruise"][0]
+    following[cruise] = np.where(np.isnan(forces[cruise]), 0.0, grid)  # exactly held
+    mean = 0.5 * (grid[None, :] + following)
+    ds = problem.track.ds
+    with np.errstate(divide="ignore"):
+        time = np.where(mean > 1e-6, ds / mean, np.inf)
+    energy = np.maximum(np.nan_to_num(forces), 0.0) * problem.weight / 1000.0 * ds \
+        / problem.efficiency  # kJ
+    feasible = ~np.isnan(forces) & (following <= problem.track.cap[stage] + 1e-9)
+    return forces, following, time, energy, feasible
+
+
+def solve(track: Track, train: TrainParameters, efficiency: float, planned_time: float | None,
+          *, speed_step: float = 0.25, energy_weight: float = 1.0,
+          lam: float | None = None, iterations: int = 40) -> Strategy:
+    """The energy-optimal strategy that arrives in `planned_time` (lambda bisected), or
+    for a given price of a second `lam`; energy_weight 0 (and any lam > 0) is the
+    minimum-time run. Raises ValueError if the planned time cannot be met."""
+    problem = Problem(track, train, efficiency)
+    grid = np.arange(0.0, float(track.cap.max()) + speed_step, speed_step)
+    if lam is not None or planned_time is None:
+        return _forward(problem, grid, energy_weight, 1.0 if lam is None else lam)
+    fastest = _forward(problem, grid, 0.0, 1.0)
+    if fastest.time > planned_time:
+        raise ValueError(f"the planned time {planned_time:.0f} s is shorter than the "
+                         f"flat-out run's {fastest.time:.1f} s")
+    low, high = math.log(1e-3), math.log(1e6)  # kW per s of time saved
+    best = None
+    for _ in range(iterations):
+        middle = 0.5 * (low + high)
+        candidate = _forward(problem, grid, energy_weight, math.exp(middle))
+        if candidate.time > planned_time:
+            low = middle
+        else:
+            high, best = middle, candidate
+        if best is not None and planned_time - best.time < 0.05:
+            break
+    return best if best is not None else _forward(problem, grid, energy_weight, math.exp(high))
+
+
+INFEASIBLE = 1e30  # the value of a node from which the stop cannot be reached
+
+
+def _choices(problem: Problem, stage: int, speeds: np.ndarray, following_value: np.ndarray,
+             grid: np.ndarray, energy_weight: float, lam: float):
+    """Total cost of every control from every speed (controls x speeds), and what the
+    controls do: forces, end speeds, times, energies."""
+    forces, following, time, energy, feasible = _stage_costs(
+        problem, stage, speeds, energy_weight, lam)
+    if stage < len(problem.track.positions) - 1:  # a train stopped short is stuck
+        feasible &= following > 1e-9
+    future = np.interp(following, grid, following_value)
+    total = np.where(feasible & (future < INFEASIBLE / 2),
+                     energy_weight * energy + lam * time + future, INFEASIBLE)
+    return total, forces, following, time, energy
+
+
+def _values(problem: Problem, grid: np.ndarray, energy_weight: float, lam: float) -> list:
+    """The value function on the grid at every stage boundary (the last: the mark)."""
+    value = np.where(grid <= 1e-9, 0.0, INFEASIBLE)  # standing at the stop mark
+    values = [value]
+    for stage in range(len(problem.track.positions) - 1, -1, -1):
+        value = _choices(problem, stage, grid, value, grid, energy_weight, lam)[0].min(axis=0)
+        values.append(value)
+    values.reverse()
+    return values
+
+
+def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: float) -> Strategy:
+    """The value functions, then the run from standstill, each control chosen at the
+    actual speed (no rounding of the speed to the grid)."""
+    track = problem.track
+    values = _values(problem, grid, energy_weight, lam)
+    speeds, forces_taken, modes, controls = [0.0], [], [], []
+    energy_total = time_total = 0.0
+    for stage in range(len(track.positions)):
+        total, forces, following, time, energy = _choices(
+            problem, stage, np.array([speeds[-1]]), values[stage + 1], grid, energy_weight,
+            lam)
+        pick = int(np.argmin(total[:, 0]))
+        if total[pick, 0] >= INFEASIBLE / 2:
+            raise ValueError(f"no feasible way on from {track.positions[stage]:.0f} m at "
+                             f"{speeds[-1]:.2f} m/s")
+        speeds.append(float(following[pick, 0]))
+        forces_taken.append(float(forces[pick, 0]))
+        controls.append(CONTROLS[pick])
+        modes.append(MODE[CONTROLS[pick][0]])
+        energy_total += float(energy[pick, 0])
+        time_total += float(time[pick, 0])
+    positions = np.append(track.positions, track.positions[-1] + track.ds)
+    return Strategy(positions, np.array(speeds), np.array(forces_taken), np.array(modes),
+                    controls, energy_total / 3600.0, time_total, lam)
