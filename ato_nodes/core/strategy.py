@@ -239,3 +239,152 @@ def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: floa
     positions = np.append(track.positions, track.positions[-1] + track.ds)
     return Strategy(positions, np.array(speeds), np.array(forces_taken), np.array(modes),
                     controls, energy_total / 3600.0, time_total, lam)
+
+
+# Switching-point strategies (seed 002's decision variables) -----------------------
+TAU = 60.0  # s: the time-error index exp(|T' - T| / TAU) is e at one minute off the plan
+# G's weights (the paper leaves them to the user): energy and comfort relative to the
+# flat-out run's, so each term is ~1 for a plain strategy; the stop error per 10 m; the
+# speed protection weighs most (a strategy above limit - 7 km/h is not one to drive).
+WEIGHTS = {"energy": 1.0, "time": 1.0, "comfort": 0.2, "stop": 1.0, "protection": 10.0}
+
+
+def braking_curve(problem: Problem, service: float = 1.0) -> np.ndarray:
+    """Highest speed at each stage boundary from which braking at `service` x the brake
+    envelope keeps under every cap ahead and stops at the mark (backwards in distance)."""
+    track = problem.track
+    stages = len(track.positions)
+    curve = np.zeros(stages + 1)
+    for stage in range(stages - 1, -1, -1):
+        after = min(curve[stage + 1], track.cap[stage])
+        v = np.array([after])
+        brake, _ = problem.limits(v)
+        deceleration = problem.xi * (-service * brake + problem.resistance(v)
+                                     + track.line_resistance[stage])
+        curve[stage] = min(track.cap[stage], math.sqrt(after * after + 2.0 * track.ds
+                                                       * max(float(deceleration[0]), 1e-6)))
+    return curve
+
+
+def segments(track: Track) -> list[tuple[int, int]]:
+    """Stage ranges between neutral sections: [start, end) in stage indices, each ending
+    where the next unpowered run begins (the last at the mark)."""
+    bounds, previous = [0], True
+    for stage, powered in enumerate(track.powered):
+        if previous and not powered:
+            bounds.append(stage)
+        previous = powered
+    bounds.append(len(track.powered))
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+class SwitchingStrategy:
+    """Seed 002's decision variables, per segment between neutral sections: the cruise
+    speed (a fraction of the segment's highest cap) and the point where coasting
+    starts (a fraction of the segment). In a segment the train applies full traction
+    up to the cruise speed, cruises (held at the cap where it is lower), coasts from
+    the coasting point, and brakes at full service along the braking curve wherever
+    a lower cap ahead or the stop requires it. Traction is off while unpowered."""
+
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        self.segments = segments(problem.track)
+        self.curve = braking_curve(problem)
+        self.dimension = 2 * len(self.segments)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lower = np.tile([0.3, 0.0], len(self.segments))
+        return lower, np.ones(self.dimension)
+
+    def run(self, x: np.ndarray) -> Strategy:
+        problem, track = self.problem, self.problem.track
+        controls = {}
+        for k, (first, last) in enumerate(self.segments):
+            cruise = x[2 * k] * float(track.cap[first:last].max())
+            coast_from = first + x[2 * k + 1] * (last - first)
+            for stage in range(first, last):
+                controls[stage] = (cruise, stage >= coast_from)
+        speeds, forces, modes, chosen = [0.0], [], [], []
+        energy = time = 0.0
+        for stage in range(len(track.positions)):
+            v = speeds[-1]
+            cruise, coasting = controls[stage]
+            brake, traction = (float(a[0]) for a in problem.limits(np.array([v])))
+            hold = float(problem.resistance(np.array([v]))[0]) + track.line_resistance[stage]
+            limit = min(self.curve[stage + 1], track.cap[stage])
+            options = [("coast", 0.0)] if coasting else (
+                [("traction", traction)] if v < min(cruise, limit) else
+                [("cruise", min(max(hold, brake), traction))])
+            kind, force = options[0]
+            if not track.powered[stage] and force > 0:
+                kind, force = "coast", 0.0
+            following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+            if kind == "cruise":
+                following = v if brake <= hold <= traction else following
+            if following > limit:  # the braking curve or a cap: brake down to it
+                kind = "brake"
+                force = max(brake, _force_for(problem, stage, v, limit))
+                following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+            if following <= 1e-9 and stage < len(track.positions) - 1:
+                return self._stuck(track, speeds, forces, modes, chosen, energy, time, stage)
+            time += track.ds / max(0.5 * (v + following), 1e-6)
+            energy += max(force, 0.0) * problem.weight / 1000.0 * track.ds / problem.efficiency
+            speeds.append(following)
+            forces.append(force)
+            modes.append(MODE[kind])
+            chosen.append((kind, force))
+        positions = np.append(track.positions, track.positions[-1] + track.ds)
+        return Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
+                        chosen, energy / 3600.0, time, math.nan)
+
+    def _stuck(self, track, speeds, forces, modes, chosen, energy, time, stage):
+        """A strategy that coasts to a standstill before the mark: it ends there."""
+        positions = track.positions[:len(speeds)]
+        return Strategy(np.append(positions, track.positions[stage]), np.array(speeds + [0.0]),
+                        np.array(forces + [0.0]), np.array(modes + [0]), chosen + [("coast", 0)],
+                        energy / 3600.0, math.inf, math.nan)
+
+
+def _force_for(problem: Problem, stage: int, v: float, target: float) -> float:
+    """The specific force that takes speed v to `target` over the stage (Euler)."""
+    track = problem.track
+    resistance = float(problem.resistance(np.array([0.5 * (v + target)]))[0])
+    return ((target * target - v * v) / (2.0 * track.ds) / problem.xi + resistance
+            + track.line_resistance[stage])
+
+
+def indices(result: Strategy, planned_time: float, stop: float, cap: np.ndarray) -> dict:
+    """Seed 002's indices of a strategy: energy (kWh), time error exp(|T' - T| / TAU),
+    comfort (sum of |change of acceleration| over the run time, m/s^3), stopping error
+    |S - s| (m), speed protection (sum of the excess over the cap, m/s)."""
+    v = result.speeds
+    ds = np.maximum(np.diff(result.positions), 1e-9)
+    acceleration = (v[1:] ** 2 - v[:-1] ** 2) / (2.0 * ds)
+    finished = math.isfinite(result.time)
+    return {
+        "energy_kwh": result.energy_kwh,
+        "time": result.time,
+        "time_index": math.exp(min(abs(result.time - planned_time) / TAU, 50.0))
+        if finished else math.exp(50.0),
+        "comfort": float(np.abs(np.diff(acceleration)).sum() / result.time) if finished
+        else math.inf,
+        "stopping_error": abs(stop - result.positions[-1]),
+        "protection": float(np.maximum(0.0, v[1:len(cap) + 1] - cap[:len(v) - 1]).sum()),
+    }
+
+
+def flat_out(problem: Problem) -> Strategy:
+    """The minimum-time run: full traction up to the cap, held at the cap, full service
+    braking along the braking curve (no coasting but through neutral sections)."""
+    switching = SwitchingStrategy(problem)
+    return switching.run(np.ones(switching.dimension))
+
+
+def objective(values: dict, reference: dict) -> float:
+    """G: the weighted sum of the indices, energy and comfort relative to `reference`
+    (the flat-out run's), the stopping error per 10 m."""
+    return (WEIGHTS["energy"] * values["energy_kwh"] / reference["energy_kwh"]
+            + WEIGHTS["time"] * values["time_index"]
+            + WEIGHTS["comfort"] * values["comfort"] / max(reference["comfort"], 1e-9)
+            + WEIGHTS["stop"] * values["stopping_error"] / 10.0
+            + WEIGHTS["protection"] * values["protection"])

@@ -1,0 +1,103 @@
+"""Seed 002's energy-optimal limit: dynamic programming over (position, speed)."""
+
+import numpy as np
+import pytest
+
+from ato_nodes.core import strategy
+from ato_nodes.core.line import parse_line
+from ato_nodes.core.plant import TrainParameters
+from ato_nodes.core.scenario import complete
+
+CRH5 = TrainParameters.from_values(complete({"plant.train": "crh5"}, []))
+
+
+def line(length=20000.0, limit=69.44, body=""):
+    return parse_line(f"name: t\nlength: {length}\nspeed_limits:\n"
+                      f"  - {{start: 0, end: {length}, limit: {limit}}}\nstations:\n"
+                      f"  - {{name: A, position: 0}}\n  - {{name: B, position: {length}}}\n"
+                      f"{body}")
+
+
+def runs(modes):
+    """The mode sequence with repeats collapsed: [1, 1, 0, -1] -> [1, 0, -1]."""
+    modes = list(modes)
+    return [m for i, m in enumerate(modes) if i == 0 or modes[i - 1] != m]
+
+
+def test_on_a_flat_line_the_optimum_is_full_power_cruise_coast_full_brake():
+    track = strategy.Track.of(line(), CRH5, ds=100.0)
+    fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
+    best = strategy.solve(track, CRH5, 0.9, 1.08 * fastest.time)
+    assert 1.08 * fastest.time - 2.0 < best.time <= 1.08 * fastest.time  # on time, no later
+    assert runs(best.modes) == [1, 0, -1]
+    kinds = [kind for kind, _ in best.controls]
+    accelerating = [fraction for kind, fraction in best.controls if kind == "traction"]
+    assert accelerating and min(accelerating) == 1.0  # full power while accelerating
+    coasting = kinds.index("coast")
+    assert "cruise" in kinds[:coasting] and "traction" not in kinds[coasting:]
+    braking = [fraction for kind, fraction in best.controls if kind == "brake"]
+    assert braking[-1] == 1.0
+    assert best.energy_kwh < fastest.energy_kwh
+    assert best.speeds[0] == 0.0 and best.speeds[-1] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_traction_is_off_through_every_neutral_section_and_the_cap_holds():
+    neutral = "neutral_sections:\n  - {start: 6000, end: 6300}\n  - {start: 12000, end: 12300}\n"
+    grades = "gradients:\n  - {start: 0, end: 20000, grade: 6.0}\n"
+    test_line = line(body=neutral + grades)
+    track = strategy.Track.of(test_line, CRH5, ds=100.0)
+    fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
+    best = strategy.solve(track, CRH5, 0.9, 1.05 * fastest.time)
+    for result in (fastest, best):
+        for start, force in zip(result.positions[:-1], result.forces):
+            stage = (start - CRH5.pantograph_offset, start + track.ds - CRH5.pantograph_offset)
+            if any(stage[0] < s.end and stage[1] > s.start for s in test_line.neutral_sections):
+                assert force <= 0.0
+        assert np.all(result.speeds <= 69.44 - strategy.MARGIN + 1e-9)
+
+
+def test_a_planned_time_below_the_flat_out_run_is_refused():
+    track = strategy.Track.of(line(), CRH5, ds=200.0)
+    fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
+    with pytest.raises(ValueError, match="shorter than the flat-out"):
+        strategy.solve(track, CRH5, 0.9, fastest.time - 5.0)
+
+
+def test_more_time_costs_less_energy():
+    track = strategy.Track.of(line(), CRH5, ds=200.0)
+    fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
+    energies = [strategy.solve(track, CRH5, 0.9, f * fastest.time).energy_kwh
+                for f in (1.03, 1.06, 1.12)]
+    assert energies[0] > energies[1] > energies[2]
+
+
+def test_switching_strategies_keep_traction_off_in_neutral_sections_and_stop_at_the_mark():
+    neutral = "neutral_sections:\n  - {start: 6000, end: 6300}\n"
+    grades = "gradients:\n  - {start: 0, end: 9000, grade: -8.0}\n  - {start: 9000, end: 20000, grade: 5.0}\n"
+    test_line = line(body=neutral + grades)
+    track = strategy.Track.of(test_line, CRH5, ds=100.0)
+    problem = strategy.Problem(track, CRH5, 0.9)
+    switching = strategy.SwitchingStrategy(problem)
+    assert len(switching.segments) == 2
+    rng = np.random.default_rng(0)
+    low, high = switching.bounds()
+    for x in [np.ones(switching.dimension), *(rng.uniform(low, high) for _ in range(20))]:
+        result = switching.run(x)
+        for start, force in zip(result.positions[:-1], result.forces):
+            head = start - CRH5.pantograph_offset
+            if 6000 - track.ds < head < 6300:
+                assert force <= 0.0
+        assert np.all(result.speeds[1:] <= track.cap[:len(result.speeds) - 1] + 1e-6)
+        if np.isfinite(result.time):
+            assert result.positions[-1] == test_line.stop_position
+
+
+def test_the_flat_out_run_is_the_fastest_switching_strategy():
+    track = strategy.Track.of(line(body="gradients:\n  - {start: 0, end: 20000, grade: 4.0}\n"),
+                              CRH5, ds=100.0)
+    problem = strategy.Problem(track, CRH5, 0.9)
+    fastest = strategy.flat_out(problem)
+    switching = strategy.SwitchingStrategy(problem)
+    rng = np.random.default_rng(1)
+    for x in (rng.uniform(*switching.bounds()) for _ in range(10)):
+        assert switching.run(x).time >= fastest.time - 1e-6
