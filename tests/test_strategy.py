@@ -88,8 +88,9 @@ def test_switching_strategies_keep_traction_off_in_neutral_sections_and_stop_at_
             if 6000 - track.ds < head < 6300:
                 assert force <= 0.0
         assert np.all(result.speeds[1:] <= track.cap[:len(result.speeds) - 1] + 1e-6)
-        if np.isfinite(result.time):
+        if np.isfinite(result.time):  # it did not coast to a stand short of the mark
             assert result.positions[-1] == test_line.stop_position
+            assert result.speeds[-1] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_the_flat_out_run_is_the_fastest_switching_strategy():

@@ -257,12 +257,16 @@ def braking_curve(problem: Problem, service: float = 1.0) -> np.ndarray:
     curve = np.zeros(stages + 1)
     for stage in range(stages - 1, -1, -1):
         after = min(curve[stage + 1], track.cap[stage])
-        v = np.array([after])
-        brake, _ = problem.limits(v)
-        deceleration = problem.xi * (-service * brake + problem.resistance(v)
-                                     + track.line_resistance[stage])
-        curve[stage] = min(track.cap[stage], math.sqrt(after * after + 2.0 * track.ds
-                                                       * max(float(deceleration[0]), 1e-6)))
+        # the weakest deceleration over the stage: the brake envelope at its start speed
+        # (it falls with speed), the resistance at its end speed (it rises), so the
+        # train can follow the curve
+        start = after
+        for _ in range(3):
+            brake, _ = problem.limits(np.array([start]))
+            deceleration = problem.xi * (-service * float(brake[0]) + float(
+                problem.resistance(np.array([after]))[0]) + track.line_resistance[stage])
+            start = math.sqrt(after * after + 2.0 * track.ds * max(deceleration, 1e-6))
+        curve[stage] = min(track.cap[stage], start)
     return curve
 
 
@@ -325,6 +329,10 @@ class SwitchingStrategy:
                 kind = "brake"
                 force = max(brake, _force_for(problem, stage, v, limit))
                 following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+                if following > limit:  # correct by what the stage really gave
+                    force = max(brake, force - (following ** 2 - limit ** 2)
+                                / (2.0 * track.ds * problem.xi))
+                    following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
             if following <= 1e-9 and stage < len(track.positions) - 1:
                 return self._stuck(track, speeds, forces, modes, chosen, energy, time, stage)
             time += track.ds / max(0.5 * (v + following), 1e-6)
@@ -368,7 +376,7 @@ def indices(result: Strategy, planned_time: float, stop: float, cap: np.ndarray)
         if finished else math.exp(50.0),
         "comfort": float(np.abs(np.diff(acceleration)).sum() / result.time) if finished
         else math.inf,
-        "stopping_error": abs(stop - result.positions[-1]),
+        "stopping_error": abs(stop - result.positions[-1]) + overrun(result),
         "protection": float(np.maximum(0.0, v[1:len(cap) + 1] - cap[:len(v) - 1]).sum()),
     }
 
@@ -378,6 +386,12 @@ def flat_out(problem: Problem) -> Strategy:
     braking along the braking curve (no coasting but through neutral sections)."""
     switching = SwitchingStrategy(problem)
     return switching.run(np.ones(switching.dimension))
+
+
+def overrun(result: Strategy, deceleration: float = 0.5) -> float:
+    """How far past the mark a strategy still moving at its end would stop, m (at a
+    service deceleration, m/s^2): 0 for one that stands at the mark."""
+    return float(result.speeds[-1]) ** 2 / (2.0 * deceleration)
 
 
 def objective(values: dict, reference: dict) -> float:

@@ -1,0 +1,234 @@
+#!/usr/bin/env python3
+"""Seed 002: optimise a driving strategy along a line (when to apply traction, cruise,
+coast and brake), and compare it with the flat-out run and the DP energy-optimal limit.
+
+    python scripts/optimize_strategy.py --line lines/lanxin-67km.yaml --train crh5 \\
+        --algorithm kh --supplement 0.05 --out bags/strategy-kh
+
+Algorithms: kh and pso search seed 002's switching points (per segment between neutral
+sections: cruise speed and coasting point) on G (core/strategy.py: indices, weights),
+with --evaluations and --seed; dp is the energy-optimal limit (dynamic programming over
+position and speed, the running time enforced by a bisected price of time); mareco is
+a cruise-and-coast strategy (one cruise speed, bisected to meet the time, coasting over
+the last 15 % of every segment); flatout the minimum-time run. The planned time is the
+flat-out run's time x (1 + --supplement). --ignore-neutral plans as if there were no
+neutral sections (the paper's comparison); the result is still evaluated on the line.
+
+Writes in --out: strategy.csv (the strategy file: a header of `# key: value` lines,
+then position m, speed m/s, mode 1 traction / 0 cruise or coast / -1 brake, force
+N/kN at each stage start), indices.json, speed_distance.png (speed against distance
+with the caps, the grade profile and the neutral sections shaded), and for kh and pso
+convergence.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import _cli
+import numpy as np
+
+from ato_nodes.core import strategy
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.line import load_line
+from ato_nodes.core.optimizers import optimize
+from ato_nodes.core.paths import resolve_file
+from ato_nodes.core.plant import TrainParameters
+from ato_nodes.core.scenario import complete, train_preset
+
+ALGORITHMS = ("kh", "pso", "dp", "mareco", "flatout")
+MARECO_COAST = 0.85  # the coasting point of every segment, as a fraction of it
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("--line", required=True, help="line file (relative: msg_config/)")
+    parser.add_argument("--train", required=True, help="train preset (msg_config/trains)")
+    parser.add_argument("--algorithm", required=True, choices=ALGORITHMS)
+    parser.add_argument("--supplement", type=float, default=0.05,
+                        help="running-time supplement over the flat-out run (0.05 = 5 %%)")
+    parser.add_argument("--evaluations", type=int, default=1500)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--ds", type=float, default=100.0, help="stage length, m")
+    parser.add_argument("--ignore-neutral", action="store_true")
+    parser.add_argument("--out", type=Path, required=True)
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = parse_args()
+    if not 0.0 <= args.supplement <= 1.0:
+        _cli.fail("--supplement must lie in [0, 1]")
+    if args.evaluations < 2 or not 10.0 <= args.ds <= 1000.0:
+        _cli.fail("--evaluations must be at least 2 and --ds within 10-1000 m")
+    try:
+        line_path = resolve_file(args.line, [Path.cwd()])
+        line = load_line(line_path)
+        train_preset(args.train)
+        train = TrainParameters.from_values(complete({"plant.train": args.train}, []))
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    if line.stop_position <= 0.0:
+        _cli.fail(f"{line_path}: the line has no stop beyond the departure point")
+    _cli.new_directory(args.out)
+    efficiency = complete({}, [])["plant.efficiency"]
+    track = strategy.Track.of(line, train, args.ds)
+    planning = dataclasses.replace(track, powered=np.ones_like(track.powered)) \
+        if args.ignore_neutral else track
+    problem, plan_problem = (strategy.Problem(t, train, efficiency) for t in (track, planning))
+    fastest = strategy.flat_out(problem)
+    planned = fastest.time * (1.0 + args.supplement)
+    reference = strategy.indices(fastest, planned, line.stop_position, track.cap)
+    started = time.monotonic()
+    history = None
+    if args.algorithm == "flatout":
+        result = fastest
+    elif args.algorithm == "dp":
+        try:
+            result = strategy.solve(planning, train, efficiency, planned)
+        except ValueError as exc:
+            _cli.fail(str(exc))
+    elif args.algorithm == "mareco":
+        result = mareco(plan_problem, planned)
+    else:
+        switching = strategy.SwitchingStrategy(plan_problem)
+
+        def fitness(candidates):
+            return np.array([strategy.objective(strategy.indices(
+                switching.run(x), planned, line.stop_position, track.cap), reference)
+                for x in candidates])
+
+        found = optimize(args.algorithm, fitness, *switching.bounds(),
+                         budget=args.evaluations, seed=args.seed)
+        result, history = switching.run(found.best_x), found
+    seconds = time.monotonic() - started
+    if args.ignore_neutral:  # what the plan does on the real line: traction cut there
+        result = replay(problem, result)
+    values = strategy.indices(result, planned, line.stop_position, track.cap)
+    values["G"] = strategy.objective(values, reference)
+    values["time_error"] = result.time - planned
+    values["energy_saved_vs_flat_out_percent"] = 100 * (1 - result.energy_kwh
+                                                        / fastest.energy_kwh)
+    values["seconds"] = seconds
+    values["traction_in_neutral_sections"] = result.traction_in(line.neutral_sections)
+    args.out.mkdir()
+    header = {"format": "ato-strategy-1", "line": str(line_path),
+              "line_sha256": hashlib.sha256(Path(line_path).read_bytes()).hexdigest(),
+              "train": args.train, "planned_time_s": f"{planned:.3f}",
+              "algorithm": args.algorithm, "supplement": args.supplement}
+    write_strategy(args.out / "strategy.csv", header, result)
+    summary = {"header": header, "indices": values, "flat_out": reference}
+    if history is not None:
+        summary["convergence"] = {"evaluations": history.trace("evaluations").tolist(),
+                                  "best_G": history.trace("best_f").tolist()}
+        plot_convergence(args.out / "convergence.png", history, args.algorithm)
+    (args.out / "indices.json").write_text(json.dumps(summary, indent=2, default=float))
+    plot_strategy(args.out / "speed_distance.png", line, track, result, args.algorithm)
+    print(f"{args.algorithm}: energy {values['energy_kwh']:.1f} kWh "
+          f"({values['energy_saved_vs_flat_out_percent']:.1f} % below flat-out's "
+          f"{fastest.energy_kwh:.1f}), time {result.time:.1f} s (planned {planned:.1f}, error "
+          f"{values['time_error']:+.1f}), comfort {values['comfort']:.4f} m/s^3, stop error "
+          f"{values['stopping_error']:.2f} m, G {values['G']:.4f}, {seconds:.1f} s")
+    print(f"outputs: {args.out}/strategy.csv, indices.json, speed_distance.png")
+
+
+def mareco(problem, planned: float) -> strategy.Strategy:
+    """One cruise speed for every segment, bisected until the run meets the planned
+    time, coasting over the last MARECO_COAST of each segment."""
+    switching = strategy.SwitchingStrategy(problem)
+    low, high = 0.3, 1.0
+    best = switching.run(np.tile([high, MARECO_COAST], len(switching.segments)))
+    for _ in range(30):
+        middle = 0.5 * (low + high)
+        candidate = switching.run(np.tile([middle, MARECO_COAST], len(switching.segments)))
+        if candidate.time > planned:
+            low = middle
+        else:
+            high, best = middle, candidate
+    return best
+
+
+def replay(problem, planned_result: strategy.Strategy) -> strategy.Strategy:
+    """A plan made without neutral sections, driven on the line: each stage's force,
+    traction cut where unpowered."""
+    track = problem.track
+    speeds, energy, elapsed, forces, modes = [0.0], 0.0, 0.0, [], []
+    for stage, force in enumerate(planned_result.forces):
+        if not track.powered[stage] and force > 0:
+            force = 0.0
+        v = speeds[-1]
+        following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+        if following <= 1e-9 and stage < len(planned_result.forces) - 1:
+            elapsed = float("inf")
+            break
+        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
+        energy += max(force, 0.0) * problem.weight / 1000.0 * track.ds / problem.efficiency
+        speeds.append(following)
+        forces.append(force)
+        modes.append(1 if force > 0 else -1 if force < 0 else 0)
+    positions = planned_result.positions[:len(speeds)]
+    return strategy.Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
+                             [], energy / 3600.0, elapsed, planned_result.lam)
+
+
+def write_strategy(path: Path, header: dict, result: strategy.Strategy) -> None:
+    lines = [f"# {key}: {value}" for key, value in header.items()]
+    lines.append("position,speed,mode,force")
+    forces = np.append(result.forces, 0.0)
+    modes = np.append(result.modes, 0)
+    lines += [f"{s:.1f},{v:.5f},{int(m)},{f:.5f}"
+              for s, v, m, f in zip(result.positions, result.speeds, modes, forces)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def plot_strategy(path: Path, line, track, result, name: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figure, (speed, grade) = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True,
+                                          gridspec_kw={"height_ratios": [3, 1]})
+    km = result.positions / 1000.0
+    speed.plot(km, result.speeds * 3.6, lw=1.2, label=f"{name} strategy")
+    speed.step(track.positions / 1000.0, track.cap * 3.6, where="post", color="r", lw=0.8,
+               label="limit - 7 km/h")
+    for axis in (speed, grade):
+        for section in line.neutral_sections:
+            axis.axvspan(section.start / 1000, section.end / 1000, color="orange", alpha=0.3)
+    colours = {1: "tab:green", 0: "tab:gray", -1: "tab:red"}
+    for mode, colour in colours.items():
+        mask = result.modes == mode
+        speed.scatter(km[:-1][mask], np.full(mask.sum(), 5.0 + 5 * mode), s=2, color=colour)
+    speed.set(ylabel="speed (km/h)", title=f"{line.name}: {name} (modes at the bottom: "
+              "green traction, grey cruise/coast, red brake; orange: neutral sections)")
+    speed.legend(loc="upper right")
+    speed.grid(alpha=0.3)
+    for section in line.gradients:
+        grade.plot([section.start / 1000, section.end / 1000], [section.value] * 2, "k")
+    grade.set(xlabel="distance (km)", ylabel="grade (per mille)")
+    grade.grid(alpha=0.3)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+
+
+def plot_convergence(path: Path, history, name: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figure, axis = plt.subplots(figsize=(8, 4))
+    axis.plot(history.trace("evaluations"), history.trace("best_f"), label=name)
+    axis.set(xlabel="evaluations", ylabel="best G", title="convergence")
+    axis.grid(alpha=0.3)
+    axis.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)
