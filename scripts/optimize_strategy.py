@@ -119,11 +119,11 @@ def main() -> None:
     values["seconds"] = seconds
     values["traction_in_neutral_sections"] = result.traction_in(line.neutral_sections)
     args.out.mkdir()
-    header = {"format": "ato-strategy-1", "line": str(line_path),
+    header = {"line": args.line,
               "line_sha256": hashlib.sha256(Path(line_path).read_bytes()).hexdigest(),
               "train": args.train, "planned_time_s": f"{planned:.3f}",
               "algorithm": args.algorithm, "supplement": args.supplement}
-    write_strategy(args.out / "strategy.csv", header, result)
+    strategy.write_strategy(args.out / "strategy.csv", header, result)
     summary = {"header": header, "indices": values, "flat_out": reference}
     if history is not None:
         summary["convergence"] = {"evaluations": history.trace("evaluations").tolist(),
@@ -176,16 +176,6 @@ def replay(problem, planned_result: strategy.Strategy) -> strategy.Strategy:
     positions = planned_result.positions[:len(speeds)]
     return strategy.Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
                              [], energy / 3600.0, elapsed, planned_result.lam)
-
-
-def write_strategy(path: Path, header: dict, result: strategy.Strategy) -> None:
-    lines = [f"# {key}: {value}" for key, value in header.items()]
-    lines.append("position,speed,mode,force")
-    forces = np.append(result.forces, 0.0)
-    modes = np.append(result.modes, 0)
-    lines += [f"{s:.1f},{v:.5f},{int(m)},{f:.5f}"
-              for s, v, m, f in zip(result.positions, result.speeds, modes, forces)]
-    path.write_text("\n".join(lines) + "\n")
 
 
 def plot_strategy(path: Path, line, track, result, name: str) -> None:

@@ -1,12 +1,17 @@
 """Seed 002's energy-optimal limit: dynamic programming over (position, speed)."""
 
+import hashlib
+
 import numpy as np
 import pytest
 
 from ato_nodes.core import strategy
+from ato_nodes.core.context import RunContext
+from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.line import parse_line
+from ato_nodes.core.loop import simulate
 from ato_nodes.core.plant import TrainParameters
-from ato_nodes.core.scenario import complete
+from ato_nodes.core.scenario import apply_overrides, complete, load_scenario
 
 CRH5 = TrainParameters.from_values(complete({"plant.train": "crh5"}, []))
 
@@ -102,3 +107,62 @@ def test_the_flat_out_run_is_the_fastest_switching_strategy():
     rng = np.random.default_rng(1)
     for x in (rng.uniform(*switching.bounds()) for _ in range(10)):
         assert switching.run(x).time >= fastest.time - 1e-6
+
+
+def shipped_like_strategy(tmp_path, train="crh5"):
+    """A DP strategy for a short line, written as scripts/optimize_strategy.py does."""
+    path = tmp_path / "line.yaml"
+    path.write_text("name: t\nlength: 8000\nspeed_limits:\n  - {start: 0, end: 8000, limit: 50}\n"
+                    "neutral_sections:\n  - {start: 3000, end: 3300}\n"
+                    "stations:\n  - {name: A, position: 0}\n  - {name: B, position: 8000}\n")
+    track = strategy.Track.of(parse_line(path.read_text()), CRH5, ds=100.0)
+    result = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
+    header = {"line": str(path), "line_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+              "train": train}
+    strategy.write_strategy(tmp_path / "strategy.csv", header, result)
+    return path, tmp_path / "strategy.csv", result
+
+
+def strategy_run(line_path, strategy_path, *overrides):
+    return apply_overrides(load_scenario("hsr-neutral"), [
+        f"line.file={line_path}", "profile.kind=strategy",
+        f"profile.strategy.file={strategy_path}", *overrides])
+
+
+def test_the_strategy_profile_publishes_the_strategy_and_its_modes(tmp_path):
+    line_path, path, result = shipped_like_strategy(tmp_path)
+    context = RunContext(strategy_run(line_path, path))
+    plan = context.plan
+    assert plan.position_indexed
+    assert plan.speed(0.0, 0.0) == pytest.approx(0.3)
+    for i in (5, 20, 40):
+        assert plan.speed(0.0, result.positions[i]) == pytest.approx(result.speeds[i])
+        assert plan.mode(result.positions[i] + 1.0) == result.modes[i]
+        assert plan.force(result.positions[i] + 1.0) == pytest.approx(result.forces[i], abs=1e-5)
+    assert plan.speed(0.0, 8000.0) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_tracked_strategy_has_no_traction_in_the_neutral_section(tmp_path):
+    line_path, path, _ = shipped_like_strategy(tmp_path)
+    series = simulate(strategy_run(line_path, path, "run.duration=400"))
+    pantograph = series["position"] - CRH5.pantograph_offset
+    inside = (pantograph >= 3000) & (pantograph <= 3300)
+    # the sample at which the pantograph has just entered still shows the force of the
+    # sub-step that began outside: traction is cut from the next sub-step on
+    held = inside[1:] & inside[:-1]
+    assert held.sum() > 10 and np.all(series["force"][1:][held] <= 0.0)
+
+
+@pytest.mark.parametrize("change, message", [
+    ("line", "planned for another line"), ("train", "planned for train 'crh380al'"),
+    ("format", "not a strategy file")])
+def test_a_strategy_file_for_another_line_or_train_is_one_line(tmp_path, change, message):
+    line_path, path, _ = shipped_like_strategy(tmp_path, "crh380al" if change == "train"
+                                               else "crh5")
+    if change == "line":
+        line_path.write_text(line_path.read_text().replace("limit: 50", "limit: 49"))
+    if change == "format":
+        path.write_text(path.read_text().replace("ato-strategy-1", "something-else"))
+    with pytest.raises(ScenarioError, match=message) as caught:
+        strategy_run(line_path, path)
+    assert "\n" not in str(caught.value)

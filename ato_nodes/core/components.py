@@ -13,5 +13,5 @@ CONTROLLERS = Registry("controller", "han_adrc", ("controller",), (
 ))
 
 PROFILES = Registry("profile", "seed000", PROFILE_NODES, (
-    profiles.SEED000, profiles.STEP, profiles.TABLE, profiles.ATO,
+    profiles.SEED000, profiles.STEP, profiles.TABLE, profiles.ATO, profiles.STRATEGY,
 ))

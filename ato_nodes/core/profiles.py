@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -110,6 +111,37 @@ class TableProfile:
     def speed(self, t: float, position: float = 0.0) -> float:
         x = t if self.axis == "time" else position
         return float(np.interp(x, self.points, self.speeds))
+
+
+class StrategyProfile:
+    """A driving strategy (seed 002, scripts/optimize_strategy.py) as the target: its
+    speed against distance, interpolated in v^2 (kinetic energy is what a held force
+    changes linearly along the track), at least `start_speed` at the departure point
+    (a position-indexed target of 0 would never start the train). The strategy's mode
+    (1 traction, 0 cruise/coast, -1 brake) and planned force (N/kN) at a position are
+    there for a controller's feedforward: context.plan.mode(s), context.plan.force(s)."""
+
+    position_indexed = True
+
+    def __init__(self, plan, start_speed: float):
+        self.positions = plan.positions
+        energies = plan.speeds ** 2
+        energies[0] = max(energies[0], start_speed ** 2)
+        self.energies = energies
+        self.modes, self.forces = plan.modes, plan.forces
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        return math.sqrt(max(0.0, float(np.interp(position, self.positions, self.energies))))
+
+    def _stage(self, position: float) -> int:
+        index = int(np.searchsorted(self.positions, position, side="right")) - 1
+        return min(max(index, 0), len(self.positions) - 1)
+
+    def mode(self, position: float) -> int:
+        return int(self.modes[self._stage(position)])
+
+    def force(self, position: float) -> float:
+        return float(self.forces[self._stage(position)])
 
 
 class AtoCurve:
@@ -284,6 +316,40 @@ def _ato(values, context) -> AtoCurve:
     return ato_curve(values, line)
 
 
+STRATEGY_PARAMETERS = (
+    param("profile.strategy.file", "", "strategy file (scripts/optimize_strategy.py) planned "
+          "for this run's line and train; relative to the scenario file, else to msg_config/",
+          PROFILE_NODES),
+    param("profile.strategy.start_speed", 0.3, "strategy target at the departure point, m/s",
+          PROFILE_NODES, 0.01, 10.0),
+)
+
+
+def _strategy(values, context) -> StrategyProfile:
+    from . import strategy  # the DP and its helpers are not needed by the other kinds
+    path = values["profile.strategy.file"]
+    if not path:
+        raise ScenarioError("profile.kind is strategy but profile.strategy.file is empty")
+    if context.line is None:
+        raise ScenarioError("profile.kind is strategy but line.file is empty")
+    try:
+        plan = strategy.read_strategy(path)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+    digest = hashlib.sha256(Path(values["line.file"]).read_bytes()).hexdigest()
+    if plan.header.get("line_sha256") != digest:
+        raise ScenarioError(f"strategy file {path} was planned for another line "
+                            f"({plan.header.get('line', '?')}), not {values['line.file']}")
+    if plan.header.get("train") != values["plant.train"]:
+        raise ScenarioError(f"strategy file {path} was planned for train "
+                            f"{plan.header.get('train')!r}, the run uses "
+                            f"{values['plant.train'] or '(none)'!r}")
+    if abs(plan.positions[-1] - context.line.stop_position) > 1.0:
+        raise ScenarioError(f"strategy file {path} ends at {plan.positions[-1]:.0f} m, the "
+                            f"line's stop is at {context.line.stop_position:.0f} m")
+    return StrategyProfile(plan, values["profile.strategy.start_speed"])
+
+
 SEED000 = Component(
     "seed000", "seed 000 eq. 25, time-indexed", SEED000_PARAMETERS,
     lambda values, context: Seed000Profile(**{
@@ -292,5 +358,7 @@ STEP = Component(
     "step", "a speed step at a given time", STEP_PARAMETERS,
     lambda values, context: StepProfile(values["profile.step.speed"], values["profile.step.time"]))
 TABLE = Component("table", "CSV table against time or position", TABLE_PARAMETERS, _table)
+STRATEGY = Component("strategy", "a driving strategy from scripts/optimize_strategy.py "
+                     "(seed 002), distance-indexed", STRATEGY_PARAMETERS, _strategy)
 ATO = Component("ato", "distance-indexed ATO curve from the line, braking and planned run time",
                 ATO_PARAMETERS, _ato)

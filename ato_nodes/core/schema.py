@@ -98,7 +98,7 @@ SPECS: tuple[ParamSpec, ...] = (*BASE, *PROFILES.parameters(), *CONTROLLERS.para
 SPEC_BY_NAME = {spec.name: spec for spec in SPECS}
 if len(SPEC_BY_NAME) != len(SPECS):
     raise ValueError("a parameter name is defined twice in the schema")
-FILE_PARAMETERS = ("profile.table.file", "line.file", "gpc.model")  # resolved to absolute paths
+FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "gpc.model")  # resolved to absolute paths
 
 
 def defaults() -> dict[str, Any]:

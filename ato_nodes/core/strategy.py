@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -402,3 +403,56 @@ def objective(values: dict, reference: dict) -> float:
             + WEIGHTS["comfort"] * values["comfort"] / max(reference["comfort"], 1e-9)
             + WEIGHTS["stop"] * values["stopping_error"] / 10.0
             + WEIGHTS["protection"] * values["protection"])
+
+
+# The strategy file ------------------------------------------------------------------
+FORMAT = "ato-strategy-1"
+
+
+def write_strategy(path, header: dict, result: Strategy) -> None:
+    """The strategy file: `# key: value` header lines (format, line and its sha256,
+    train, planned time, algorithm, ...), then `position,speed,mode,force` rows (m, m/s,
+    1 traction / 0 cruise or coast / -1 brake, N/kN) at every stage start and the end."""
+    lines = [f"# {key}: {value}" for key, value in {"format": FORMAT, **header}.items()]
+    lines.append("position,speed,mode,force")
+    forces = np.append(result.forces, 0.0)
+    modes = np.append(result.modes, 0)
+    lines += [f"{s:.1f},{v:.5f},{int(m)},{f:.5f}"
+              for s, v, m, f in zip(result.positions, result.speeds, modes, forces)]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+@dataclass(frozen=True)
+class StrategyFile:
+    header: dict
+    positions: np.ndarray
+    speeds: np.ndarray
+    modes: np.ndarray
+    forces: np.ndarray
+
+
+def read_strategy(path) -> StrategyFile:
+    """A strategy file, checked: ValueError (one line) if it is not one."""
+    try:
+        text = Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read strategy file {path}: {getattr(exc, 'strerror', exc)}") \
+            from None
+    header, rows = {}, []
+    for number, line in enumerate(text.splitlines(), 1):
+        if line.startswith("#"):
+            key, _, value = line[1:].partition(":")
+            header[key.strip()] = value.strip()
+        elif line.strip() and line.strip() != "position,speed,mode,force":
+            try:
+                rows.append([float(v) for v in line.split(",")])
+            except ValueError:
+                raise ValueError(f"{path} line {number}: four numbers expected") from None
+    if header.get("format") != FORMAT:
+        raise ValueError(f"{path}: not a strategy file (format {header.get('format')!r})")
+    data = np.array(rows, dtype=float)
+    if data.ndim != 2 or data.shape[1] != 4 or len(data) < 2 or not np.all(np.isfinite(data)) \
+            or np.any(np.diff(data[:, 0]) <= 0) or np.any(data[:, 1] < 0):
+        raise ValueError(f"{path}: rows must be increasing positions with finite, "
+                         f"non-negative speeds")
+    return StrategyFile(header, data[:, 0], data[:, 1], data[:, 2].astype(int), data[:, 3])
