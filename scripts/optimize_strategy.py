@@ -24,7 +24,6 @@ convergence.png.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import hashlib
 import json
 import time
@@ -36,13 +35,10 @@ import numpy as np
 from ato_nodes.core import strategy
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.line import load_line
-from ato_nodes.core.optimizers import optimize
 from ato_nodes.core.paths import resolve_file
 from ato_nodes.core.plant import TrainParameters
 from ato_nodes.core.scenario import complete, train_preset
 
-ALGORITHMS = ("kh", "pso", "dp", "mareco", "flatout")
-MARECO_COAST = 0.85  # the coasting point of every segment, as a fraction of it
 
 
 def parse_args() -> argparse.Namespace:
@@ -51,9 +47,11 @@ def parse_args() -> argparse.Namespace:
                                      epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("--line", required=True, help="line file (relative: msg_config/)")
     parser.add_argument("--train", required=True, help="train preset (msg_config/trains)")
-    parser.add_argument("--algorithm", required=True, choices=ALGORITHMS)
+    parser.add_argument("--algorithm", required=True, choices=strategy.ALGORITHMS)
     parser.add_argument("--supplement", type=float, default=0.05,
                         help="running-time supplement over the flat-out run (0.05 = 5 %%)")
+    parser.add_argument("--time", type=float, help="planned running time, s (default: the "
+                        "flat-out run's time x (1 + --supplement))")
     parser.add_argument("--evaluations", type=int, default=1500)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--ds", type=float, default=100.0, help="stage length, m")
@@ -77,40 +75,28 @@ def main() -> None:
         _cli.fail(str(exc))
     if line.stop_position <= 0.0:
         _cli.fail(f"{line_path}: the line has no stop beyond the departure point")
+    _cli.seconds(args.time, "--time")
     _cli.new_directory(args.out)
     efficiency = complete({}, [])["plant.efficiency"]
     track = strategy.Track.of(line, train, args.ds)
-    planning = dataclasses.replace(track, powered=np.ones_like(track.powered)) \
-        if args.ignore_neutral else track
+    planning = track.without_neutral_sections() if args.ignore_neutral else track
     problem, plan_problem = (strategy.Problem(t, train, efficiency) for t in (track, planning))
     fastest = strategy.flat_out(problem)
-    planned = fastest.time * (1.0 + args.supplement)
+    planned = fastest.time * (1.0 + args.supplement) if args.time is None else args.time
+    if not planned >= fastest.time:
+        _cli.fail(f"--time {planned:g} s is shorter than the flat-out run's "
+                  f"{fastest.time:.1f} s on {line_path}")
     reference = strategy.indices(fastest, planned, line.stop_position, track.cap)
     started = time.monotonic()
-    history = None
-    if args.algorithm == "flatout":
-        result = fastest
-    elif args.algorithm == "dp":
-        try:
-            result = strategy.solve(planning, train, efficiency, planned)
-        except ValueError as exc:
-            _cli.fail(str(exc))
-    elif args.algorithm == "mareco":
-        result = mareco(plan_problem, planned)
-    else:
-        switching = strategy.SwitchingStrategy(plan_problem)
-
-        def fitness(candidates):
-            return np.array([strategy.objective(strategy.indices(
-                switching.run(x), planned, line.stop_position, track.cap), reference)
-                for x in candidates])
-
-        found = optimize(args.algorithm, fitness, *switching.bounds(),
-                         budget=args.evaluations, seed=args.seed)
-        result, history = switching.run(found.best_x), found
+    try:
+        result, history = strategy.plan(args.algorithm, problem, plan_problem, planned,
+                                        reference, evaluations=args.evaluations,
+                                        seed=args.seed)
+    except ValueError as exc:  # the DP's grid runs a little slower than the flat-out run
+        _cli.fail(str(exc))
     seconds = time.monotonic() - started
     if args.ignore_neutral:  # what the plan does on the real line: traction cut there
-        result = replay(problem, result)
+        result = strategy.replay(problem, result)
     values = strategy.indices(result, planned, line.stop_position, track.cap)
     values["G"] = strategy.objective(values, reference)
     values["time_error"] = result.time - planned
@@ -139,45 +125,6 @@ def main() -> None:
     print(f"outputs: {args.out}/strategy.csv, indices.json, speed_distance.png")
 
 
-def mareco(problem, planned: float) -> strategy.Strategy:
-    """One cruise speed for every segment, bisected until the run meets the planned
-    time, coasting over the last MARECO_COAST of each segment."""
-    switching = strategy.SwitchingStrategy(problem)
-    low, high = 0.3, 1.0
-    best = switching.run(np.tile([high, MARECO_COAST], len(switching.segments)))
-    for _ in range(30):
-        middle = 0.5 * (low + high)
-        candidate = switching.run(np.tile([middle, MARECO_COAST], len(switching.segments)))
-        if candidate.time > planned:
-            low = middle
-        else:
-            high, best = middle, candidate
-    return best
-
-
-def replay(problem, planned_result: strategy.Strategy) -> strategy.Strategy:
-    """A plan made without neutral sections, driven on the line: each stage's force,
-    traction cut where unpowered."""
-    track = problem.track
-    speeds, energy, elapsed, forces, modes = [0.0], 0.0, 0.0, [], []
-    for stage, force in enumerate(planned_result.forces):
-        if not track.powered[stage] and force > 0:
-            force = 0.0
-        v = speeds[-1]
-        following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-        if following <= 1e-9 and stage < len(planned_result.forces) - 1:
-            elapsed = float("inf")
-            break
-        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
-        energy += max(force, 0.0) * problem.weight / 1000.0 * track.ds / problem.efficiency
-        speeds.append(following)
-        forces.append(force)
-        modes.append(1 if force > 0 else -1 if force < 0 else 0)
-    positions = planned_result.positions[:len(speeds)]
-    return strategy.Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
-                             [], energy / 3600.0, elapsed, planned_result.lam)
-
-
 def plot_strategy(path: Path, line, track, result, name: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -195,8 +142,9 @@ def plot_strategy(path: Path, line, track, result, name: str) -> None:
     for mode, colour in colours.items():
         mask = result.modes == mode
         speed.scatter(km[:-1][mask], np.full(mask.sum(), 5.0 + 5 * mode), s=2, color=colour)
-    speed.set(ylabel="speed (km/h)", title=f"{line.name}: {name} (modes at the bottom: "
-              "green traction, grey cruise/coast, red brake; orange: neutral sections)")
+    speed.set(ylabel="speed (km/h)")
+    speed.set_title(f"{name} strategy, {line.name}\nmodes at the bottom: green traction, "
+                    "grey cruise or coast, red brake; orange: neutral sections", fontsize=9)
     speed.legend(loc="upper right")
     speed.grid(alpha=0.3)
     for section in line.gradients:

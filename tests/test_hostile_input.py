@@ -149,3 +149,27 @@ def test_identify_refuses_bad_options_in_one_line(tmp_path, args, words):
 def test_identify_refuses_a_missing_bag_in_one_line(tmp_path):
     one_line_exit_2(script("identify.py", tmp_path / "no-bag", "--out", tmp_path / "m.npz"),
                     "no-bag")
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--time", "600"], ["shorter than the flat-out run"]),
+    (["--line", "lines/no-such-line.yaml"], ["no-such-line"]),
+    (["--train", "nonexistent"], ["nonexistent"]),
+])
+def test_optimize_strategy_refuses_impossible_plans_in_one_line(tmp_path, args, words):
+    base = {"--line": "lines/lanxin-67km.yaml", "--train": "crh5"}
+    base.update(dict(zip(args[::2], args[1::2])))
+    options = [item for pair in base.items() for item in pair]
+    extra = [a for a in args if a not in base and a not in base.values()]
+    result = script("optimize_strategy.py", *options, *extra, "--algorithm", "flatout",
+                    "--out", tmp_path / "out")
+    one_line_exit_2(result, *words)
+    assert not (tmp_path / "out").exists()
+
+
+def test_optimize_strategy_refuses_a_line_without_a_stop(tmp_path):
+    path = line_file(tmp_path).read_text().replace("position: 900", "position: 0")
+    (tmp_path / "nostop.yaml").write_text(path)
+    one_line_exit_2(script("optimize_strategy.py", "--line", tmp_path / "nostop.yaml",
+                           "--train", "crh5", "--algorithm", "dp", "--out", tmp_path / "o"),
+                    "no stop")

@@ -12,6 +12,7 @@ import pytest
 
 from ato_nodes.analysis import write_report
 from ato_nodes.bagio import read_parameters, read_run, read_series
+from ato_nodes.core.line import load_line
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import kept_file, score_series
@@ -72,6 +73,24 @@ def test_the_gpc_with_online_correction_runs_through_the_stack_and_the_bag_keeps
     markdown, _ = write_report([read_run(bag)], [], tmp_path / "report")
     assert "## Controller outputs" in markdown.read_text()
     assert (tmp_path / "report" / "outputs_1.png").stat().st_size > 0
+
+
+def test_the_seed002_strategy_is_tracked_through_the_stack_with_no_traction_in_neutral_sections(
+        tmp_path):
+    values = apply_overrides(load_scenario("seed002-hsr"), ["run.duration=300"])
+    bag = tmp_path / "bag"
+    outcome = Stack(values, bag, quiet=True, timeout=180).run()
+    assert outcome.ok, outcome.message
+    assert_bag_equals_in_process(bag, values)
+    series = read_series(bag)
+    line = load_line(values["line.file"])
+    pantograph = series["position"] - values["plant.pantograph_offset"]
+    inside = np.array([line.in_neutral_section(x) for x in pantograph])
+    held = inside[1:] & inside[:-1]  # the entering sample shows the last powered sub-step
+    assert held.sum() > 10 and np.all(series["force"][1:][held] <= 0.0)
+    parameters = read_parameters(bag)
+    assert kept_file(parameters, "profile.strategy.file") == Path(
+        values["profile.strategy.file"]).read_bytes()
 
 
 def start_nodes_directly(parameter_file: Path, bag: Path, report: Path):

@@ -25,6 +25,7 @@ energy_weight=0)` is the minimum-time (flat-out) run.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,6 +68,11 @@ class Track:
             pantograph = [x - train.pantograph_offset for x in (s, s + ds / 2, s + ds)]
             powered.append(not any(line.in_neutral_section(x) for x in pantograph))
         return cls(starts, ds, np.array(resistance), np.array(cap), np.array(powered))
+
+
+    def without_neutral_sections(self) -> Track:
+        """The same track powered everywhere (a plan that ignores neutral sections)."""
+        return dataclasses.replace(self, powered=np.ones_like(self.powered))
 
 
 @dataclass
@@ -283,18 +289,25 @@ def segments(track: Track) -> list[tuple[int, int]]:
     return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
 
 
+# Switching strategies brake along a curve at this share of the brake envelope: the
+# margin a tracking controller with dead time and lag needs to follow it (measured:
+# at the full envelope the stack's PID overran the stop by 23 m).
+PLANNED_BRAKING = 0.8
+
+
 class SwitchingStrategy:
     """Seed 002's decision variables, per segment between neutral sections: the cruise
     speed (a fraction of the segment's highest cap) and the point where coasting
     starts (a fraction of the segment). In a segment the train applies full traction
     up to the cruise speed, cruises (held at the cap where it is lower), coasts from
-    the coasting point, and brakes at full service along the braking curve wherever
-    a lower cap ahead or the stop requires it. Traction is off while unpowered."""
+    the coasting point, and brakes along the braking curve (PLANNED_BRAKING of the
+    envelope) wherever a lower cap ahead or the stop requires it. Traction is off
+    while unpowered."""
 
     def __init__(self, problem: Problem):
         self.problem = problem
         self.segments = segments(problem.track)
-        self.curve = braking_curve(problem)
+        self.curve = braking_curve(problem, PLANNED_BRAKING)
         self.dimension = 2 * len(self.segments)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -383,8 +396,9 @@ def indices(result: Strategy, planned_time: float, stop: float, cap: np.ndarray)
 
 
 def flat_out(problem: Problem) -> Strategy:
-    """The minimum-time run: full traction up to the cap, held at the cap, full service
-    braking along the braking curve (no coasting but through neutral sections)."""
+    """The minimum-time run of a switching strategy: full traction up to the cap, held
+    at the cap, braking along the braking curve (no coasting but through neutral
+    sections)."""
     switching = SwitchingStrategy(problem)
     return switching.run(np.ones(switching.dimension))
 
@@ -456,3 +470,70 @@ def read_strategy(path) -> StrategyFile:
         raise ValueError(f"{path}: rows must be increasing positions with finite, "
                          f"non-negative speeds")
     return StrategyFile(header, data[:, 0], data[:, 1], data[:, 2].astype(int), data[:, 3])
+
+
+# Planning by algorithm ----------------------------------------------------------------
+ALGORITHMS = ("kh", "pso", "dp", "mareco", "flatout")
+MARECO_COAST = 0.85  # the coasting point of every segment, as a fraction of it
+
+
+def plan(algorithm: str, problem: Problem, planning: Problem, planned: float,
+         reference: dict, *, evaluations: int = 1500, seed: int = 1):
+    """(strategy, optimizer result or None) of one algorithm. `planning` is the problem
+    the plan is made on (without neutral sections, for the paper's comparison), `problem`
+    the line as it is; G's reference is the flat-out run's indices."""
+    from .optimizers import optimize
+    if algorithm == "flatout":
+        return flat_out(problem), None
+    if algorithm == "dp":
+        return solve(planning.track, planning.train, planning.efficiency, planned), None
+    if algorithm == "mareco":
+        return mareco(planning, planned), None
+    switching = SwitchingStrategy(planning)
+    stop = problem.track.positions[-1] + problem.track.ds
+
+    def fitness(candidates):
+        return np.array([objective(indices(switching.run(x), planned, stop, problem.track.cap),
+                                   reference) for x in candidates])
+
+    found = optimize(algorithm, fitness, *switching.bounds(), budget=evaluations, seed=seed)
+    return switching.run(found.best_x), found
+
+
+def mareco(problem, planned: float) -> Strategy:
+    """One cruise speed for every segment, bisected until the run meets the planned
+    time, coasting over the last MARECO_COAST of each segment."""
+    switching = SwitchingStrategy(problem)
+    low, high = 0.3, 1.0
+    best = switching.run(np.tile([high, MARECO_COAST], len(switching.segments)))
+    for _ in range(30):
+        middle = 0.5 * (low + high)
+        candidate = switching.run(np.tile([middle, MARECO_COAST], len(switching.segments)))
+        if candidate.time > planned:
+            low = middle
+        else:
+            high, best = middle, candidate
+    return best
+
+
+def replay(problem, planned_result: Strategy) -> Strategy:
+    """A plan made without neutral sections, driven on the line: each stage's force,
+    traction cut where unpowered."""
+    track = problem.track
+    speeds, energy, elapsed, forces, modes = [0.0], 0.0, 0.0, [], []
+    for stage, force in enumerate(planned_result.forces):
+        if not track.powered[stage] and force > 0:
+            force = 0.0
+        v = speeds[-1]
+        following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+        if following <= 1e-9 and stage < len(planned_result.forces) - 1:
+            elapsed = float("inf")
+            break
+        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
+        energy += max(force, 0.0) * problem.weight / 1000.0 * track.ds / problem.efficiency
+        speeds.append(following)
+        forces.append(force)
+        modes.append(1 if force > 0 else -1 if force < 0 else 0)
+    positions = planned_result.positions[:len(speeds)]
+    return Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
+                             [], energy / 3600.0, elapsed, planned_result.lam)
