@@ -30,7 +30,10 @@ from ato_nodes.core.scenario import ros_parameter_file
 from ato_nodes.core.schema import NODES
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-DOMAIN_LOCK_PORT = 47300   # TCP port base + domain id held while a run uses that domain
+# TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
+# range (32768-60999), where an outgoing connection could be handed the port (seen: the
+# old base 47300 made a fault test fail in a fresh-clone CI run)
+DOMAIN_LOCK_PORT = 30300
 DOMAIN_IDS = range(1, 102)  # 0 is left for the user's own ROS graph
 STOP_GRACE = 5.0           # s for nodes to exit after SIGINT before SIGTERM / SIGKILL
 POLL = 0.05                # s between checks of the children
