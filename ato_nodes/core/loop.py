@@ -112,10 +112,13 @@ class PlantStage:
     """The train, its line and its speed sensor (noise and quantisation, seeded)."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
-        nominal = TrainParameters.from_values(values)
+        nominal = TrainParameters.from_values(values)  # what the ATO knows; the real train:
         factor = values["plant.resistance_factor"]
-        self.params = dataclasses.replace(nominal, **{
-            name: factor * getattr(nominal, name) for name in ("davis_a", "davis_b", "davis_c")})
+        self.params = dataclasses.replace(
+            nominal, mass=values["plant.mass_factor"] * nominal.mass,
+            actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
+            **{name: factor * getattr(nominal, name) for name in ("davis_a", "davis_b",
+                                                                   "davis_c")})
         if line is None and values["line.file"]:
             line = load_line(values["line.file"])
         self.train = PointMassTrain(

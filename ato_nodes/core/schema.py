@@ -69,6 +69,11 @@ BASE: tuple[ParamSpec, ...] = (
     param("plant.resistance_factor", 1.0, "the real train's basic running resistance over the "
        "nominal one (plant.davis_*), which the controller and the profile know: a model "
        "error the ATO does not see (1 = the nominal train)", "plant", 0.1, 10.0),
+    param("plant.mass_factor", 1.0, "the real train's mass over the nominal plant.mass (its "
+       "load: the envelopes in kN and kW then give less specific force), unknown to the ATO",
+       "plant", 0.1, 10.0),
+    param("plant.lag_factor", 1.0, "the real actuator lag over the nominal "
+       "plant.actuator_lag, unknown to the ATO", "plant", 0.0, 10.0),
     param("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
        "the scorer from the bag's run parameters", PLANT_NODES, 0.01, 1.0),
     param("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", PLANT_NODES,

@@ -125,7 +125,8 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
     if "speed_limit" in series and not np.any(np.isfinite(series["speed_limit"])):
         series = {name: values for name, values in series.items() if name != "speed_limit"}
     indices = operation_indices(
-        series, mass=parameters.get("plant.mass", math.nan),
+        series,  # the real train's mass: the nominal times its load factor
+        mass=parameters.get("plant.mass", math.nan) * parameters.get("plant.mass_factor", 1.0),
         gravity=parameters.get("plant.gravity", 9.8),
         efficiency=parameters.get("plant.efficiency", 0.9),
         stop_position=line.stop_position if to_station else None,

@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Robustness of a controller: one scenario over a seeded spread of real trains.
+
+    python scripts/robustness.py seed004-metro-tuned --samples 50 --out bags/robust-metro
+
+Each sample draws, uniformly in the given ranges, the real train's mass (its load,
+as a share of the nominal plant.mass), running resistance and actuator lag (shares of
+the nominal ones), and a speed-sensor noise seed; the controller and the profile keep
+the nominal train (plant.mass_factor, plant.resistance_factor, plant.lag_factor are the
+plant node's alone). Runs in-process in --workers processes; prints and writes
+(robustness.json, robustness.png) the median and worst of max abs(e), p95 abs(e),
+abs(stopping error), max jerk over 1 s and ITAE.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import _cli
+import numpy as np
+
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.core.scoring import score_series
+
+INDICES = (  # key, heading, worst is the largest of
+    ("max_abs_error_kmh", "max abs(e) km/h"),
+    ("p95_abs_error_kmh", "p95 abs(e) km/h"),
+    ("abs_stopping_error", "abs(stop error) m"),
+    ("max_jerk", "max jerk (1 s) m/s^3"),
+    ("itae", "ITAE"),
+)
+
+
+def span(text: str, name: str) -> tuple[float, float]:
+    try:
+        low, high = (float(v) for v in text.split(":"))
+    except ValueError:
+        _cli.fail(f"--{name} expects LOW:HIGH, got {text!r}")
+    if not (math.isfinite(low) and math.isfinite(high) and 0 < low <= high):
+        _cli.fail(f"--{name} needs 0 < LOW <= HIGH, got {text!r}")
+    return low, high
+
+
+def run_sample(job: tuple[dict, dict]) -> dict:
+    values, draw = job
+    series = simulate(apply_overrides(values, [f"{k}={v}" for k, v in draw.items()]))
+    indices = score_series(series, {**values, **draw})
+    error = np.abs(series["target"] - series["speed"]) * 3.6
+    result = {**draw, **{key: float(indices[key]) for key, _ in INDICES
+                         if key in indices}}
+    result["p95_abs_error_kmh"] = float(np.percentile(error, 95))
+    if "stopping_error" in indices:
+        result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("scenario")
+    parser.add_argument("--samples", type=int, default=50)
+    parser.add_argument("--mass", default="0.85:1.3", help="mass range, share of the nominal "
+                        "(default 0.85:1.3, empty to crush load)")
+    parser.add_argument("--resistance", default="0.8:1.2", help="resistance range (+-20 %%)")
+    parser.add_argument("--lag", default="0.7:1.3", help="actuator lag range (+-30 %%)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    if args.samples < 1 or args.workers < 1:
+        _cli.fail("--samples and --workers must be positive")
+    ranges = {"plant.mass_factor": span(args.mass, "mass"),
+              "plant.resistance_factor": span(args.resistance, "resistance"),
+              "plant.lag_factor": span(args.lag, "lag")}
+    try:
+        check_given_once(args.set)
+        values = apply_overrides(load_scenario(args.scenario), args.set)
+        for name, bounds in ranges.items():  # both ends inside the schema's range
+            for bound in bounds:
+                apply_overrides(values, [f"{name}={bound}"])
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    _cli.new_directory(args.out)
+    rng = np.random.default_rng(args.seed)
+    draws = [{**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},
+              "plant.noise_seed": int(rng.integers(0, 2**31 - 1))}
+             for _ in range(args.samples)]
+    with ProcessPoolExecutor(args.workers) as pool:
+        results = list(pool.map(run_sample, [(values, draw) for draw in draws]))
+    args.out.mkdir()
+    summary = {}
+    for key, heading in INDICES:
+        column = [r[key] for r in results if key in r]
+        if column:
+            summary[key] = {"median": float(np.median(column)), "worst": float(max(column))}
+            print(f"{heading:24s} median {summary[key]['median']:.4g}  worst "
+                  f"{summary[key]['worst']:.4g}")
+    (args.out / "robustness.json").write_text(json.dumps(
+        {"scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
+         "summary": summary, "samples": results}, indent=2))
+    plot(results, args.out / "robustness.png", args.scenario)
+    print(f"{args.samples} samples; outputs: {args.out}/robustness.json, robustness.png")
+
+
+def plot(results: list[dict], path: Path, scenario: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    factors = ("plant.mass_factor", "plant.resistance_factor", "plant.lag_factor")
+    figure, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
+    for axis, name in zip(axes, factors):
+        axis.plot([r[name] for r in results], [r["max_abs_error_kmh"] for r in results], "o",
+                  ms=3)
+        axis.set(xlabel=name.split(".")[1].replace("_", " "))
+        axis.grid(alpha=0.3)
+    axes[0].set_ylabel("max abs(e), km/h")
+    figure.suptitle(f"{scenario}: max tracking error over {len(results)} real trains")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)
