@@ -18,55 +18,31 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import _cli
-import numpy as np
 
 from ato_nodes.core import strategy
 from ato_nodes.core.line import load_line
 from ato_nodes.core.paths import resolve_file
-from ato_nodes.core.plant import TrainParameters
 from ato_nodes.core.scenario import complete
 
 SUPPLEMENTS = (0.03, 0.05, 0.10)
 
 
-def setup(line_file: str, train: str, ds: float, ignore_neutral: bool = False):
-    line = load_line(resolve_file(line_file, [Path.cwd()]))
-    values = complete({"plant.train": train}, [])
-    parameters = TrainParameters.from_values(values)
-    track = strategy.Track.of(line, parameters, ds)
-    problem = strategy.Problem(track, parameters, values["plant.efficiency"])
-    if not ignore_neutral:
-        return line, problem, problem
-    return line, problem, strategy.Problem(track.without_neutral_sections(), parameters,
-                                           values["plant.efficiency"])
-
-
 def evaluate(job: dict) -> dict:
     """One (algorithm, supplement, seed) run; the indices on the real line."""
-    line, problem, planning = setup(job["line"], job["train"], job["ds"],
-                                    job.get("ignore_neutral", False))
-    fastest = strategy.flat_out(problem)
-    planned = fastest.time * (1.0 + job["supplement"])
-    reference = strategy.indices(fastest, planned, line.stop_position, problem.track.cap)
-    started = time.monotonic()
-    result, history = strategy.plan(job["algorithm"], problem, planning, planned, reference,
-                                    evaluations=job["evaluations"], seed=job["seed"])
-    seconds = time.monotonic() - started
-    if job.get("ignore_neutral"):
-        result = strategy.replay(problem, result)
-    values = strategy.indices(result, planned, line.stop_position, problem.track.cap)
-    values.update(G=strategy.objective(values, reference), planned=planned,
-                  time_error=result.time - planned, seconds=seconds,
-                  saved_percent=100 * (1 - result.energy_kwh / fastest.energy_kwh),
-                  flat_out_energy_kwh=fastest.energy_kwh)
-    if history is not None:
-        values["convergence"] = [history.trace("evaluations").tolist(),
-                                 history.trace("best_f").tolist()]
+    line = load_line(resolve_file(job["line"], [Path.cwd()]))
+    problem, planning = strategy.problems(line, complete({"plant.train": job["train"]}, []),
+                                          job["ds"], job.get("ignore_neutral", False))
+    outcome = strategy.evaluate(job["algorithm"], problem, planning, None,
+                                supplement=job["supplement"], evaluations=job["evaluations"],
+                                seed=job["seed"])
+    values = outcome.values
+    if outcome.history is not None:
+        values["convergence"] = [outcome.history.trace("evaluations").tolist(),
+                                 outcome.history.trace("best_f").tolist()]
     return {**job, "indices": {k: float(v) if not isinstance(v, list) else v
                                for k, v in values.items()}}
 

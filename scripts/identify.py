@@ -31,6 +31,7 @@ import numpy as np
 from ato_nodes.bagio import BagError, read_run
 from ato_nodes.core import identification as ident
 from ato_nodes.core import lssvm
+from ato_nodes.core.gpc import MultiModel
 from ato_nodes.core.plant import TrainParameters
 from ato_nodes.core.schema import defaults
 
@@ -110,9 +111,10 @@ def lssvm_step(model):
 
 
 def arx_step(layout, centres, width, coefficients):
+    model = MultiModel(layout, centres, width, coefficients)  # as the GPC blends them
+
     def step(x):
-        weights = np.exp(-0.5 * ((x[0] - centres) / width) ** 2)
-        row = weights @ coefficients / max(weights.sum(), 1e-300)
+        row = model.row(x[0])
         return float(row[0] + row[1:] @ x)
     return step
 

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import time
 from pathlib import Path
 
 import _cli
@@ -36,7 +35,6 @@ from ato_nodes.core import strategy
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.line import load_line
 from ato_nodes.core.paths import resolve_file
-from ato_nodes.core.plant import TrainParameters
 from ato_nodes.core.scenario import complete, train_preset
 
 
@@ -70,39 +68,22 @@ def main() -> None:
         line_path = resolve_file(args.line, [Path.cwd()])
         line = load_line(line_path)
         train_preset(args.train)
-        train = TrainParameters.from_values(complete({"plant.train": args.train}, []))
+        values = complete({"plant.train": args.train}, [])
     except ScenarioError as exc:
         _cli.fail(str(exc))
     if line.stop_position <= 0.0:
         _cli.fail(f"{line_path}: the line has no stop beyond the departure point")
     _cli.seconds(args.time, "--time")
     _cli.new_directory(args.out)
-    efficiency = complete({}, [])["plant.efficiency"]
-    track = strategy.Track.of(line, train, args.ds)
-    planning = track.without_neutral_sections() if args.ignore_neutral else track
-    problem, plan_problem = (strategy.Problem(t, train, efficiency) for t in (track, planning))
-    fastest = strategy.flat_out(problem)
-    planned = fastest.time * (1.0 + args.supplement) if args.time is None else args.time
-    if not planned >= fastest.time:
-        _cli.fail(f"--time {planned:g} s is shorter than the flat-out run's "
-                  f"{fastest.time:.1f} s on {line_path}")
-    reference = strategy.indices(fastest, planned, line.stop_position, track.cap)
-    started = time.monotonic()
+    problem, planning = strategy.problems(line, values, args.ds, args.ignore_neutral)
     try:
-        result, history = strategy.plan(args.algorithm, problem, plan_problem, planned,
-                                        reference, evaluations=args.evaluations,
-                                        seed=args.seed)
-    except ValueError as exc:  # the DP's grid runs a little slower than the flat-out run
-        _cli.fail(str(exc))
-    seconds = time.monotonic() - started
-    if args.ignore_neutral:  # what the plan does on the real line: traction cut there
-        result = strategy.replay(problem, result)
-    values = strategy.indices(result, planned, line.stop_position, track.cap)
-    values["G"] = strategy.objective(values, reference)
-    values["time_error"] = result.time - planned
-    values["energy_saved_vs_flat_out_percent"] = 100 * (1 - result.energy_kwh
-                                                        / fastest.energy_kwh)
-    values["seconds"] = seconds
+        outcome = strategy.evaluate(args.algorithm, problem, planning, args.time,
+                                    supplement=args.supplement, evaluations=args.evaluations,
+                                    seed=args.seed)
+    except ValueError as exc:  # shorter than flat-out; or the DP's grid, ~1 % slower
+        _cli.fail(f"{exc} on {line_path}")
+    result, history, values = outcome.result, outcome.history, outcome.values
+    planned = values["planned"]
     values["traction_in_neutral_sections"] = result.traction_in(line.neutral_sections)
     args.out.mkdir()
     header = {"line": args.line,
@@ -110,18 +91,20 @@ def main() -> None:
               "train": args.train, "planned_time_s": f"{planned:.3f}",
               "algorithm": args.algorithm, "supplement": args.supplement}
     strategy.write_strategy(args.out / "strategy.csv", header, result)
-    summary = {"header": header, "indices": values, "flat_out": reference}
+    summary = {"header": header, "indices": values, "flat_out": outcome.reference}
     if history is not None:
         summary["convergence"] = {"evaluations": history.trace("evaluations").tolist(),
                                   "best_G": history.trace("best_f").tolist()}
         plot_convergence(args.out / "convergence.png", history, args.algorithm)
     (args.out / "indices.json").write_text(json.dumps(summary, indent=2, default=float))
-    plot_strategy(args.out / "speed_distance.png", line, track, result, args.algorithm)
+    plot_strategy(args.out / "speed_distance.png", line, problem.track, result,
+                  args.algorithm)
     print(f"{args.algorithm}: energy {values['energy_kwh']:.1f} kWh "
-          f"({values['energy_saved_vs_flat_out_percent']:.1f} % below flat-out's "
-          f"{fastest.energy_kwh:.1f}), time {result.time:.1f} s (planned {planned:.1f}, error "
-          f"{values['time_error']:+.1f}), comfort {values['comfort']:.4f} m/s^3, stop error "
-          f"{values['stopping_error']:.2f} m, G {values['G']:.4f}, {seconds:.1f} s")
+          f"({values['saved_percent']:.1f} % below flat-out's "
+          f"{values['flat_out_energy_kwh']:.1f}), time {result.time:.1f} s (planned "
+          f"{planned:.1f}, error {values['time_error']:+.1f}), comfort "
+          f"{values['comfort']:.4f} m/s^3, stop error {values['stopping_error']:.2f} m, "
+          f"G {values['G']:.4f}, {values['seconds']:.1f} s")
     print(f"outputs: {args.out}/strategy.csv, indices.json, speed_distance.png")
 
 

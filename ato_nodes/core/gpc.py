@@ -132,12 +132,16 @@ class MultiModel:
         self.delay = layout.delay
         self.history = max(layout.speed_lags, layout.history + 1)
 
-    def linearise(self, speeds, commands) -> Arx:
-        weights = np.exp(-0.5 * ((speeds[-1] - self.centres) / self.width) ** 2)
+    def row(self, speed: float) -> np.ndarray:
+        """The blended coefficients [c, a.., b..] at this speed."""
+        weights = np.exp(-0.5 * ((speed - self.centres) / self.width) ** 2)
         if not weights.sum() > 0.0:  # far outside every centre: the nearest alone
-            weights = (np.abs(speeds[-1] - self.centres)
-                       == np.abs(speeds[-1] - self.centres).min()).astype(float)
-        row = weights @ self.coefficients / weights.sum()
+            weights = (np.abs(speed - self.centres)
+                       == np.abs(speed - self.centres).min()).astype(float)
+        return weights @ self.coefficients / weights.sum()
+
+    def linearise(self, speeds, commands) -> Arx:
+        row = self.row(speeds[-1])
         na = self.layout.speed_lags
         return Arx(float(row[0]), tuple(float(v) for v in row[1:1 + na]),
                    tuple(float(v) for v in row[1 + na:]), self.layout.delay)
@@ -209,6 +213,10 @@ class GPC:
         self.added = 0
         moves = np.arange(self.nu)
         self.cumulative = (moves[:, None] >= moves[None, :]).astype(float)  # u = u0 + C du
+        self.move_weight = settings.r * np.eye(self.nu)
+        rate = limiter.max_change if limiter.max_change > 0 else math.inf
+        self.move_limit = np.full(self.nu, min(rate, 1e30))  # |du| per step
+        self.reach = rate * np.arange(1, self.nu + 1)  # what the jerk limit can reach
         # G[j, i] = step[j - i] (response at k+j+1 to a move at k+i), -1 (zero) above
         lag = np.arange(settings.horizon)[:, None] - moves[None, :]
         self.toeplitz = np.where(lag >= 0, lag, -1)
@@ -273,7 +281,7 @@ class GPC:
         arx = Arx(model_arx.c + self.bias, model_arx.a, model_arx.b, model_arx.delay)
         free, matrix = self._responses(arx)
         reference = np.asarray(horizon[1:s.horizon + 1], dtype=float)
-        hessian = s.q * matrix.T @ matrix + s.r * np.eye(self.nu)
+        hessian = s.q * matrix.T @ matrix + self.move_weight
         gradient = s.q * matrix.T @ (free - reference)
         previous = self.limiter.last
         move = self._solve(hessian, gradient, previous, measured)
@@ -288,15 +296,12 @@ class GPC:
         if not self.s.constrained:
             return float(np.linalg.solve(hessian, -gradient)[0])
         low, high = self._bounds(speed)
-        rate = self.limiter.max_change if self.limiter.max_change > 0 else math.inf
-        reach = rate * np.arange(1, self.nu + 1)
         # never infeasible: a bound the jerk limit cannot reach yet widens to what it can
-        upper = np.maximum(high, previous - reach) - previous
-        lower = np.minimum(low, previous + reach) - previous
-        moves = np.full(self.nu, min(rate, 1e30))
+        upper = np.maximum(high, previous - self.reach) - previous
+        lower = np.minimum(low, previous + self.reach) - previous
         x, _, flag, _ = daqp.solve(hessian, gradient, self.cumulative,
-                                   np.concatenate([moves, upper]),
-                                   np.concatenate([-moves, lower]))
+                                   np.concatenate([self.move_limit, upper]),
+                                   np.concatenate([-self.move_limit, lower]))
         if flag < 1:  # no solution reported: the closed form, clipped by the limiter
             return float(np.linalg.solve(hessian, -gradient)[0])
         return float(x[0])

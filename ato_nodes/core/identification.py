@@ -147,13 +147,14 @@ def fit_multimodel(layout: lssvm.Layout, x: np.ndarray, t: np.ndarray, centres: 
     return np.array(rows)
 
 
-def free_run(step, layout: lssvm.Layout, speeds: np.ndarray, commands: np.ndarray) -> np.ndarray:
-    """The model's own speed over a recorded run: started from the measured history,
-    then driven by the recorded commands alone, each prediction fed back as the next
-    regressor's speed. step(x) -> y(k) from regressor x."""
+def free_run(step, layout: lssvm.Layout, speeds: np.ndarray, commands: np.ndarray,
+             start: int | None = None) -> np.ndarray:
+    """The model's own speed over a recorded run: the measured history up to `start`
+    (default: the first step with a full history), then driven by the recorded commands
+    alone, each prediction fed back as the next regressor's speed. step(x) -> y(k)."""
     first = max(layout.speed_lags, layout.history)
     predicted = speeds.astype(float)
-    for k in range(first, len(speeds)):
+    for k in range(first if start is None else start, len(speeds)):
         predicted[k] = step(layout.regressor(predicted[:k], commands[:k]))
     return predicted
 
@@ -161,13 +162,9 @@ def free_run(step, layout: lssvm.Layout, speeds: np.ndarray, commands: np.ndarra
 def ahead(step, layout: lssvm.Layout, speeds: np.ndarray, commands: np.ndarray, count: int,
           every: int = 10) -> np.ndarray:
     """Errors of `count`-step-ahead predictions (what a GPC with horizon P = count relies
-    on): from every `every`-th step, the model runs `count` steps on the recorded
-    commands from the measured history; the error of its last step, m/s."""
+    on): from every `every`-th step, a free run of `count` steps from the measured
+    history; the error of its last step, m/s."""
     first = max(layout.speed_lags, layout.history)
-    errors = []
-    for start in range(first, len(speeds) - count, every):
-        predicted = list(speeds[:start])
-        for k in range(start, start + count):
-            predicted.append(step(layout.regressor(predicted, commands[:k])))
-        errors.append(predicted[-1] - speeds[start + count - 1])
-    return np.array(errors)
+    return np.array([free_run(step, layout, speeds[:start + count], commands[:start + count],
+                              start)[-1] - speeds[start + count - 1]
+                     for start in range(first, len(speeds) - count, every)])

@@ -276,20 +276,18 @@ class ModelFile:
         model = self.lssvm
         path = Path(path)
         partial = path.with_name(f".{path.name}.partial")
+        regressors, targets = model.samples
         with open(partial, "wb") as handle:
-            self._write(handle, model)
+            np.savez(handle, format=FORMAT,
+                     layout=np.array([model.layout.speed_lags, model.layout.command_lags,
+                                      model.layout.delay]),
+                     mu=model.mu, delta=model.delta, offset=model.offset, scale=model.scale,
+                     regressors=regressors, targets=targets, alpha=model.alpha,
+                     bias=model.bias, period=self.period,
+                     train=json.dumps(self.train, sort_keys=True),
+                     arx_centres=self.arx_centres, arx_width=self.arx_width,
+                     arx_coefficients=self.arx_coefficients)
         os.replace(partial, path)
-
-    def _write(self, handle, model) -> None:
-        np.savez(handle, format=FORMAT,
-                 layout=np.array([model.layout.speed_lags, model.layout.command_lags,
-                                  model.layout.delay]),
-                 mu=model.mu, delta=model.delta, offset=model.offset, scale=model.scale,
-                 regressors=model.samples[0], targets=model.samples[1], alpha=model.alpha,
-                 bias=model.bias,
-                 period=self.period, train=json.dumps(self.train, sort_keys=True),
-                 arx_centres=self.arx_centres, arx_width=self.arx_width,
-                 arx_coefficients=self.arx_coefficients)
 
 
 def file_digest(path) -> str:

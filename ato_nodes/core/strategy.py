@@ -27,12 +27,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from .line import Line
+from .optimizers import optimize
 from .plant import TrainParameters
 
 KMH = 1.0 / 3.6
@@ -42,6 +45,7 @@ CONTROLS = (("traction", 1.0), ("traction", 0.75), ("traction", 0.5), ("traction
             ("cruise", 0.0), ("coast", 0.0), ("brake", 0.25), ("brake", 0.5),
             ("brake", 1.0))
 MODE = {"traction": 1, "cruise": 0, "coast": 0, "brake": -1}
+CRUISE = [kind for kind, _ in CONTROLS].index("cruise")
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,16 @@ class Track:
             powered.append(not any(line.in_neutral_section(x) for x in pantograph))
         return cls(starts, ds, np.array(resistance), np.array(cap), np.array(powered))
 
+
+    @property
+    def stop(self) -> float:
+        """The stop mark: the end of the last stage, m."""
+        return float(self.positions[-1] + self.ds)
+
+    @property
+    def boundaries(self) -> np.ndarray:
+        """Stage starts and the stop mark, m."""
+        return np.append(self.positions, self.stop)
 
     def without_neutral_sections(self) -> Track:
         """The same track powered everywhere (a plan that ignores neutral sections)."""
@@ -138,6 +152,10 @@ class Problem:
         p = self.train
         return p.davis_a + p.davis_b * v + p.davis_c * v * v
 
+    def energy(self, force):
+        """Energy drawn over one stage under `force` (N/kN), kJ."""
+        return np.maximum(force, 0.0) * self.weight / 1000.0 * self.track.ds / self.efficiency
+
     def step(self, stage: int, v: np.ndarray, force: np.ndarray) -> np.ndarray:
         """Speed at the end of the stage from v under force (Heun on v^2/2; the
         resistance at the predicted end speed too). 0 where the train stops short."""
@@ -149,21 +167,17 @@ class Problem:
         return np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * 0.5 * (first + second))))
 
 
-def _stage_costs(problem: Problem, stage: int, grid: np.ndarray, energy_weight: float,
-                 lam: float):
+def _stage_costs(problem: Problem, stage: int, grid: np.ndarray):
     forces = problem.forces(stage, grid)
     with np.errstate(invalid="ignore"):
         following = problem.step(stage, grid[None, :], np.nan_to_num(forces))
-    cruise = [i for i, (kind, _) in enumerate(CONTROLS) if kind == "cruise"][0]
-    following[cruise] = np.where(np.isnan(forces[cruise]), 0.0, grid)  # exactly held
+    following[CRUISE] = np.where(np.isnan(forces[CRUISE]), 0.0, grid)  # exactly held
     mean = 0.5 * (grid[None, :] + following)
-    ds = problem.track.ds
     with np.errstate(divide="ignore"):
-        time = np.where(mean > 1e-6, ds / mean, np.inf)
-    energy = np.maximum(np.nan_to_num(forces), 0.0) * problem.weight / 1000.0 * ds \
-        / problem.efficiency  # kJ
+        seconds = np.where(mean > 1e-6, problem.track.ds / mean, np.inf)
+    energy = problem.energy(np.nan_to_num(forces))
     feasible = ~np.isnan(forces) & (following <= problem.track.cap[stage] + 1e-9)
-    return forces, following, time, energy, feasible
+    return forces, following, seconds, energy, feasible
 
 
 def solve(track: Track, train: TrainParameters, efficiency: float, planned_time: float | None,
@@ -201,14 +215,13 @@ def _choices(problem: Problem, stage: int, speeds: np.ndarray, following_value: 
              grid: np.ndarray, energy_weight: float, lam: float):
     """Total cost of every control from every speed (controls x speeds), and what the
     controls do: forces, end speeds, times, energies."""
-    forces, following, time, energy, feasible = _stage_costs(
-        problem, stage, speeds, energy_weight, lam)
+    forces, following, seconds, energy, feasible = _stage_costs(problem, stage, speeds)
     if stage < len(problem.track.positions) - 1:  # a train stopped short is stuck
         feasible &= following > 1e-9
     future = np.interp(following, grid, following_value)
     total = np.where(feasible & (future < INFEASIBLE / 2),
-                     energy_weight * energy + lam * time + future, INFEASIBLE)
-    return total, forces, following, time, energy
+                     energy_weight * energy + lam * seconds + future, INFEASIBLE)
+    return total, forces, following, seconds, energy
 
 
 def _values(problem: Problem, grid: np.ndarray, energy_weight: float, lam: float) -> list:
@@ -230,7 +243,7 @@ def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: floa
     speeds, forces_taken, modes, controls = [0.0], [], [], []
     energy_total = time_total = 0.0
     for stage in range(len(track.positions)):
-        total, forces, following, time, energy = _choices(
+        total, forces, following, seconds, energy = _choices(
             problem, stage, np.array([speeds[-1]]), values[stage + 1], grid, energy_weight,
             lam)
         pick = int(np.argmin(total[:, 0]))
@@ -242,10 +255,9 @@ def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: floa
         controls.append(CONTROLS[pick])
         modes.append(MODE[CONTROLS[pick][0]])
         energy_total += float(energy[pick, 0])
-        time_total += float(time[pick, 0])
-    positions = np.append(track.positions, track.positions[-1] + track.ds)
-    return Strategy(positions, np.array(speeds), np.array(forces_taken), np.array(modes),
-                    controls, energy_total / 3600.0, time_total, lam)
+        time_total += float(seconds[pick, 0])
+    return Strategy(track.boundaries, np.array(speeds), np.array(forces_taken),
+                    np.array(modes), controls, energy_total / 3600.0, time_total, lam)
 
 
 # Switching-point strategies (seed 002's decision variables) -----------------------
@@ -322,23 +334,23 @@ class SwitchingStrategy:
             coast_from = first + x[2 * k + 1] * (last - first)
             for stage in range(first, last):
                 controls[stage] = (cruise, stage >= coast_from)
-        speeds, forces, modes, chosen = [0.0], [], [], []
-        energy = time = 0.0
-        for stage in range(len(track.positions)):
-            v = speeds[-1]
+
+        def decide(stage: int, v: float) -> tuple[str, float, float]:
             cruise, coasting = controls[stage]
             brake, traction = (float(a[0]) for a in problem.limits(np.array([v])))
             hold = float(problem.resistance(np.array([v]))[0]) + track.line_resistance[stage]
             limit = min(self.curve[stage + 1], track.cap[stage])
-            options = [("coast", 0.0)] if coasting else (
-                [("traction", traction)] if v < min(cruise, limit) else
-                [("cruise", min(max(hold, brake), traction))])
-            kind, force = options[0]
+            if coasting:
+                kind, force = "coast", 0.0
+            elif v < min(cruise, limit):
+                kind, force = "traction", traction
+            else:
+                kind, force = "cruise", min(max(hold, brake), traction)
             if not track.powered[stage] and force > 0:
                 kind, force = "coast", 0.0
             following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-            if kind == "cruise":
-                following = v if brake <= hold <= traction else following
+            if kind == "cruise" and brake <= hold <= traction:
+                following = v
             if following > limit:  # the braking curve or a cap: brake down to it
                 kind = "brake"
                 force = max(brake, _force_for(problem, stage, v, limit))
@@ -347,24 +359,36 @@ class SwitchingStrategy:
                     force = max(brake, force - (following ** 2 - limit ** 2)
                                 / (2.0 * track.ds * problem.xi))
                     following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-            if following <= 1e-9 and stage < len(track.positions) - 1:
-                return self._stuck(track, speeds, forces, modes, chosen, energy, time, stage)
-            time += track.ds / max(0.5 * (v + following), 1e-6)
-            energy += max(force, 0.0) * problem.weight / 1000.0 * track.ds / problem.efficiency
-            speeds.append(following)
-            forces.append(force)
-            modes.append(MODE[kind])
-            chosen.append((kind, force))
-        positions = np.append(track.positions, track.positions[-1] + track.ds)
-        return Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
-                        chosen, energy / 3600.0, time, math.nan)
+            return kind, force, following
 
-    def _stuck(self, track, speeds, forces, modes, chosen, energy, time, stage):
-        """A strategy that coasts to a standstill before the mark: it ends there."""
-        positions = track.positions[:len(speeds)]
-        return Strategy(np.append(positions, track.positions[stage]), np.array(speeds + [0.0]),
-                        np.array(forces + [0.0]), np.array(modes + [0]), chosen + [("coast", 0)],
-                        energy / 3600.0, math.inf, math.nan)
+        return _drive(problem, decide)
+
+
+def _drive(problem: Problem, decide: Callable[[int, float], tuple[str, float, float]],
+           lam: float = math.nan) -> Strategy:
+    """A run from standstill, stage by stage: decide(stage, v) -> (kind of control,
+    force N/kN, end speed). A train that stops short of the mark ends where that stage
+    begins, standing, with an infinite running time."""
+    track = problem.track
+    speeds, forces, chosen = [0.0], [], []
+    energy = elapsed = 0.0
+    for stage in range(len(track.positions)):
+        v = speeds[-1]
+        kind, force, following = decide(stage, v)
+        if following <= 1e-9 and stage < len(track.positions) - 1:
+            positions = np.append(track.positions[:stage + 1], track.positions[stage])
+            chosen.append(("coast", 0.0))
+            return Strategy(positions, np.array(speeds + [0.0]), np.array(forces + [0.0]),
+                            np.array([MODE[k] for k, _ in chosen]), chosen,
+                            energy / 3600.0, math.inf, lam)
+        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
+        energy += float(problem.energy(force))
+        speeds.append(following)
+        forces.append(force)
+        chosen.append((kind, force))
+    return Strategy(track.boundaries, np.array(speeds), np.array(forces),
+                    np.array([MODE[k] for k, _ in chosen]), chosen, energy / 3600.0,
+                    elapsed, lam)
 
 
 def _force_for(problem: Problem, stage: int, v: float, target: float) -> float:
@@ -375,11 +399,12 @@ def _force_for(problem: Problem, stage: int, v: float, target: float) -> float:
             + track.line_resistance[stage])
 
 
-def indices(result: Strategy, planned_time: float, stop: float, cap: np.ndarray) -> dict:
-    """Seed 002's indices of a strategy: energy (kWh), time error exp(|T' - T| / TAU),
-    comfort (sum of |change of acceleration| over the run time, m/s^3), stopping error
-    |S - s| (m), speed protection (sum of the excess over the cap, m/s)."""
-    v = result.speeds
+def indices(result: Strategy, planned_time: float, track: Track) -> dict:
+    """Seed 002's indices of a strategy on `track`: energy (kWh), time error
+    exp(|T' - T| / TAU), comfort (sum of |change of acceleration| over the run time,
+    m/s^3), stopping error |S - s| (m), speed protection (sum of the excess over the
+    cap, m/s)."""
+    v, cap, stop = result.speeds, track.cap, track.stop
     ds = np.maximum(np.diff(result.positions), 1e-9)
     acceleration = (v[1:] ** 2 - v[:-1] ** 2) / (2.0 * ds)
     finished = math.isfinite(result.time)
@@ -482,7 +507,6 @@ def plan(algorithm: str, problem: Problem, planning: Problem, planned: float,
     """(strategy, optimizer result or None) of one algorithm. `planning` is the problem
     the plan is made on (without neutral sections, for the paper's comparison), `problem`
     the line as it is; G's reference is the flat-out run's indices."""
-    from .optimizers import optimize
     if algorithm == "flatout":
         return flat_out(problem), None
     if algorithm == "dp":
@@ -490,10 +514,9 @@ def plan(algorithm: str, problem: Problem, planning: Problem, planned: float,
     if algorithm == "mareco":
         return mareco(planning, planned), None
     switching = SwitchingStrategy(planning)
-    stop = problem.track.positions[-1] + problem.track.ds
 
     def fitness(candidates):
-        return np.array([objective(indices(switching.run(x), planned, stop, problem.track.cap),
+        return np.array([objective(indices(switching.run(x), planned, problem.track),
                                    reference) for x in candidates])
 
     found = optimize(algorithm, fitness, *switching.bounds(), budget=evaluations, seed=seed)
@@ -502,7 +525,7 @@ def plan(algorithm: str, problem: Problem, planning: Problem, planned: float,
 
 def mareco(problem, planned: float) -> Strategy:
     """One cruise speed for every segment, bisected until the run meets the planned
-    time, coasting over the last MARECO_COAST of each segment."""
+    time, coasting from MARECO_COAST of each segment on."""
     switching = SwitchingStrategy(problem)
     low, high = 0.3, 1.0
     best = switching.run(np.tile([high, MARECO_COAST], len(switching.segments)))
@@ -516,24 +539,62 @@ def mareco(problem, planned: float) -> Strategy:
     return best
 
 
-def replay(problem, planned_result: Strategy) -> Strategy:
+def replay(problem: Problem, planned_result: Strategy) -> Strategy:
     """A plan made without neutral sections, driven on the line: each stage's force,
     traction cut where unpowered."""
     track = problem.track
-    speeds, energy, elapsed, forces, modes = [0.0], 0.0, 0.0, [], []
-    for stage, force in enumerate(planned_result.forces):
+
+    def decide(stage: int, v: float) -> tuple[str, float, float]:
+        force = float(planned_result.forces[stage])
         if not track.powered[stage] and force > 0:
             force = 0.0
-        v = speeds[-1]
-        following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-        if following <= 1e-9 and stage < len(planned_result.forces) - 1:
-            elapsed = float("inf")
-            break
-        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
-        energy += max(force, 0.0) * problem.weight / 1000.0 * track.ds / problem.efficiency
-        speeds.append(following)
-        forces.append(force)
-        modes.append(1 if force > 0 else -1 if force < 0 else 0)
-    positions = planned_result.positions[:len(speeds)]
-    return Strategy(positions, np.array(speeds), np.array(forces), np.array(modes),
-                             [], energy / 3600.0, elapsed, planned_result.lam)
+        kind = "traction" if force > 0 else "brake" if force < 0 else "coast"
+        return kind, force, float(problem.step(stage, np.array([v]), np.array([force]))[0])
+
+    return _drive(problem, decide, planned_result.lam)
+
+
+def problems(line: Line, values: dict, ds: float, ignore_neutral: bool = False):
+    """(the line as it is, the line the plan is made on) for the train of the run values
+    `values` (plant.*): the same problem unless the plan ignores neutral sections."""
+    train = TrainParameters.from_values(values)
+    track = Track.of(line, train, ds)
+    problem = Problem(track, train, values["plant.efficiency"])
+    if not ignore_neutral:
+        return problem, problem
+    return problem, Problem(track.without_neutral_sections(), train, values["plant.efficiency"])
+
+
+@dataclass
+class Outcome:
+    result: Strategy    # driven on the line as it is
+    history: object     # the swarm's optimizers.Result, None for the other algorithms
+    values: dict        # indices, G, planned, time_error, saved_percent, seconds, ...
+    reference: dict     # the flat-out run's indices
+
+
+def evaluate(algorithm: str, problem: Problem, planning: Problem, planned: float | None, *,
+             supplement: float = 0.0, evaluations: int = 1500, seed: int = 1) -> Outcome:
+    """One algorithm's strategy for the planned time (None: the flat-out run's time plus
+    `supplement`, a share), judged on the line as it is (a plan made without neutral
+    sections is driven with traction cut in them). ValueError if the planned time is
+    shorter than the flat-out run's."""
+    fastest = flat_out(problem)
+    if planned is None:
+        planned = fastest.time * (1.0 + supplement)
+    if not planned >= fastest.time:
+        raise ValueError(f"the planned time {planned:g} s is shorter than the flat-out "
+                         f"run's {fastest.time:.1f} s")
+    reference = indices(fastest, planned, problem.track)
+    started = time.monotonic()
+    result, history = plan(algorithm, problem, planning, planned, reference,
+                           evaluations=evaluations, seed=seed)
+    seconds = time.monotonic() - started
+    if planning is not problem:
+        result = replay(problem, result)
+    values = indices(result, planned, problem.track)
+    values.update(G=objective(values, reference), planned=planned,
+                  time_error=result.time - planned, seconds=seconds,
+                  saved_percent=100 * (1 - result.energy_kwh / fastest.energy_kwh),
+                  flat_out_energy_kwh=fastest.energy_kwh)
+    return Outcome(result, history, values, reference)
