@@ -62,9 +62,12 @@ def test_a_sigkilled_recorder_loses_at_most_a_second_and_its_bag_is_repaired(tmp
     assert "repaired" in result.stderr and "Traceback" not in result.stderr
     counts = opens_everywhere(bag)
     # killed on taking that step of /clock; the plant never ran more than run.record_lag
-    # (1 s = 20 steps) ahead of the last block on disk: at most 1 s of simulated time lost
+    # (1 s = 20 steps) ahead of the last block on disk: at most 1 s of simulated time lost.
+    # Other topics' messages of the steps the plant ran ahead may reach the recorder
+    # before that /clock message does (seen in a fresh-clone CI run: 513 at step 500),
+    # so the counts lie within the plant's lead on either side of the step.
     assert set(counts) == {topic.name for topic in step_topics()}
-    assert max(0, step - 20) <= min(counts.values()) <= max(counts.values()) <= step + 2
+    assert max(0, step - 20) <= min(counts.values()) <= max(counts.values()) <= step + 20 + 2
     if step:
         holds_what_its_summary_says(bag)
 
