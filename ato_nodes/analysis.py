@@ -30,6 +30,7 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("ise", "ISE", "{:.6g}"),
     ("max_abs_error_kmh", "max abs(e) km/h", "{:.4f}"),
     ("median_abs_error_kmh", "median abs(e) km/h", "{:.4f}"),
+    ("p95_abs_error_kmh", "p95 abs(e) km/h", "{:.4f}"),
     ("max_abs_error_outside_steps_kmh", "max abs(e) outside steps km/h", "{:.4f}"),
     ("j_seed004", "J (seed 004)", "{:.6g}"),
     ("eso_speed_max_dev", "max abs(z1-v) m/s", "{:.3g}"),

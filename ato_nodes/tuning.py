@@ -41,7 +41,8 @@ from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import INDEX_NAMES, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
-FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error"}
+FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
+           "p95_abs_error_kmh": "p95_abs_error_kmh"}
 
 
 @dataclass(frozen=True)

@@ -60,8 +60,6 @@ def run_variant(values: dict, bag: Path) -> dict:
     identical = all(np.array_equal(run.series[name], series)
                     for name, series in simulate(values).items() if name != "t")
     indices = score_series(run.series, run.parameters)
-    error = np.abs(run.series["target"] - run.series["speed"]) * 3.6
-    indices["p95_abs_error_kmh"] = float(np.percentile(error, 95))
     indices["command_change_rms"] = float(np.sqrt(np.mean(np.diff(run.series["command"]) ** 2)))
     indices["bit_identical"] = "yes" if identical else "NO"
     return indices

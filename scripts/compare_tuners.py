@@ -4,6 +4,11 @@
     python scripts/compare_tuners.py --algorithms bas-pso pso wso --seeds 1 2 3 4 5 \\
         --evaluations 900 --params adrc.mu1=600:60000,... --out bags/compare-seed000
 
+Equal budgets are equal evaluations (--evaluations) or equal iterations (--iterations N:
+each algorithm gets what its initialisation and N iterations evaluate, e.g. for 30
+particles 330 for PSO and 930 for BAS-PSO, whose beetles probe two antennae per move;
+a paper's convergence figure plots iterations).
+
 Each (algorithm, seed) is a tune.py run (in-process; an existing finished one in
 --out is reused), then the best parameters of each algorithm are re-run through
 the real stack and the bag's ITAE is set beside the tuner's. Prints and writes
@@ -23,6 +28,7 @@ import _cli
 from ato_nodes.analysis import plot_convergence
 from ato_nodes.bagio import read_run
 from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.optimizers import create
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
 from ato_nodes.launch import Stack
@@ -41,7 +47,9 @@ def parse_args() -> argparse.Namespace:
                                      epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("--algorithms", nargs="+", default=["bas-pso", "pso", "wso"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5])
-    parser.add_argument("--evaluations", type=int, default=900)
+    budget = parser.add_mutually_exclusive_group(required=True)
+    budget.add_argument("--evaluations", type=int, help="budget of every run")
+    budget.add_argument("--iterations", type=int, help="iterations of every run")
     parser.add_argument("--population", type=int, default=30)
     parser.add_argument("--scenario", default="seed000")
     parser.add_argument("--params", action="append", required=True)
@@ -52,11 +60,19 @@ def parse_args() -> argparse.Namespace:
     return parser.parse_args()
 
 
+def budget(args, algorithm: str) -> int:
+    """Evaluations of one run: --evaluations, or what --iterations take this algorithm."""
+    if args.evaluations is not None:
+        return args.evaluations
+    optimizer = create(algorithm, population_size=args.population)
+    return optimizer.initial_evaluations() + args.iterations * optimizer.evaluations_per_iteration()
+
+
 def tune(args, values, space, algorithm: str, seed: int) -> dict:
     out = args.out / f"{algorithm}-seed{seed}"
     if (out / "summary.json").exists():
         return json.loads((out / "summary.json").read_text())
-    settings = TuningSettings(algorithm, args.scenario, space, args.evaluations, seed,
+    settings = TuningSettings(algorithm, args.scenario, space, budget(args, algorithm), seed,
                               args.workers, True, args.fitness,
                               options={"population_size": args.population})
     Tuner(values, settings, out, resume=True, progress=False).run()
@@ -81,9 +97,9 @@ def main() -> None:
     except ScenarioError as exc:
         _cli.fail(str(exc))
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = ["| algorithm | runs | ITAE median | ITAE best | max abs(e) km/h median | "
-            "max abs(e) km/h best | stack re-run ITAE (best) | paper's max error |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = ["| algorithm | runs | evaluations | ITAE median | ITAE best | "
+            "max abs(e) km/h median | max abs(e) km/h best | stack re-run ITAE (best) | "
+            "paper's max error |", "|---|---|---|---|---|---|---|---|---|"]
     for algorithm in args.algorithms:
         summaries = []
         for seed in args.seeds:
@@ -96,13 +112,14 @@ def main() -> None:
         best = min(summaries, key=lambda s: s["best_fitness"])
         stack_itae = stack_check(values, best["best_params"], args.out / f"{algorithm}-best-stack")
         agreement = abs(stack_itae - best["best_indices"]["itae"]) / best["best_indices"]["itae"]
-        rows.append(f"| {algorithm} | {len(summaries)} | {statistics.median(itae):.6g} | "
+        rows.append(f"| {algorithm} | {len(summaries)} | {budget(args, algorithm)} | "
+                    f"{statistics.median(itae):.6g} | "
                     f"{min(itae):.6g} | {statistics.median(max_error):.4f} | {min(max_error):.4f} | "
                     f"{stack_itae:.6g} (rel. diff {agreement:.1e}) | "
                     f"{PAPER_MAX_ERROR.get(algorithm, '-')} |")
     table = "\n".join(rows)
     (args.out / "comparison.md").write_text(
-        f"Budget {args.evaluations} evaluations each, population {args.population}, seeds "
+        f"Budget {f'{args.evaluations} evaluations' if args.evaluations is not None else f'{args.iterations} iterations'} each, population {args.population}, seeds "
         f"{' '.join(map(str, args.seeds))}, fitness {args.fitness}, scenario {args.scenario} "
         f"{' '.join(args.set)}\n\n{table}\n")
     plot_convergence(sorted(p for p in args.out.iterdir() if (p / "history.csv").exists()),

@@ -51,10 +51,8 @@ def run_sample(job: tuple[dict, dict]) -> dict:
     values, draw = job
     series = simulate(apply_overrides(values, [f"{k}={v}" for k, v in draw.items()]))
     indices = score_series(series, {**values, **draw})
-    error = np.abs(series["target"] - series["speed"]) * 3.6
     result = {**draw, **{key: float(indices[key]) for key, _ in INDICES
                          if key in indices}}
-    result["p95_abs_error_kmh"] = float(np.percentile(error, 95))
     if "stopping_error" in indices:
         result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
     return result

@@ -162,7 +162,8 @@ class TestNLSEF:
 class TestLinearADRC:
     def test_tracks_a_first_order_plant_with_constant_disturbance(self):
         period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
-        adrc = LinearADRC(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b), period,
+        adrc = LinearADRC(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b, feedforward=False,
+                                          delay_aware=False), period,
                           CommandLimiter(-1e6, 1e6))
         v = 0.0
         for _ in range(400):

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 from .limiter import CommandLimiter
 from .registry import Component, Output
 from .spec import param, settings
+from .train_model import NominalTrain
 
 
 def sign(x: float) -> float:
@@ -315,46 +316,90 @@ LINEAR_ADRC_PARAMETERS = (
           1e-6, 1e6),
     param("ladrc.b0", 0.0098 / 1.11, "linear ADRC input gain, m/s^2 per N/kN", "controller",
           1e-9, 1e9),
+    param("ladrc.feedforward", False, "linear ADRC: add the plan's acceleration at the tracked "
+          "target (needs controller.preview >= 1) and the nominal train's basic and line "
+          "resistance (at the dead-reckoned position) to the law, and tell the observer the "
+          "resistance, so it estimates only what the model does not know", "controller"),
+    param("ladrc.delay_aware", False, "linear ADRC: feed the observer the force the nominal "
+          "actuator applies (dead time, lag, envelope, neutral sections) instead of the "
+          "command, and act on the speed predicted controller.preview steps ahead from the "
+          "commands already sent (a Smith predictor)", "controller"),
 )
 
 
 @dataclass(frozen=True)
 class LinearADRCGains:
-    """Bandwidth parametrisation (ladrc.*): observer bandwidth omega_o, controller omega_c."""
+    """Bandwidth parametrisation (ladrc.*): observer bandwidth omega_o, controller omega_c;
+    the two model-based additions, off in the papers' settings."""
 
     omega_o: float
     omega_c: float
     b0: float
+    feedforward: bool
+    delay_aware: bool
 
 
 class LinearADRC:
     """First-order linear ADRC for the speed loop (the plant's true relative degree).
 
-    ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by b0 u),
-    gains 2 omega_o and omega_o^2; law u = (omega_c (r - z1) - z2) / b0.
-    The ESO is integrated by backward Euler in closed form, stable for any step.
+    ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by the input
+    b0 (F - w)), gains 2 omega_o and omega_o^2; with r the tracked target r_k+N and
+    v the speed estimate,
+        u = (omega_c (r - v) + a_r - z2) / b0 + w_r.
+    In the papers' setting F is the command, w = w_r = a_r = 0 and v = z1. With
+    `feedforward`, a_r is the plan's acceleration at r, w the known resistance now
+    and w_r at r's planned position (core/train_model.py); with `delay_aware`, F is
+    the force the nominal actuator applies and v the speed predicted N steps ahead
+    (the commands inside the dead time and lag act first), so the law's error is
+    the one its command can still change. The ESO is integrated by backward Euler in
+    closed form, stable for any step.
     """
 
-    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter):
+    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter,
+                 model: NominalTrain | None = None):
         self.gains, self.h = gains, period
         self.limiter = limiter
         self.l1, self.l2 = 2.0 * gains.omega_o, gains.omega_o ** 2
         self.z1, self.z2 = 0.0, 0.0
+        self.model = model
+        self.observer_input = 0.0  # F - w over the last period, N/kN
         self.u_applied = 0.0
 
     def start(self, target: float, measured: float) -> None:
         self.z1 = measured
 
     def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
-        g, h = self.gains, self.h
-        e = (self.z1 - measured + h * (self.z2 + g.b0 * self.u_applied)) / (
+        g, h, model = self.gains, self.h, self.model
+        e = (self.z1 - measured + h * (self.z2 + g.b0 * self.observer_input)) / (
             1.0 + h * self.l1 + h * h * self.l2)
         self.z2 -= h * self.l2 * e
         self.z1 = measured + e
-        u = self.limiter.apply((g.omega_c * (target - self.z1) - self.z2) / g.b0, target,
-                               measured)
+        ahead = len(horizon) - 1 if horizon is not None else 0
+        speed = self.z1
+        if g.delay_aware and ahead:
+            speed = model.predict(self.z1, self.z2, g.b0, ahead, self.u_applied,
+                                  g.feedforward)
+        law = (g.omega_c * (target - speed) - self.z2) / g.b0
+        resistance = 0.0  # known to the observer over the coming period
+        if g.feedforward:
+            planned = (horizon[-1] - horizon[-2]) / h if ahead else 0.0
+            law += planned / g.b0 + model.known_resistance(
+                target, model.position + h * sum(horizon[:-1]))
+            resistance = model.known_resistance(measured, model.position)
+        u = self.limiter.apply(law, target, measured)
         self.u_applied = u
+        force = model.advance(u, measured) if model is not None else u
+        self.observer_input = (force if g.delay_aware else u) - resistance
         return ControllerOutput(u, (self.z1, self.z2))
+
+
+def linear_adrc(values, context, limiter: CommandLimiter) -> LinearADRC:
+    gains = settings(LinearADRCGains, "ladrc", values)
+    model = None
+    if gains.feedforward or gains.delay_aware:
+        model = NominalTrain(context.train, context.period, values["plant.initial_position"],
+                             context.line)
+    return LinearADRC(gains, context.period, limiter, model)
 
 
 HAN_ADRC = Component(
@@ -379,7 +424,6 @@ DISCRETE_ADRC = Component(
 
 LINEAR_ADRC = Component(
     "linear_adrc", "first-order linear ADRC", LINEAR_ADRC_PARAMETERS,
-    lambda values, context, limiter: LinearADRC(settings(LinearADRCGains, "ladrc", values),
-                                                context.period, limiter),
+    linear_adrc,
     (Output("z1", "m/s", "ESO speed estimate"),
      Output("z2", "m/s^2", "ESO total-disturbance estimate")))

@@ -13,8 +13,10 @@ import functools
 import math
 
 from .components import PROFILES
+from .errors import ScenarioError
 from .line import Line, load_line
 from .plant import TrainParameters
+from .profiles import FeasiblePlan
 from .schema import steps
 
 
@@ -30,8 +32,18 @@ class RunContext:
 
     @functools.cached_property
     def plan(self):
-        """The planned target: speed(t, position) in m/s, and position_indexed."""
-        return PROFILES.chosen(self.values).factory(self.values, self)
+        """The planned target: speed(t, position) in m/s, and position_indexed; made
+        drivable by the nominal train when profile.envelope_share or profile.jerk asks."""
+        values = self.values
+        plan = PROFILES.chosen(values).factory(values, self)
+        share, jerk = values["profile.envelope_share"], values["profile.jerk"]
+        if not (share or jerk) or getattr(plan, "shapes_itself", False):
+            return plan
+        if plan.position_indexed:
+            raise ScenarioError(f"profile.envelope_share and profile.jerk apply to time-indexed "
+                                f"profiles and the ato curve, not to profile.kind "
+                                f"{values['profile.kind']}")
+        return FeasiblePlan(plan, self.train, share, jerk, self.period, self.steps)
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies with the head at `position`, m/s (inf without a line):

@@ -14,6 +14,10 @@ LIMITER_PARAMETERS = (
           "m/s (0 = off)", "controller", 0.0, 100.0),
     param("controller.holding_brake", 0.0, "braking held with a zero target once the train is "
           "stopped (station berth), N/kN (0 = none)", "controller", 0.0, 1e6),
+    param("controller.holding_target", 0.0, "the holding brake applies once the target is at "
+          "most this, m/s (0 = only a zero target; a distance-indexed target is a few mm/s in "
+          "the last centimetres before the mark, where a train would otherwise creep for "
+          "seconds; keep it below the departure target)", "controller", 0.0, 1.0),
 )
 
 
@@ -31,23 +35,24 @@ class CommandLimiter:
     * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
       (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
     * saturation to [u_min, u_max] (acceleration limit);
-    * holding brake, `holding_brake` > 0: with a zero target and the train (nearly)
-      stopped, at least this much braking, as an ATO holds a train berthed at a
+    * holding brake, `holding_brake` > 0: with a zero target (at most `holding_target`)
+      and the train (nearly) stopped, at least this much braking, as an ATO holds a train berthed at a
       station; without it a controller dithers about zero speed and creeps.
     """
 
     STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
 
     def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
-                 mode_band: float = 0.0, holding_brake: float = 0.0):
+                 mode_band: float = 0.0, holding_brake: float = 0.0,
+                 holding_target: float = 0.0):
         self.u_min, self.u_max = u_min, u_max
         self.max_change = max_rate * period
         self.mode_band = mode_band
-        self.holding_brake = holding_brake
+        self.holding_brake, self.holding_target = holding_brake, holding_target
         self.last = 0.0
 
     def apply(self, u: float, target: float, speed: float) -> float:
-        if self.holding_brake > 0.0 and target <= 0.0 and speed < self.STOPPED:
+        if self.holding_brake > 0.0 and target <= self.holding_target and speed < self.STOPPED:
             u = min(u, -self.holding_brake)
         band = self.mode_band
         if band > 0.0:
@@ -64,4 +69,4 @@ class CommandLimiter:
     def from_values(cls, values) -> CommandLimiter:
         return cls(values["controller.u_min"], values["controller.u_max"], values["run.period"],
                    values["controller.max_rate"], values["controller.mode_band"],
-                   values["controller.holding_brake"])
+                   values["controller.holding_brake"], values["controller.holding_target"])

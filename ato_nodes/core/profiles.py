@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ScenarioError
+from .plant import TrainParameters
 from .registry import Component
-from .spec import PROFILE_NODES, param
+from .spec import MAX_PREVIEW, PROFILE_NODES, param
 
 KMH = 1.0 / 3.6  # m/s per km/h
 
@@ -55,6 +56,64 @@ class Seed000Profile:
         if t < 3 * T / 2:
             return min(v * (1.0 - math.exp(-(t - T + self.t1) / 160.0)), self.cruise_high)
         return max(v * (1.0 - math.exp(-(3 * T / 2 + 480.0 - t) / 160.0)), 0.0)
+
+
+ROUNDING_WIDTH = 20  # samples per averaging window of round_corners
+
+
+def round_corners(samples: np.ndarray, width: int, after: float) -> np.ndarray:
+    """A speed curve sampled evenly in time, its acceleration made continuous: the mean
+    over `width` samples centred where it falls, over the past where it rises, so it
+    brakes earlier and accelerates later than the corners, never the other way (the
+    lower of the two means; the curve before its start holds its first value, after its
+    end `after`). An acceleration step of da becomes a ramp of da / (width * tick)."""
+    padded = np.concatenate((np.full(width, samples[0]), samples, np.full(width, after)))
+    sums = np.concatenate(([0.0], np.cumsum(padded)))
+    i = np.arange(len(samples))
+    past = (sums[i + width + 1] - sums[i + 1]) / width
+    centred = (sums[i + width + width // 2 + 1] - sums[i + width // 2 + 1]) / width
+    return np.minimum(past, centred)
+
+
+class FeasiblePlan:
+    """A time-indexed plan made drivable by the nominal train (profile.envelope_share,
+    profile.jerk), precomputed on the run's step grid: where the plan asks more
+    traction or braking force than `share` of the envelope against the basic
+    resistance, the target falls behind it and catches up as the share allows
+    (forward then backward pass; braking starts earlier, so the target is never above
+    what the train can brake from); then its corners are rounded to `jerk` over
+    T = (the largest planned acceleration change) / jerk. Between steps, linear."""
+
+    position_indexed = False
+
+    def __init__(self, plan, train: TrainParameters, share: float, jerk: float, period: float,
+                 steps: int):
+        self.period = period
+        times = period * np.arange(steps + 2 * MAX_PREVIEW)
+        raw = np.array([plan.speed(t) for t in times])
+        speeds = raw.copy()
+        if share > 0.0:
+            xi = train.xi
+            for k in range(len(speeds) - 1):  # forward: the acceleration it can give
+                v = speeds[k]
+                reach = v + period * xi * (share * train.force_limits(v)[1] - train.resistance(v))
+                speeds[k + 1] = min(speeds[k + 1], max(reach, 0.0))
+            for k in range(len(speeds) - 2, -1, -1):  # backward: the braking it can give
+                v = speeds[k + 1]
+                reach = v + period * xi * (train.resistance(v) - share * train.force_limits(v)[0])
+                speeds[k] = min(speeds[k], reach)
+        if jerk > 0.0:
+            acceleration = np.diff(speeds) / period
+            change = float(np.max(np.abs(np.diff(acceleration)))) if len(acceleration) > 1 else 0.0
+            width = max(2, 2 * round(change / jerk / period / 2))
+            speeds = round_corners(speeds, width, speeds[-1])
+        self.speeds = speeds.tolist()
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        x = t / self.period
+        i = min(max(int(x), 0), len(self.speeds) - 2)
+        low = self.speeds[i]
+        return low + (min(x, i + 1.0) - i) * (self.speeds[i + 1] - low)
 
 
 @dataclass(frozen=True)
@@ -157,13 +216,34 @@ class AtoCurve:
     line's planned run time (bisection); when even the limits cannot meet the
     plan, the curve runs at the limits. The departure point's target is
     `start_speed`, not 0, or a position-indexed curve would never start the train.
+
+    Two additions, off by default (the papers' curves):
+    * `envelope_share` > 0 with the nominal `train`: the planned traction and braking
+      force never exceeds that share of the train's envelope at the speed, against its
+      basic and the line's resistance, so the controller keeps the rest for what the
+      plan does not know (a steep up grade lowers the target instead of leaving it
+      unreachable; a speed the share cannot hold is not planned; in a neutral section
+      the plan coasts). The
+      passes then step cell by cell; the curve for a cruise speed c is the curve
+      without one, capped at c (both passes are monotone in their start).
+    * `jerk` > 0: the acceleration is made continuous with at most this jerk, the
+      curve in time averaged over T = max(acceleration, deceleration) / jerk:
+      centred where it falls (the braking starts T/2 earlier, never later), over
+      the past where it rises (the acceleration starts later, never earlier). Where a
+      braking ends at a lower limit the centred mean passes over the corner by at
+      most da T / 8 (0.12 m/s for 0.7 m/s^2 at 0.5 m/s^3); the rounded curve is
+      kept half the margin under the limits, never clipped to the cap (a clip
+      would bring the corner back).
     """
 
     position_indexed = True
+    shapes_itself = True  # applies profile.envelope_share and profile.jerk in distance
 
     def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
                  start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
-                 power_speed: float = math.inf, stop_jerk: float = 0.0):
+                 power_speed: float = math.inf, stop_jerk: float = 0.0,
+                 train: TrainParameters | None = None, envelope_share: float = 0.0,
+                 jerk: float = 0.0):
         self.line = line
         stop = line.stop_position
         self.positions = np.arange(0.0, stop + resolution / 2, resolution)
@@ -173,6 +253,9 @@ class AtoCurve:
         self.power_speed, self.stop_jerk = power_speed, stop_jerk
         self.start_speed = start_speed
         self.caps = np.maximum(self.limits - margin, start_speed)
+        self.margin, self.jerk = margin, jerk
+        self.feasible = (self._feasible(train, envelope_share, train_length)
+                         if envelope_share > 0.0 else None)
         top = float(self.caps.max())
         if line.planned_run_time is None or self.run_time(top) >= line.planned_run_time:
             self.cruise = top
@@ -215,6 +298,12 @@ class AtoCurve:
                         np.cbrt(vp ** 3 + 3.0 * a * vp * np.maximum(distance - knee, 0.0)))
 
     def curve(self, cruise: float) -> np.ndarray:
+        """The target at every grid point for a cruise speed, m/s."""
+        speeds = (np.minimum(self.feasible, cruise) if self.feasible is not None
+                  else self._fixed_rates(cruise))
+        return self._rounded(speeds) if self.jerk > 0.0 else speeds
+
+    def _fixed_rates(self, cruise: float) -> np.ndarray:
         """In run-up distance d(v) the acceleration curve from any point grows by one
         metre per metre, so the forward pass is a running minimum too."""
         x = self.positions
@@ -227,6 +316,48 @@ class AtoCurve:
         if self.stop_jerk > 0.0:
             squared = np.minimum(squared, self.stopping(x[-1] - x) ** 2)
         return np.sqrt(np.maximum(squared, 0.0))
+
+    def _feasible(self, train: TrainParameters, share: float, train_length: float
+                  ) -> np.ndarray:
+        """The curve without a cruise speed, each cell's rate the planned one or what the
+        share of the envelope's force gives against the resistance, whichever is lower
+        (forward then backward pass)."""
+        x, caps = self.positions, self.caps
+        line_resistance = [self.line.additional_resistance(p, train_length) for p in x]
+        powered = [not self.line.in_neutral_section(p - train.pantograph_offset) for p in x]
+        xi, a, vp = train.xi, self.acceleration, self.power_speed
+        squared = np.empty(len(x))
+        v2 = squared[0] = self.start_speed ** 2
+        for i in range(len(x) - 1):
+            v = math.sqrt(v2)
+            high = train.force_limits(v)[1] if powered[i] else 0.0
+            planned = a if v <= vp else a * vp / v
+            rate = min(planned, xi * (share * high - train.resistance(v) - line_resistance[i]))
+            v2 = min(max(v2 + 2.0 * rate * (x[i + 1] - x[i]), self.start_speed ** 2),
+                     caps[i + 1] ** 2)
+            squared[i + 1] = v2
+        stopping = self.stopping(x[-1] - x) ** 2 if self.stop_jerk > 0.0 else squared
+        v2 = squared[-1] = 0.0
+        for i in range(len(x) - 2, -1, -1):
+            v = math.sqrt(v2)
+            low = train.force_limits(v)[0]
+            rate = min(self.deceleration,
+                       xi * (train.resistance(v) + line_resistance[i] - share * low))
+            v2 = min(v2 + 2.0 * max(rate, 0.0) * (x[i + 1] - x[i]), squared[i], stopping[i])
+            squared[i] = v2
+        return np.sqrt(squared)
+
+    def _rounded(self, speeds: np.ndarray) -> np.ndarray:
+        """The curve with its acceleration made continuous (see the class docstring), in
+        time along the curve itself, then back onto the grid."""
+        x = self.positions
+        times = np.concatenate(([0.0], np.cumsum(2.0 * np.diff(x) / (speeds[:-1] + speeds[1:]))))
+        tick = max(self.acceleration, self.deceleration) / self.jerk / ROUNDING_WIDTH
+        grid = np.arange(0.0, times[-1] + tick / 2, tick)
+        rounded = round_corners(np.interp(grid, times, speeds), ROUNDING_WIDTH, 0.0)
+        rounded = np.minimum(np.interp(times, grid, rounded), self.limits - self.margin / 2)
+        rounded[0], rounded[-1] = speeds[0], 0.0
+        return rounded
 
     def stopping(self, distance: np.ndarray) -> np.ndarray:
         """Speed at `distance` before the mark on a stop whose braking eases off at
@@ -259,16 +390,19 @@ def ato_curve(values: dict, line) -> AtoCurve:
     return _ato_curve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
                       values["profile.ato.margin"], values["profile.ato.start_speed"],
                       values["plant.length"], values["profile.ato.power_speed"] or math.inf,
-                      values["profile.ato.stop_jerk"])
+                      values["profile.ato.stop_jerk"],
+                      TrainParameters.from_values(values) if values["profile.envelope_share"]
+                      else None, values["profile.envelope_share"], values["profile.jerk"])
 
 
 @functools.lru_cache(maxsize=8)
 def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
-               power_speed, stop_jerk) -> AtoCurve:
+               power_speed, stop_jerk, train, envelope_share, jerk) -> AtoCurve:
     """One curve per distinct line and parameters (the profile and the scorer both need
     it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
-                    power_speed=power_speed, stop_jerk=stop_jerk)
+                    power_speed=power_speed, stop_jerk=stop_jerk, train=train,
+                    envelope_share=envelope_share, jerk=jerk)
 
 
 STEP_PARAMETERS = (

@@ -15,7 +15,7 @@ from typing import Any
 from .components import CONTROLLERS, PROFILES
 from .errors import ScenarioError
 from .limiter import LIMITER_PARAMETERS
-from .spec import PLANT_NODES, PROFILE_NODES, ParamSpec, param
+from .spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, param
 
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 LOOP_NODES = ("profile", "plant", "controller")
@@ -38,6 +38,15 @@ BASE: tuple[ParamSpec, ...] = (
     param("profile.approach_step", 0.0, "seed 003's stepped approach: when the target is more "
           "than this above the speed, approach it in stairs of this size, m/s (0 = off)",
           PROFILE_NODES, 0.0, 100.0),
+    param("profile.envelope_share", 0.0, "plan traction and braking forces of at most this "
+          "share of the nominal train's envelope, against its resistance (and the line's, "
+          "for the ato curve), keeping the rest for the controller; the target falls behind "
+          "a plan that asks more and catches up as it can (0 = the plan as given, the "
+          "papers' setting); time-indexed profiles and the ato curve", PROFILE_NODES,
+          0.0, 1.0),
+    param("profile.jerk", 0.0, "round the target's acceleration changes to at most this "
+          "jerk, m/s^3 (0 = the plan's corners, the papers' setting); time-indexed profiles "
+          "and the ato curve", PROFILE_NODES, 0.0, 10.0),
     param("plant.train", "", "train preset (msg_config/trains/NAME.yaml) whose plant.* values "
        "the scenario starts from; the scenario's own plant.* values override it", PLANT_NODES),
     param("plant.gamma", 0.11, "rotating-mass coefficient", PLANT_NODES, 0.0, 1.0),
@@ -90,7 +99,7 @@ BASE: tuple[ParamSpec, ...] = (
     param("controller.preview", 0, "steps of target preview: the profile sends the controller "
           "r_k .. r_k+N (the planned target; along the planned trajectory for position-indexed "
           "targets) and the controller tracks r_k+N (0 = r_k, the papers' setting)",
-          ("profile", "controller"), 0, 1000),
+          ("profile", "controller"), 0, MAX_PREVIEW),
     *LIMITER_PARAMETERS,
     param("supervisor.ready_timeout", 30.0, "wall seconds to wait for every edge to match",
           "supervisor", 0.1, 3600.0),

@@ -78,7 +78,7 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
 # Every index score_series can give (a run gives those that apply to it).
 INDEX_NAMES = (
     "steps", "finite", "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh",
-    "median_abs_error_kmh", "j_seed004",
+    "median_abs_error_kmh", "p95_abs_error_kmh", "j_seed004",
     "eso_speed_max_dev", "eso_acceleration_max_dev", "eso_disturbance_max_dev",
     "overshoot_percent", "traction_energy_kwh", "regenerated_energy_kwh", "net_energy_kwh",
     "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time",
@@ -200,6 +200,7 @@ def format_indices(indices: dict) -> str:
         f"max |e|          {indices['max_abs_error_kmh']:.4f} km/h"
         f"  ({indices['max_abs_error']:.5f} m/s)",
         f"median |e|       {indices['median_abs_error_kmh']:.4f} km/h",
+        f"p95 |e|          {indices['p95_abs_error_kmh']:.4f} km/h",
         f"J (seed 004)     {indices.get('j_seed004', float('nan')):.6g}",
         *([f"ESO max |z1 - v| {indices['eso_speed_max_dev']:.3g} m/s, |z2 - a| "
            f"{indices['eso_acceleration_max_dev']:.3g} m/s^2, |z3 - f| "

@@ -70,4 +70,5 @@ def settings(cls, group: str, values) -> Any:
 # The read-only run context (core/context.py) holds the nominal train and the planned
 # target, so the nodes whose components receive it declare those parameters too.
 PLANT_NODES = ("plant", "profile", "controller")
+MAX_PREVIEW = 1000  # steps: the longest target horizon a controller may ask for
 PROFILE_NODES = ("profile", "controller")

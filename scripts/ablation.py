@@ -1,0 +1,124 @@
+#!/usr/bin/env python3
+"""What each tracking addition gives: one scenario with every addition, without each in
+turn, and built up one addition at a time from none.
+
+    python scripts/ablation.py seed004-metro-ato --untuned ladrc.omega_o=10 \\
+        --untuned ladrc.omega_c=2 --untuned ladrc.b0=0.00907 --untuned controller.preview=10 \\
+        --reference seed004-metro-tuned --out bags/ablation-metro
+
+The additions (docs/tracking.md), each undone by the overrides beside it:
+  feedforward         ladrc.feedforward=false (planned acceleration, known resistance)
+  preview             controller.preview=0 (and with it the prediction horizon)
+  delay-aware         ladrc.delay_aware=false (observer input, Smith predictor)
+  feasible curve      profile.envelope_share=0
+  rounded curve       profile.jerk=0
+  departure and berth profile.ato.start_speed=0.3, controller.holding_target=0
+  tuned gains         the --untuned values (the tuning objective's work)
+Runs in-process (the stack gives the same numbers bit for bit); --reference adds the
+rows of other scenarios (today's controllers). Prints and writes ablation.md and
+ablation.json in --out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import _cli
+
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.core.scoring import score_series
+
+ADDITIONS = (
+    ("feedforward", ["ladrc.feedforward=false"]),
+    ("preview", ["controller.preview=0"]),
+    ("delay-aware", ["ladrc.delay_aware=false"]),
+    ("feasible curve", ["profile.envelope_share=0"]),
+    ("rounded curve", ["profile.jerk=0"]),
+    ("departure and berth", ["profile.ato.start_speed=0.3", "controller.holding_target=0"]),
+)
+TUNED = "tuned gains"
+COLUMNS = (  # index, heading, format
+    ("max_abs_error_kmh", "max abs(e) km/h", "{:.3f}"),
+    ("max_abs_error_outside_steps_kmh", "outside steps km/h", "{:.3f}"),
+    ("p95_abs_error_kmh", "p95 abs(e) km/h", "{:.3f}"),
+    ("itae", "ITAE", "{:.5g}"),
+    ("stopping_error", "stop m", "{:+.3f}"),
+    ("max_jerk", "jerk 1 s m/s^3", "{:.3f}"),
+    ("switch_count", "switches", "{:d}"),
+    ("overspeed_time", "overspeed s", "{:.1f}"),
+    ("net_energy_kwh", "net energy kWh", "{:.2f}"),
+)
+
+
+def run(job: tuple[str, dict]) -> tuple[str, dict]:
+    label, values = job
+    series = simulate(values)
+    return label, {key: value for key, value in score_series(series, values).items()
+                   if isinstance(value, (int, float))}
+
+
+def cell(indices: dict, key: str, form: str) -> str:
+    if key not in indices:
+        return "-"
+    value = indices[key]
+    return form.format(int(value) if form == "{:d}" else value)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("scenario")
+    parser.add_argument("--untuned", action="append", default=[], metavar="NAME=VALUE",
+                        help="a gain before tuning (repeatable); without, no tuned-gains row")
+    parser.add_argument("--reference", action="append", default=[], metavar="SCENARIO")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    additions = list(ADDITIONS) + ([(TUNED, args.untuned)] if args.untuned else [])
+    try:
+        check_given_once(args.untuned)
+        full = load_scenario(args.scenario)
+        jobs = [("all additions", full)]
+        jobs += [(f"without {name}", apply_overrides(full, undo)) for name, undo in additions]
+        undone = [item for _, undo in additions for item in undo]
+        jobs.append(("none (linear ADRC alone)", apply_overrides(full, undone)))
+        for i, (name, _) in enumerate(additions[:-1]):
+            still_off = [item for _, undo in additions[i + 1:] for item in undo]
+            jobs.append((f"+ {name}", apply_overrides(full, still_off)))
+        jobs += [(f"reference: {name}", load_scenario(name)) for name in args.reference]
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    if args.workers < 1:
+        _cli.fail("--workers must be positive")
+    _cli.new_directory(args.out)
+    with ProcessPoolExecutor(args.workers) as pool:
+        results = dict(pool.map(run, jobs))
+    order = ([label for label, _ in jobs if label.startswith("reference")]
+             + ["none (linear ADRC alone)"]
+             + [label for label, _ in jobs if label.startswith("+ ")] + ["all additions"]
+             + [label for label, _ in jobs if label.startswith("without")])
+    present = [c for c in COLUMNS if any(c[0] in results[label] for label in order)]
+    lines = [f"Ablation of {args.scenario} (in-process; cumulative from none, then each "
+             f"addition left out)", "",
+             "| run | " + " | ".join(heading for _, heading, _ in present) + " |",
+             "|---|" + "---|" * len(present)]
+    lines += [f"| {label} | " + " | ".join(cell(results[label], key, form)
+                                            for key, _, form in present) + " |"
+              for label in order]
+    table = "\n".join(lines)
+    args.out.mkdir()
+    (args.out / "ablation.md").write_text(table + "\n")
+    (args.out / "ablation.json").write_text(json.dumps(
+        {"scenario": args.scenario, "untuned": args.untuned, "reference": args.reference,
+         "runs": {label: results[label] for label in order}}, indent=2))
+    print(table)
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)

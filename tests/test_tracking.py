@@ -1,0 +1,183 @@
+"""What an ATO knows, used for tracking (issue 12): the nominal train model, the linear
+ADRC's feedforward and delay-aware observer, envelope-feasible and jerk-rounded target
+curves, the holding target (ROS-free)."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.adrc import LinearADRC, LinearADRCGains
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.limiter import CommandLimiter
+from ato_nodes.core.line import load_line, parse_line
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
+from ato_nodes.core.profiles import AtoCurve, FeasiblePlan, Seed000Profile
+from ato_nodes.core.scenario import apply_overrides, load_scenario, train_preset
+from ato_nodes.core.schema import defaults
+from ato_nodes.core.scoring import score_series
+from ato_nodes.core.train_model import NominalTrain
+
+PERIOD = 0.1
+
+
+def metro(**changes) -> TrainParameters:
+    values = {**defaults(), **train_preset("metro-b"), "plant.envelope": True,
+              "plant.disturbance.amplitude": 0.0}
+    return replace(TrainParameters.from_values(values), **changes)
+
+
+def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag():
+    train = metro()
+    plant = PointMassTrain(train, PERIOD, 4, TrainState(speed=10.0))
+    model, blind = NominalTrain(train, PERIOD), NominalTrain(replace(train, dead_time=0.0), PERIOD)
+    commands = [40.0] * 30 + [-30.0] * 30 + [80.0] * 40
+    speeds, worst, worst_blind = [], 0.0, 0.0
+    for k, u in enumerate(commands):
+        speeds.append(plant.state.speed)
+        if k >= 60:  # from step 60 the command is held at 80: the prediction's assumption
+            ahead = 10
+            if k + ahead < len(commands):
+                predicted = model.predict(speeds[-1], 0.0, train.xi, ahead, u)
+                blind_prediction = blind.predict(speeds[-1], 0.0, train.xi, ahead, u)
+                future = PointMassTrain(train, PERIOD, 4, TrainState(speed=0.0))
+                future.state = replace(plant.state)
+                future.lag_state, future.delayed = plant.lag_state, plant.delayed.copy()
+                for _ in range(ahead):
+                    future.step(u)
+                worst = max(worst, abs(predicted - future.state.speed))
+                worst_blind = max(worst_blind, abs(blind_prediction - future.state.speed))
+        model.advance(u, speeds[-1])
+        blind.advance(u, speeds[-1])
+        plant.step(u)
+    assert worst < 0.01  # Euler over 1 s against RK4: millimetres per second
+    assert worst_blind > 5 * worst  # ignoring the dead time is visibly wrong
+
+
+def test_the_linear_adrc_without_its_additions_is_the_papers_law():
+    gains = LinearADRCGains(omega_o=8.0, omega_c=1.5, b0=0.009, feedforward=False,
+                            delay_aware=False)
+    adrc = LinearADRC(gains, PERIOD, CommandLimiter(-1e6, 1e6))
+    z1 = z2 = u_prev = 0.0
+    adrc.start(1.0, 0.5)
+    z1 = 0.5
+    for k in range(50):
+        target, measured = 1.0 + 0.05 * k, 0.5 + 0.04 * k
+        out = adrc.step(target, measured, [target])
+        l1, l2, h, b0 = 16.0, 64.0, PERIOD, 0.009
+        e = (z1 - measured + h * (z2 + b0 * u_prev)) / (1 + h * l1 + h * h * l2)
+        z2 -= h * l2 * e
+        z1 = measured + e
+        u_prev = (1.5 * (target - z1) - z2) / b0
+        assert out.u == u_prev and out.extras == (z1, z2)
+
+
+def nominal_run(**sets):
+    values = apply_overrides(load_scenario("seed004-metro-ato"),
+                             [f"{k}={v}" for k, v in sets.items()])
+    series = simulate(values)
+    return series, score_series(series, values)
+
+
+def test_feedforward_leaves_the_observer_only_what_the_model_does_not_know():
+    with_model, _ = nominal_run()
+    without, _ = nominal_run(**{"ladrc.feedforward": "false"})
+    moving = with_model["speed"] > 5.0
+    # On the nominal train the model explains the resistance and grades: the observer's
+    # disturbance estimate is mostly sensor noise; without it, it carries them all.
+    explained = np.percentile(np.abs(with_model["z2"][moving]), 95)
+    assert np.percentile(np.abs(without["z2"][moving]), 95) > 3 * explained
+
+
+def test_the_delay_aware_observer_and_preview_cut_the_metro_error():
+    _, aware = nominal_run()
+    _, blind = nominal_run(**{"ladrc.delay_aware": "false"})
+    _, no_preview = nominal_run(**{"controller.preview": "0"})
+    assert aware["max_abs_error_kmh"] < 1.0
+    assert blind["max_abs_error_kmh"] > 2 * aware["max_abs_error_kmh"]
+    assert no_preview["max_abs_error_kmh"] > 2 * aware["max_abs_error_kmh"]
+
+
+def maglev_curve(**extra) -> tuple[AtoCurve, TrainParameters]:
+    values = load_scenario("seed003-maglev")
+    train = TrainParameters.from_values(values)
+    line = load_line(values["line.file"])
+    return AtoCurve(line, 0.7, 0.7, margin=1.3889, start_speed=0.1, train_length=train.length,
+                    train=train, **extra), train
+
+
+def test_an_envelope_feasible_curve_never_plans_more_than_its_share_of_the_force():
+    share = 0.9
+    curve, train = maglev_curve(envelope_share=share)
+    fixed, _ = maglev_curve()
+    x, v = curve.positions, curve.speeds
+    rate = np.diff(v * v) / (2 * np.diff(x))
+    for i in range(0, len(x) - 1, 7):
+        low, high = train.force_limits(v[i])
+        resistance = train.resistance(v[i]) + curve.line.additional_resistance(x[i], train.length)
+        assert rate[i] <= train.xi * (share * high - resistance) + 1e-3
+        assert rate[i] >= train.xi * (share * low - resistance) - 1e-3
+    assert np.all(v <= fixed.caps + 1e-9)
+    # On the 55 per mille grades the fixed 0.7 m/s^2 cannot be given: the curves differ.
+    assert np.max(np.abs(fixed.speeds - v)) > 1.0
+
+
+def time_along(curve_positions, speeds):
+    return np.concatenate(([0.0], np.cumsum(2 * np.diff(curve_positions)
+                                             / (speeds[:-1] + speeds[1:]))))
+
+
+def test_a_rounded_curve_has_its_jerk_and_brakes_no_later_than_the_corners():
+    jerk = 0.5
+    rounded, _ = maglev_curve(envelope_share=0.9, jerk=jerk)
+    corners, _ = maglev_curve(envelope_share=0.9)
+    for curve, bound in ((rounded, 1.1 * jerk), (corners, None)):
+        t = time_along(curve.positions, curve.speeds)
+        grid = np.arange(1.0, t[-1] - 1.0, 0.05)
+        speed = np.interp(grid, t, curve.speeds)
+        acceleration = np.gradient(speed, grid)
+        window = 20  # 1 s, as the jerk index
+        jerks = np.abs(acceleration[window:] - acceleration[:-window]) / 1.0
+        if bound is not None:
+            assert jerks.max() <= bound
+        else:
+            assert jerks.max() > 1.3 * jerk  # a 0.7 m/s^2 step over the 1 s window
+    assert np.all(rounded.speeds <= rounded.limits - 1.3889 / 2 + 1e-9)
+    # Braking starts no later than at the corners: where the corners' curve falls the
+    # rounded one is under it, but for da T / 8 where a braking ends at a lower limit.
+    falling = np.diff(corners.speeds) < 0
+    assert np.all(rounded.speeds[1:][falling] <= corners.speeds[1:][falling] + 0.7 * 1.4 / 8)
+    assert np.mean(rounded.speeds[1:][falling] <= corners.speeds[1:][falling] + 1e-6) > 0.95
+
+
+def test_a_feasible_time_plan_falls_behind_where_the_plan_asks_too_much():
+    values = load_scenario("seed000-realistic")
+    train = TrainParameters.from_values(values)
+    plan = Seed000Profile(1200.0, 368.34 / 3.6, 125.2841, 350 / 3.6, 200 / 3.6)
+    feasible = FeasiblePlan(plan, train, 0.5, 0.0, 0.05, 48000)
+    t = np.arange(0, 2400, 0.05)
+    raw = np.array([plan.speed(s) for s in t])
+    v = np.array([feasible.speed(s) for s in t])
+    assert np.all(v <= raw + 1e-9)
+    rate = np.diff(v) / 0.05
+    high = np.array([train.force_limits(s)[1] for s in v[:-1]])
+    resistance = np.array([train.resistance(s) for s in v[:-1]])
+    assert np.all(rate <= train.xi * (0.5 * high - resistance) + 1e-9)
+    assert raw.max() - v.max() > 10.0  # 350 km/h cannot be held on half the envelope
+    gentle = FeasiblePlan(plan, replace(train, max_traction_force=1e9, max_traction_power=1e9,
+                                        max_brake_force=1e9, max_brake_power=1e9),
+                          1.0, 0.0, 0.05, 48000)
+    assert [gentle.speed(s) for s in t[::97]] == pytest.approx(raw[::97])
+
+
+def test_shaping_a_position_indexed_plan_that_is_not_the_ato_curve_is_refused():
+    with pytest.raises(ScenarioError, match="profile.jerk apply to time-indexed"):
+        apply_overrides(load_scenario("seed002-hsr"), ["profile.jerk=0.5"])  # before a start
+
+
+def test_the_holding_brake_takes_a_target_below_the_holding_target():
+    limiter = CommandLimiter(-100.0, 100.0, holding_brake=30.0, holding_target=0.02)
+    assert limiter.apply(5.0, 0.015, 0.05) == -30.0
+    assert limiter.apply(5.0, 0.05, 0.05) == 5.0  # a departure target is never held
+    assert CommandLimiter(-100.0, 100.0, holding_brake=30.0).apply(5.0, 0.015, 0.05) == 5.0
