@@ -39,6 +39,7 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("overshoot_percent", "overshoot %", "{:.3f}"),
     ("traction_energy_kwh", "traction kWh", "{:.2f}"),
     ("regenerated_energy_kwh", "regenerated kWh", "{:.2f}"),
+    ("net_energy_kwh", "net energy kWh", "{:.2f}"),
     ("max_jerk", "max jerk (1 s) m/s^3", "{:.3f}"),
     ("comfort_index", "comfort m/s^3", "{:.4f}"),
     ("switch_count", "switches", "{:d}"),
@@ -47,6 +48,30 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("stopping_error", "stopping error m", "{:+.3f}"),
     ("running_time_error", "run-time error s", "{:+.2f}"),
 ]
+
+
+# What a tracking comparison shows (scripts/compare_scenarios.py, scripts/ablation.py).
+TRACKING_KEYS = ("max_abs_error_kmh", "max_abs_error_outside_steps_kmh", "p95_abs_error_kmh",
+                 "itae", "stopping_error", "max_jerk", "switch_count", "overspeed_time",
+                 "net_energy_kwh")
+
+
+def markdown_table(results: dict[str, dict], keys: tuple[str, ...] = TRACKING_KEYS,
+                   extra: dict[str, dict[str, str]] | None = None) -> str:
+    """One row per run (`results`: label -> indices), one column per index of `keys`
+    that some run has, formatted as in INDEX_COLUMNS; `extra` adds text columns
+    (heading -> label -> text)."""
+    columns = {key: (heading, form) for key, heading, form in INDEX_COLUMNS}
+    present = [key for key in keys if any(key in r for r in results.values())]
+    extra = extra or {}
+    lines = ["| run | " + " | ".join([columns[k][0] for k in present] + list(extra)) + " |",
+             "|---|" + "---|" * (len(present) + len(extra))]
+    for name, indices in results.items():
+        cells = [columns[k][1].format(int(indices[k]) if columns[k][1] == "{:d}" else indices[k])
+                 if k in indices else "-" for k in present]
+        cells += [texts.get(name, "") for texts in extra.values()]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 @dataclass

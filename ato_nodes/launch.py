@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
@@ -320,3 +321,20 @@ class Stack:
         outcome.domain_id = self.lock.domain_id
         outcome.wall_time = time.monotonic() - started
         return outcome
+
+
+def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0
+                ) -> tuple[dict[str, Any], bool]:
+    """One run through the stack, scored from its bag, and the same run in-process:
+    (the bag's indices, whether the two agree bit for bit). A failed run raises
+    RuntimeError with the launcher's one-line message."""
+    from ato_nodes.bagio import read_run
+    from ato_nodes.core.loop import simulate
+    from ato_nodes.core.scoring import score_series
+    outcome = Stack(values, bag, quiet=True, timeout=timeout).run()
+    if not outcome.ok:
+        raise RuntimeError(f"{bag}: {outcome.message}")
+    run = read_run(bag)
+    identical = all(np.array_equal(run.series[name], series)
+                    for name, series in simulate(values).items() if name != "t")
+    return score_series(run.series, run.parameters), identical

@@ -3,7 +3,7 @@
 turn, and built up one addition at a time from none.
 
     python scripts/ablation.py seed004-metro-ato --untuned ladrc.omega_o=10 \\
-        --untuned ladrc.omega_c=2 --untuned ladrc.b0=0.00907 --untuned controller.preview=10 \\
+        --untuned ladrc.omega_c=2 --untuned ladrc.b0=0.00907 \\
         --reference seed004-metro-tuned --out bags/ablation-metro
 
 The additions (docs/tracking.md), each undone by the overrides beside it:
@@ -13,7 +13,8 @@ The additions (docs/tracking.md), each undone by the overrides beside it:
   feasible curve      profile.envelope_share=0
   rounded curve       profile.jerk=0
   departure and berth profile.ato.start_speed=0.3, controller.holding_target=0
-  tuned gains         the --untuned values (the tuning objective's work)
+  tuned gains         the --untuned values (the tuning objective's work; not a
+                      parameter another addition undoes)
 Runs in-process (the stack gives the same numbers bit for bit); --reference adds the
 rows of other scenarios (today's controllers). Prints and writes ablation.md and
 ablation.json in --out.
@@ -28,6 +29,7 @@ from pathlib import Path
 
 import _cli
 
+from ato_nodes.analysis import markdown_table
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
@@ -42,31 +44,11 @@ ADDITIONS = (
     ("departure and berth", ["profile.ato.start_speed=0.3", "controller.holding_target=0"]),
 )
 TUNED = "tuned gains"
-COLUMNS = (  # index, heading, format
-    ("max_abs_error_kmh", "max abs(e) km/h", "{:.3f}"),
-    ("max_abs_error_outside_steps_kmh", "outside steps km/h", "{:.3f}"),
-    ("p95_abs_error_kmh", "p95 abs(e) km/h", "{:.3f}"),
-    ("itae", "ITAE", "{:.5g}"),
-    ("stopping_error", "stop m", "{:+.3f}"),
-    ("max_jerk", "jerk 1 s m/s^3", "{:.3f}"),
-    ("switch_count", "switches", "{:d}"),
-    ("overspeed_time", "overspeed s", "{:.1f}"),
-    ("net_energy_kwh", "net energy kWh", "{:.2f}"),
-)
-
-
 def run(job: tuple[str, dict]) -> tuple[str, dict]:
     label, values = job
     series = simulate(values)
     return label, {key: value for key, value in score_series(series, values).items()
                    if isinstance(value, (int, float))}
-
-
-def cell(indices: dict, key: str, form: str) -> str:
-    if key not in indices:
-        return "-"
-    value = indices[key]
-    return form.format(int(value) if form == "{:d}" else value)
 
 
 def main() -> None:
@@ -77,13 +59,20 @@ def main() -> None:
     parser.add_argument("--untuned", action="append", default=[], metavar="NAME=VALUE",
                         help="a gain before tuning (repeatable); without, no tuned-gains row")
     parser.add_argument("--reference", action="append", default=[], metavar="SCENARIO")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override for every run, references included (repeatable)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     additions = list(ADDITIONS) + ([(TUNED, args.untuned)] if args.untuned else [])
+    undone = [item.split("=", 1)[0] for _, undo in ADDITIONS for item in undo]
+    for item in args.untuned:
+        if item.split("=", 1)[0] in undone:
+            _cli.fail(f"--untuned {item}: another addition undoes {item.split('=', 1)[0]}")
     try:
         check_given_once(args.untuned)
-        full = load_scenario(args.scenario)
+        check_given_once(args.set)
+        full = apply_overrides(load_scenario(args.scenario), args.set)
         jobs = [("all additions", full)]
         jobs += [(f"without {name}", apply_overrides(full, undo)) for name, undo in additions]
         undone = [item for _, undo in additions for item in undo]
@@ -91,7 +80,8 @@ def main() -> None:
         for i, (name, _) in enumerate(additions[:-1]):
             still_off = [item for _, undo in additions[i + 1:] for item in undo]
             jobs.append((f"+ {name}", apply_overrides(full, still_off)))
-        jobs += [(f"reference: {name}", load_scenario(name)) for name in args.reference]
+        jobs += [(f"reference: {name}", apply_overrides(load_scenario(name), args.set))
+                 for name in args.reference]
     except ScenarioError as exc:
         _cli.fail(str(exc))
     if args.workers < 1:
@@ -103,19 +93,14 @@ def main() -> None:
              + ["none (linear ADRC alone)"]
              + [label for label, _ in jobs if label.startswith("+ ")] + ["all additions"]
              + [label for label, _ in jobs if label.startswith("without")])
-    present = [c for c in COLUMNS if any(c[0] in results[label] for label in order)]
-    lines = [f"Ablation of {args.scenario} (in-process; cumulative from none, then each "
-             f"addition left out)", "",
-             "| run | " + " | ".join(heading for _, heading, _ in present) + " |",
-             "|---|" + "---|" * len(present)]
-    lines += [f"| {label} | " + " | ".join(cell(results[label], key, form)
-                                            for key, _, form in present) + " |"
-              for label in order]
-    table = "\n".join(lines)
+    table = "\n".join([f"Ablation of {args.scenario} (in-process; cumulative from none, then "
+                       f"each addition left out)", "",
+                       markdown_table({label: results[label] for label in order})])
     args.out.mkdir()
     (args.out / "ablation.md").write_text(table + "\n")
     (args.out / "ablation.json").write_text(json.dumps(
         {"scenario": args.scenario, "untuned": args.untuned, "reference": args.reference,
+         "set": args.set,
          "runs": {label: results[label] for label in order}}, indent=2))
     print(table)
 

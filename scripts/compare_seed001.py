@@ -24,10 +24,8 @@ import _cli
 import numpy as np
 
 from ato_nodes.bagio import read_run
-from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.scoring import score_series
-from ato_nodes.launch import Stack
+from ato_nodes.launch import run_checked
 
 VARIANTS = {  # name: (scenario, overrides)
     "GPC, adaptive LSSVM": ("seed001-crh380al", []),
@@ -53,13 +51,11 @@ COLUMNS = (  # key, heading, format
 
 def run_variant(values: dict, bag: Path) -> dict:
     """Through the stack, then in-process; indices from the bag."""
-    outcome = Stack(values, bag, quiet=True, timeout=900).run()
-    if not outcome.ok:
-        _cli.fail(f"{bag}: {outcome.message}", 1)
+    try:
+        indices, identical = run_checked(values, bag)
+    except RuntimeError as exc:
+        _cli.fail(str(exc), 1)
     run = read_run(bag)
-    identical = all(np.array_equal(run.series[name], series)
-                    for name, series in simulate(values).items() if name != "t")
-    indices = score_series(run.series, run.parameters)
     indices["command_change_rms"] = float(np.sqrt(np.mean(np.diff(run.series["command"]) ** 2)))
     indices["bit_identical"] = "yes" if identical else "NO"
     return indices

@@ -2,11 +2,16 @@
 ADRC's feedforward and delay-aware observer, envelope-feasible and jerk-rounded target
 curves, the holding target (ROS-free)."""
 
+import json
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ato_nodes.analysis import markdown_table
 from ato_nodes.core.adrc import LinearADRC, LinearADRCGains
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.limiter import CommandLimiter
@@ -20,6 +25,7 @@ from ato_nodes.core.scoring import score_series
 from ato_nodes.core.train_model import NominalTrain
 
 PERIOD = 0.1
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def metro(**changes) -> TrainParameters:
@@ -181,3 +187,36 @@ def test_the_holding_brake_takes_a_target_below_the_holding_target():
     assert limiter.apply(5.0, 0.015, 0.05) == -30.0
     assert limiter.apply(5.0, 0.05, 0.05) == 5.0  # a departure target is never held
     assert CommandLimiter(-100.0, 100.0, holding_brake=30.0).apply(5.0, 0.015, 0.05) == 5.0
+
+
+def test_the_ablation_script_undoes_each_addition_and_builds_them_up(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "ablation.py"), "seed004-metro-ato",
+         "--set", "run.duration=40", "--untuned", "ladrc.omega_c=1.0", "--reference",
+         "seed004-metro", "--out", tmp_path / "a"], capture_output=True, text=True, cwd=ROOT,
+        timeout=300)
+    assert result.returncode == 0, result.stderr
+    runs = json.loads((tmp_path / "a" / "ablation.json").read_text())["runs"]
+    base = apply_overrides(load_scenario("seed004-metro-ato"), ["run.duration=40"])
+
+    def itae(*overrides):
+        values = apply_overrides(base, list(overrides))
+        return score_series(simulate(values), values)["itae"]
+
+    assert runs["all additions"]["itae"] == itae()
+    assert runs["without preview"]["itae"] == itae("controller.preview=0")
+    assert runs["without tuned gains"]["itae"] == itae("ladrc.omega_c=1.0")
+    assert runs["+ feedforward"]["itae"] == itae(
+        "controller.preview=0", "ladrc.delay_aware=false", "profile.envelope_share=0",
+        "profile.jerk=0", "profile.ato.start_speed=0.3", "controller.holding_target=0",
+        "ladrc.omega_c=1.0")
+    assert len(runs) == 1 + 7 + 1 + 6 + 1  # all, without each, none, cumulative, reference
+    assert "| none (linear ADRC alone) |" in result.stdout
+
+
+def test_a_markdown_table_formats_what_each_run_has():
+    table = markdown_table({"a": {"max_abs_error_kmh": 0.12345, "switch_count": 7.0},
+                            "b": {"max_abs_error_kmh": 2.0}}, extra={"note": {"a": "x"}})
+    lines = table.splitlines()
+    assert lines[0] == "| run | max abs(e) km/h | switches | note |"
+    assert lines[2] == "| a | 0.1235 | 7 | x |" and lines[3] == "| b | 2.0000 | - |  |"
