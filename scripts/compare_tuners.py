@@ -55,16 +55,41 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--params", action="append", required=True)
     parser.add_argument("--set", action="append", default=[])
     parser.add_argument("--fitness", default="itae")
+    parser.add_argument("--options", action="append", default=[],
+                        metavar="ALGORITHM:NAME=VALUE,...", help="an algorithm's options "
+                        "(repeatable), e.g. pso:c1=2,c2=2,w_start=0.6,w_end=0.6")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, required=True)
     return parser.parse_args()
+
+
+def algorithm_options(args, algorithm: str) -> dict:
+    """population_size and the --options given for `algorithm`."""
+    options = {"population_size": args.population}
+    for text in args.options:
+        name, _, assignments = text.partition(":")
+        if name != algorithm:
+            continue
+        for assignment in assignments.split(","):
+            key, sep, value = assignment.partition("=")
+            try:
+                options[key.strip()] = float(value)
+            except ValueError:
+                _cli.fail(f"--options {text}: expected NAME=NUMBER, got {assignment!r}")
+            if not sep:
+                _cli.fail(f"--options {text}: expected NAME=NUMBER, got {assignment!r}")
+    try:
+        create(algorithm, **options)
+    except (TypeError, ValueError) as exc:
+        _cli.fail(f"--options for {algorithm}: {exc}")
+    return options
 
 
 def budget(args, algorithm: str) -> int:
     """Evaluations of one run: --evaluations, or what --iterations take this algorithm."""
     if args.evaluations is not None:
         return args.evaluations
-    optimizer = create(algorithm, population_size=args.population)
+    optimizer = create(algorithm, **algorithm_options(args, algorithm))
     return optimizer.initial_evaluations() + args.iterations * optimizer.evaluations_per_iteration()
 
 
@@ -74,7 +99,7 @@ def tune(args, values, space, algorithm: str, seed: int) -> dict:
         return json.loads((out / "summary.json").read_text())
     settings = TuningSettings(algorithm, args.scenario, space, budget(args, algorithm), seed,
                               args.workers, True, args.fitness,
-                              options={"population_size": args.population})
+                              options=algorithm_options(args, algorithm))
     Tuner(values, settings, out, resume=True, progress=False).run()
     return json.loads((out / "summary.json").read_text())
 
@@ -101,6 +126,8 @@ def main() -> None:
             "max abs(e) km/h median | max abs(e) km/h best | stack re-run ITAE (best) | "
             "paper's max error |", "|---|---|---|---|---|---|---|---|---|"]
     for algorithm in args.algorithms:
+        algorithm_options(args, algorithm)  # a bad option fails now, before any tuning
+    for algorithm in args.algorithms:
         summaries = []
         for seed in args.seeds:
             summary = tune(args, values, space, algorithm, seed)
@@ -121,7 +148,7 @@ def main() -> None:
     (args.out / "comparison.md").write_text(
         f"Budget {f'{args.evaluations} evaluations' if args.evaluations is not None else f'{args.iterations} iterations'} each, population {args.population}, seeds "
         f"{' '.join(map(str, args.seeds))}, fitness {args.fitness}, scenario {args.scenario} "
-        f"{' '.join(args.set)}\n\n{table}\n")
+        f"{' '.join(args.set)}; options {' '.join(args.options) or 'the defaults'}\n\n{table}\n")
     plot_convergence(sorted(p for p in args.out.iterdir() if (p / "history.csv").exists()),
                      args.out / "convergence.png")
     print(table)

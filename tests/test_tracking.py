@@ -220,3 +220,19 @@ def test_a_markdown_table_formats_what_each_run_has():
     lines = table.splitlines()
     assert lines[0] == "| run | max abs(e) km/h | switches | note |"
     assert lines[2] == "| a | 0.1235 | 7 | x |" and lines[3] == "| b | 2.0000 | - |  |"
+
+
+@pytest.mark.integration
+def test_compare_scenarios_runs_each_through_the_stack_and_checks_it_in_process(tmp_path):
+    runs = ["seed004-metro-ato:run.duration=15", "hsr-neutral-ato:run.duration=10"]
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "compare_scenarios.py"),
+                             *runs, "--out", tmp_path / "c"], capture_output=True, text=True,
+                            cwd=ROOT, timeout=300)
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "c" / "comparison.json").read_text())
+    for text in runs:
+        name, override = text.split(":")
+        values = apply_overrides(load_scenario(name), [override])
+        assert report[text]["bit_identical"] is True
+        assert report[text]["itae"] == score_series(simulate(values), values)["itae"]
+    assert "| seed004-metro-ato:run.duration=15 |" in result.stdout
