@@ -35,6 +35,7 @@ import yaml
 from ato_nodes.analysis import plot_convergence
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
+from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, ros_parameter_file
 from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
@@ -54,8 +55,10 @@ class SearchSpace:
     upper: np.ndarray
 
     @classmethod
-    def parse(cls, items: list[str]) -> SearchSpace:
-        """`name=low:high` items (or comma-separated lists of them)."""
+    def parse(cls, items: list[str], values: dict[str, Any] | None = None) -> SearchSpace:
+        """`name=low:high` items (or comma-separated lists of them); with the run's
+        `values`, a parameter of a controller or profile kind the run does not use is
+        refused (tuning it would change nothing)."""
         names, lower, upper = [], [], []
         for item in (part.strip() for text in items for part in text.split(",")):
             if not item:
@@ -77,12 +80,32 @@ class SearchSpace:
                 spec.check(spec.value_type(value), "--params")
             if spec.name in names:
                 raise ScenarioError(f"--params: {spec.name} is given twice")
+            for registry in (CONTROLLERS, PROFILES) if values is not None else ():
+                owner = registry.owner(spec.name)
+                chosen = registry.chosen(values)
+                if owner is not None and owner is not chosen:
+                    raise ScenarioError(
+                        f"--params: {spec.name} belongs to {registry.role}.kind {owner.kind}; "
+                        f"this run's {registry.role} is {chosen.kind}, which does not use it")
             names.append(spec.name)
             lower.append(low_value)
             upper.append(high_value)
         if not names:
             raise ScenarioError("--params names no parameter to tune")
         return cls(tuple(names), np.array(lower), np.array(upper))
+
+    @classmethod
+    def default(cls, values: dict[str, Any]) -> SearchSpace:
+        """The run's controller kind's default search space (its registry entry)."""
+        component = CONTROLLERS.chosen(values)
+        if not component.search_space:
+            raise ScenarioError(f"controller.kind {component.kind} has no default search "
+                                f"space; give --params")
+        return cls.parse([f"{n}={lo!r}:{hi!r}" for n, lo, hi in component.search_space], values)
+
+    def describe(self) -> str:
+        return ", ".join(f"{n}={lo:g}:{hi:g}" for n, lo, hi in zip(self.names, self.lower,
+                                                                   self.upper))
 
     def overrides(self, x: np.ndarray) -> dict[str, Any]:
         return {name: (int(round(value)) if SPEC_BY_NAME[name].value_type is int else float(value))
@@ -309,6 +332,7 @@ class TuningSettings:
     timeout: float = 300.0     # s of wall time per stack candidate
     options: dict[str, Any] = field(default_factory=dict)
     requirements: tuple[Requirement, ...] = ()
+    keep_bags: bool = False    # stack candidates' bags (runs/), else deleted once scored
 
     @property
     def objective(self) -> Objective:
@@ -379,8 +403,11 @@ class Tuner:
         if bag.exists():  # a candidate interrupted before it was logged: run it again
             shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
-        return evaluate_in_stack(values, overrides, objective, index, bag, self.settings.timeout,
-                                 self.cancel)
+        record = evaluate_in_stack(values, overrides, objective, index, bag,
+                                   self.settings.timeout, self.cancel)
+        if not self.settings.keep_bags:  # scored; best.yaml reruns the best one
+            shutil.rmtree(bag, ignore_errors=True)
+        return record
 
     def _pool(self) -> Executor:
         if self.in_process_pool:

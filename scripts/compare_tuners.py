@@ -118,7 +118,7 @@ def main() -> None:
     args = parse_args()
     try:
         values = apply_overrides(load_scenario(args.scenario), args.set)
-        space = SearchSpace.parse(args.params)
+        space = SearchSpace.parse(args.params, values)
     except ScenarioError as exc:
         _cli.fail(str(exc))
     args.out.mkdir(parents=True, exist_ok=True)

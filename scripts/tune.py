@@ -35,8 +35,9 @@ def parse_args() -> argparse.Namespace:
                                      epilog="\n".join(__doc__.splitlines()[2:]))
     parser.add_argument("--algorithm", default="bas-pso", choices=sorted(ALGORITHMS))
     parser.add_argument("--scenario", default="seed000")
-    parser.add_argument("--params", action="append", required=True, metavar="NAME=LOW:HIGH,...",
-                        help="parameters to tune and their bounds (repeatable)")
+    parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",
+                        help="parameters to tune and their bounds (repeatable; default: the "
+                        "default search space of the scenario's controller kind)")
     parser.add_argument("--evaluations", type=int, default=300, help="budget of fitness evaluations")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=1, help="candidates run in parallel")
@@ -55,6 +56,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--resume", action="store_true",
                         help="continue the tuning in --out from its evaluation log")
+    parser.add_argument("--keep-bags", action="store_true",
+                        help="keep every stack candidate's bag in OUT/runs (default: deleted "
+                        "once scored)")
     parser.add_argument("--quiet", action="store_true")
     return parser.parse_args()
 
@@ -67,12 +71,20 @@ def main() -> None:
     try:
         check_given_once(args.set)
         values = apply_overrides(load_scenario(args.scenario), args.set)
-        space = SearchSpace.parse(args.params)
+        space = (SearchSpace.parse(args.params, values) if args.params
+                 else SearchSpace.default(values))
         options = {"population_size": args.population} if args.population else {}
         settings = TuningSettings(args.algorithm, args.scenario, space, args.evaluations,
                                   args.seed, args.workers, args.in_process, args.fitness,
                                   args.timeout, options,
-                                  tuple(Requirement.parse(text) for text in args.require))
+                                  tuple(Requirement.parse(text) for text in args.require),
+                                  args.keep_bags)
+        if not args.params and not args.quiet:
+            print(f"tuning the default search space: {space.describe()}")
+        if values["line.file"] and not args.require:
+            print("warning: tuning on a line without --require: a candidate that stops short "
+                  "or overspeeds can win (e.g. --require 'abs_stopping_error<=0.5' --require "
+                  "'overspeed_time<=0')", file=sys.stderr)
         if args.out.exists() and any(args.out.iterdir()) and not args.resume:
             raise ScenarioError(f"{args.out} is not empty; use --resume or another --out")
         tuner = Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet)

@@ -86,7 +86,18 @@ def test_crashing_and_hanging_candidates_are_penalised_logged_and_cleaned_up(tmp
     assert records[0]["status"] == records[3]["status"] == "ok"
     assert result.best_f < PENALTY
     assert (tmp_path / "best.yaml").exists() and (tmp_path / "convergence.png").exists()
+    assert not any((tmp_path / "runs").iterdir())  # scored candidates' bags are not kept
     assert node_processes() == []
+
+
+def test_candidate_bags_are_kept_when_asked(tmp_path):
+    settings = TuningSettings("pso", "seed000", SearchSpace.parse(["adrc.mu1=1000:10000"]),
+                              evaluations=2, seed=3, workers=1, timeout=60.0,
+                              options={"population_size": 2}, keep_bags=True)
+    Tuner(short(1), settings, tmp_path, progress=False).run()
+    kept = sorted(path.name for path in (tmp_path / "runs").iterdir())
+    assert kept == ["candidate-00000", "candidate-00001"]
+    assert (tmp_path / "runs" / "candidate-00000" / "metadata.yaml").exists()
 
 
 def test_interrupted_tuning_resumes_to_the_uninterrupted_result(tmp_path):

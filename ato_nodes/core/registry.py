@@ -35,7 +35,8 @@ class Component:
     observer_gain(values), for controllers with a third-order extended state
     observer whose outputs z1, z2, z3 estimate speed, acceleration and total
     disturbance: the observer's input gain b0 in m/s^3 per N/kN, which the
-    scorer needs to rebuild the disturbance z3 estimates.
+    scorer needs to rebuild the disturbance z3 estimates. search_space: the
+    (parameter, low, high) that tune.py tunes when given no --params.
     """
 
     kind: str
@@ -44,6 +45,7 @@ class Component:
     factory: Callable[..., Any]
     outputs: tuple[Output, ...] = ()
     observer_gain: Callable[[Any], float] | None = None
+    search_space: tuple[tuple[str, float, float], ...] = ()  # what tune.py tunes by default
 
     @property
     def output_names(self) -> tuple[str, ...]:
@@ -75,6 +77,11 @@ class Registry:
 
     def chosen(self, values) -> Component:
         return self[values[self.kind_parameter.name]]
+
+    def owner(self, name: str) -> Component | None:
+        """The kind whose own parameter group holds `name` (None for shared ones)."""
+        return next((c for c in self.components.values()
+                     if any(spec.name == name for spec in c.parameters)), None)
 
     def parameters(self) -> tuple[ParamSpec, ...]:
         return (self.kind_parameter,

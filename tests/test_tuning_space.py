@@ -1,0 +1,51 @@
+"""What tune.py tunes: the controller kinds' default search spaces, names the run does not
+use refused, the warning for line runs without requirements (fast, in-process)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from ato_nodes.core.components import CONTROLLERS
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.tuning import SearchSpace
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("kind", sorted(CONTROLLERS.components))
+def test_every_controller_kind_has_a_default_search_space_inside_the_schema(kind):
+    values = apply_overrides(load_scenario("seed000"), [f"controller.kind={kind}"]) \
+        if kind != "gpc" else load_scenario("seed001-crh380al")
+    space = SearchSpace.default(values)
+    component = CONTROLLERS[kind]
+    assert space.names == tuple(name for name, _, _ in component.search_space)
+    assert all(name in {spec.name for spec in component.parameters} for name in space.names)
+
+
+def test_a_parameter_of_another_controller_kind_is_refused():
+    values = load_scenario("seed004-metro")  # discrete_adrc
+    with pytest.raises(ScenarioError, match="belongs to controller.kind han_adrc; this run's "
+                                            "controller is discrete_adrc"):
+        SearchSpace.parse(["adrc.mu1=100:1000"], values)
+    assert SearchSpace.parse(["dadrc.b1=1:300,controller.max_rate=10:100"], values).names == (
+        "dadrc.b1", "controller.max_rate")  # its own and shared parameters pass
+
+
+def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "tune.py"), "--algorithm", "pso",
+         "--scenario", "seed004-metro", "--set", "run.duration=3", "--in-process",
+         "--evaluations", "4", "--population", "2", "--out", tmp_path / "t"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "tuning the default search space: dadrc.b01=0.1:2.5" in result.stdout
+    assert "warning: tuning on a line without --require" in result.stderr
+    refused = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "tune.py"), "--scenario", "seed004-metro",
+         "--params", "pid.kp=1:10", "--in-process", "--out", tmp_path / "u"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
+    assert "pid.kp belongs to controller.kind pid" in refused.stderr
