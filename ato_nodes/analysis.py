@@ -223,7 +223,7 @@ def plot_convergence(tunings: list[Path], path: Path) -> Figure:
         with (directory / "history.csv").open() as handle:
             rows = list(csv.DictReader(handle))
         axes.step([int(r["evaluations"]) for r in rows], [float(r["best_fitness"]) for r in rows],
-                  where="post", label=directory.name)
+                  where="post", marker="o", markersize=3, label=directory.name)
     axes.set(xlabel="fitness evaluations", ylabel="best fitness", yscale="log",
              title="Tuning convergence")
     axes.grid(alpha=0.3, which="both")

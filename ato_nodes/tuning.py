@@ -37,7 +37,9 @@ from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, ros_parameter_file
+from ato_nodes.core.paths import config_dir
+from ato_nodes.core.scenario import (apply_overrides, load_scenario, resolve_scenario,
+                                     ros_parameter_file)
 from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import INDEX_NAMES, score_series
 
@@ -470,19 +472,14 @@ class Tuner:
     def _write_outputs(self, result: Result) -> None:
         best_overrides = self.settings.space.overrides(result.best_x)
         best_values = apply_overrides(self.values, best_overrides)
-        header = (f"# Best parameters found by {self.settings.algorithm} "
-                  f"(fitness {self.settings.fitness} = {result.best_f:.9g}) on "
-                  f"{self.settings.scenario}, seed {self.settings.seed}.\n"
-                  "# Run it with: python scripts/run_stack.py --scenario THIS_FILE\n")
-        (self.out / "best.yaml").write_text(header + yaml.safe_dump(
-            ros_parameter_file(best_values), sort_keys=False))
+        (self.out / "best.yaml").write_text(self.best_scenario(result, best_values))
         with (self.out / "history.csv").open("w", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow(["iteration", "evaluations", "best_fitness", "mean_fitness",
                              *self.settings.space.names])
-            for record in result.history:
-                writer.writerow([record.iteration, record.evaluations, repr(record.best_f),
-                                 repr(record.mean_f), *map(repr, record.best_x)])
+            for record in result.history:  # plain decimal text, full precision
+                writer.writerow([record.iteration, record.evaluations, repr(float(record.best_f)),
+                                 repr(float(record.mean_f)), *(repr(float(v)) for v in record.best_x)])
         failures = {}
         for record in self.log.done.values():
             if record.status != "ok":
@@ -492,10 +489,40 @@ class Tuner:
                    "iterations": result.iterations, "stop_reason": str(result.stop_reason.value),
                    "failed_evaluations": failures,
                    "best_is_feasible": result.best_f < INFEASIBLE,
+                   "best_at_bounds": at_bounds(self.settings.space, result.best_x),
                    "best_indices": _best_indices(self.log, best_overrides),
                    "wall_time": time.monotonic() - self.started}
         (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
         plot_convergence([self.out], self.out / "convergence.png")
+
+
+    def best_scenario(self, result: Result, best_values: dict[str, Any]) -> str:
+        """best.yaml: the base scenario by name (or by path relative to OUT) and what the
+        best run changes in it, the tuned parameters and any --set; commented."""
+        s = self.settings
+        base_path = resolve_scenario(s.scenario)
+        base = (s.scenario if base_path.parent == config_dir() / "scenarios"
+                else os.path.relpath(base_path.resolve(), self.out.resolve()))
+        base_values = load_scenario(s.scenario)
+        changed = [name for name in SPEC_BY_NAME if best_values[name] != base_values[name]
+                   and name not in ("recorder.output", "supervisor.report")]
+        feasible = "feasible" if result.best_f < INFEASIBLE else "INFEASIBLE"
+        header = (f"# Best of a {s.algorithm} tuning (seed {s.seed}, {result.evaluations} "
+                  f"evaluations) on {s.scenario}, {time.strftime('%Y-%m-%d')}: fitness "
+                  f"{s.fitness} = {result.best_f:.9g} ({feasible}"
+                  + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ").\n"
+                  f"# Run it: python scripts/run_stack.py --scenario {self.out / 'best.yaml'}\n")
+        document = {"base": base, **ros_parameter_file(best_values, set(changed))}
+        return header + yaml.safe_dump(document, sort_keys=False)
+
+
+def at_bounds(space: SearchSpace, x: np.ndarray) -> list[str]:
+    """The tuned parameters whose best value sits on its box's bound (a wider box may
+    do better)."""
+    width = space.upper - space.lower
+    return [name for name, value, low, high, span in zip(space.names, x, space.lower,
+                                                         space.upper, width)
+            if min(value - low, high - value) <= 1e-6 * span]
 
 
 def _hold_directory(out: Path):

@@ -107,7 +107,11 @@ def main() -> None:
     if indices:
         print(f"  max |e| {indices['max_abs_error_kmh']:.4f} km/h, ITAE {indices['itae']:.6g}")
     print(f"failed evaluations: {summary['failed_evaluations'] or 'none'}")
+    for name in summary["best_at_bounds"]:
+        print(f"warning: the best {name} sits on its bound; a wider --params box may do "
+              f"better", file=sys.stderr)
     print(f"outputs: {args.out}/best.yaml, evaluations.jsonl, history.csv, convergence.png")
+    print(f"run the best: python scripts/run_stack.py --scenario {args.out / 'best.yaml'}")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 """What tune.py tunes: the controller kinds' default search spaces, names the run does not
 use refused, the warning for line runs without requirements (fast, in-process)."""
 
+import csv
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -49,3 +51,26 @@ def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_pat
         capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
     assert "pid.kp belongs to controller.kind pid" in refused.stderr
+
+
+def test_best_yaml_is_the_base_scenario_and_its_changes_and_history_is_plain_numbers(tmp_path):
+    out = tmp_path / "t"
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "tune.py"), "--algorithm", "pso",
+         "--scenario", "seed004-metro-ato", "--set", "run.duration=4", "--in-process",
+         "--params", "ladrc.omega_c=0.3:6", "--require", "abs_stopping_error<=3000",
+         "--evaluations", "4", "--population", "2", "--quiet", "--out", out],
+        capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert result.returncode == 0, result.stderr
+    text = (out / "best.yaml").read_text()
+    assert "base: seed004-metro-ato" in text and str(ROOT) not in text.split("\n", 2)[2]
+    summary = json.loads((out / "summary.json").read_text())
+    expected = apply_overrides(load_scenario("seed004-metro-ato"),
+                               ["run.duration=4", f"ladrc.omega_c={summary['best_params']['ladrc.omega_c']!r}"])
+    assert load_scenario(str(out / "best.yaml")) == expected
+    assert f"run the best: python scripts/run_stack.py --scenario {out / 'best.yaml'}" in result.stdout
+    with (out / "history.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    cells = [[float(value) for value in row.values()] for row in rows]  # plain numbers
+    best = [row[2] for row in cells]
+    assert len(rows) == 2 and best == sorted(best, reverse=True)  # best so far never rises

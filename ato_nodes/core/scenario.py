@@ -48,11 +48,17 @@ def resolve_scenario(name_or_file: str) -> Path:
 
 
 def load_scenario(name_or_file: str) -> dict[str, Any]:
-    """All parameters of a scenario: defaults overlaid with the file's values, checked."""
+    """All parameters of a scenario: defaults overlaid with the file's values, checked.
+    A file with a top-level `base: SCENARIO` (a name, or a file relative to this one)
+    holds only what differs from that scenario (tune.py's best.yaml)."""
     path = resolve_scenario(name_or_file)
     document = yamlfile.load(path, "scenario")
     if not isinstance(document, dict):
         raise ScenarioError(f"{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)")
+    document = dict(document)
+    base = document.pop("base", None)
+    if base is not None and not isinstance(base, str):
+        raise ScenarioError(f"{path}: base must be a scenario name or file, not {base!r}")
     given = {}
     for node, section in document.items():
         if node != "/**" and node not in NODES:
@@ -74,7 +80,18 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
                 raise ScenarioError(f"{path}: {name} is given twice, as {given[name]!r} and "
                                     f"{value!r}")
             given[name] = value
-    return validate(complete(given, [path.parent]), str(path))
+    if base is None:
+        return validate(complete(given, [path.parent]), str(path))
+    relative = path.parent / base
+    base_values = load_scenario(str(relative) if relative.suffix in (".yaml", ".yml")
+                                else base)
+    for name in FILE_PARAMETERS:
+        if given.get(name):
+            given[name] = resolve_file(given[name], [path.parent])
+    try:
+        return apply_overrides(base_values, given)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
 
 
 def complete(given: dict[str, Any], bases: list[Path]) -> dict[str, Any]:
@@ -199,14 +216,20 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
     return values
 
 
-def ros_parameter_file(values: dict[str, Any]) -> dict[str, Any]:
-    """The values as a ROS 2 parameter file: shared parameters under /**, the others
-    under the one node that declares each."""
+def ros_parameter_file(values: dict[str, Any], names=None) -> dict[str, Any]:
+    """The values (those of `names`, default all) as a ROS 2 parameter file: shared
+    parameters under /**, the others under the one node that declares each; sections
+    left empty are left out when `names` is given."""
     document: dict[str, Any] = {"/**": {"ros__parameters": {}}}
     for node in NODES:
         document[node] = {"ros__parameters": {}}
     for spec in SPECS:
+        if names is not None and spec.name not in names:
+            continue
         if spec.nodes:
             section = "/**" if shared(spec) else spec.nodes[0]
             document[section]["ros__parameters"][spec.name] = values[spec.name]
+    if names is not None:
+        document = {node: section for node, section in document.items()
+                    if section["ros__parameters"]}
     return document
