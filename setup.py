@@ -26,7 +26,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         *config_files(),
     ],
-    install_requires=["setuptools", "numpy", "scipy", "daqp", "PyYAML", "rosbags", "mcap",
+    install_requires=["setuptools", "numpy", "scipy", "daqp", "PyYAML", "matplotlib", "rosbags", "mcap",
                       "mcap-ros2-support"],
     zip_safe=True,
     maintainer="ATO stack maintainers",

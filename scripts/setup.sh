@@ -21,3 +21,7 @@ fi
 # (pip's notes about configured local index folders that do not exist are noise)
 .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
+# The package itself, editable: `import ato_nodes` works from any directory, the node
+# entry points are on .venv/bin, and the checkout stays the code that runs.
+.venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e . \
+  2> >(grep -v "^WARNING: Location .* is ignored" >&2)
