@@ -37,6 +37,7 @@ from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.paths import config_dir
 from ato_nodes.core.scenario import (apply_overrides, load_scenario, resolve_scenario,
                                      ros_parameter_file)
@@ -131,6 +132,7 @@ class Evaluation:
 
 
 INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
+PRUNE_MARGIN = 1e-9  # relative: a pruned run's value is above its bound by more than this
 
 
 @dataclass(frozen=True)
@@ -179,6 +181,12 @@ class Objective:
     fitness: str = "itae"
     requirements: tuple[Requirement, ...] = ()
 
+    @property
+    def prunable(self) -> bool:
+        """The fitness only grows along a run (ITAE, IAE, max abs(e)), so a partial run
+        bounds it from below."""
+        return FITNESS[self.fitness] in RunningIndex.MONOTONE
+
     def score(self, indices: dict[str, Any]) -> tuple[float, str, str]:
         """(fitness, status, message) of a completed run."""
         value = indices.get(FITNESS[self.fitness], math.nan)
@@ -199,20 +207,37 @@ def objective_of(objective: Objective | str) -> Objective:
 
 
 def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
-                        objective: Objective | str, index: int,
+                        objective: Objective | str, index: int, bound: float = math.inf,
                         timeout: float | None = None) -> Evaluation:
     """One candidate with the core code in this process (a worker of the pool); past
-    `timeout` wall seconds it ends as a timeout, as a stack candidate does."""
+    `timeout` wall seconds it ends as a timeout, as a stack candidate does. With a
+    finite `bound` (pruning: the optimizer does not care by how much a candidate
+    misses it) a run whose fitness, which only grows, has passed the bound ends
+    there as `pruned`, its fitness the value reached (a lower bound)."""
     started = time.perf_counter()
+    objective = objective_of(objective)
     try:
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
+    running, observe = None, None
+    if objective.prunable and 0.0 < bound < INFEASIBLE:  # any infeasible run ends above
+        running = RunningIndex(FITNESS[objective.fitness])
+        limit = bound * (1.0 + PRUNE_MARGIN)  # rounding of a step-by-step sum
+
+        def observe(t: float, target: float, speed: float) -> bool:
+            return running.add(t, target - speed) > limit
     try:
-        series = simulate(run_values, None if timeout is None else time.monotonic() + timeout)
+        series = simulate(run_values, None if timeout is None else time.monotonic() + timeout,
+                          observe)
     except TimeoutError as exc:
         return Evaluation(index, overrides, PENALTY, "timeout", time.perf_counter() - started,
                           message=f"{exc} ({timeout:g} s)")
+    if running is not None and running.value > limit:
+        return Evaluation(index, overrides, running.value, "pruned",
+                          time.perf_counter() - started,
+                          message=f"{objective.fitness} passed {bound:.9g} at t = "
+                                  f"{series['t'][-1]:g} s")
     indices = score_series(series, run_values)
     elapsed = time.perf_counter() - started
     if len(series["t"]) < steps(run_values) or not indices["finite"]:
@@ -335,6 +360,7 @@ class TuningSettings:
     options: dict[str, Any] = field(default_factory=dict)
     requirements: tuple[Requirement, ...] = ()
     keep_bags: bool = False    # stack candidates' bags (runs/), else deleted once scored
+    prune: bool = True         # in-process: end candidates that cannot matter (see Tuner)
 
     @property
     def objective(self) -> Objective:
@@ -346,6 +372,7 @@ class TuningSettings:
                                                             self.space.upper)},
                 "evaluations": self.evaluations, "seed": self.seed, "fitness": self.fitness,
                 "in_process": self.in_process, "options": self.options,
+                "prune": self.prune,
                 "requirements": [f"{r.name}<={r.limit:g}" for r in self.requirements]}
 
 
@@ -388,11 +415,16 @@ class Tuner:
             functools.partial(evaluate_in_process, timeout=settings.timeout)
             if settings.in_process else self._evaluate_in_stack)
         algorithm = create(settings.algorithm, **settings.options)
+        # Pruning: in-process, a fitness that only grows, an algorithm that bounds its
+        # candidates (optimizers/base.py); the result is the same as without.
+        self.prune = (settings.prune and self.in_process_pool and settings.objective.prunable
+                      and getattr(algorithm, "own_best_bound", False))
         self.initial_evaluations = algorithm.initial_evaluations()
         self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
         self.cancel = threading.Event()  # stops the stack candidates under way
         self.next_index = 0
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
+        self.pruned = 0  # of them, ended early by pruning
         self.started = time.monotonic()
         self.best = math.inf
 
@@ -416,7 +448,8 @@ class Tuner:
             return ProcessPoolExecutor(self.settings.workers)
         return ThreadPoolExecutor(self.settings.workers)  # stack runs are processes already
 
-    def _batch_fitness(self, pool: Executor, population: np.ndarray) -> np.ndarray:
+    def _batch_fitness(self, pool: Executor, population: np.ndarray,
+                       bounds: np.ndarray | None = None) -> np.ndarray:
         requests = []
         for x in population:
             overrides = self.settings.space.overrides(x)
@@ -430,8 +463,9 @@ class Tuner:
                 results[index] = record
                 self.best = min(self.best, record.fitness)
             else:
+                extra = (float(bounds[index - requests[0][0]]),) if bounds is not None else ()
                 pending[pool.submit(self.evaluate, self.values, overrides,
-                                    self.settings.objective, index)] = index
+                                    self.settings.objective, index, *extra)] = index
         for future in as_completed(pending):
             record = self._stamped(future.result())
             self.fresh += 1
@@ -442,15 +476,18 @@ class Tuner:
 
     def _report(self, record: Evaluation) -> None:
         self.best = min(self.best, record.fitness)
+        self.pruned += record.status == "pruned"
         if not self.progress:
             return
         done = len(self.log.done)
         total = self.settings.evaluations
         eta = (time.monotonic() - self.started) / max(self.fresh, 1) * (total - done)
         iteration = max(0, done - self.initial_evaluations) // self.evaluations_per_iteration
-        status = "" if record.status == "ok" else f" ({record.status}: candidate {record.index})"
-        print(f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}  "
-              f"ETA {eta:6.0f} s{status}", file=sys.stderr, flush=True)
+        status = ("" if record.status in ("ok", "pruned")
+                  else f" ({record.status}: candidate {record.index})")
+        pruned = f"  pruned {self.pruned / max(self.fresh, 1):4.0%}" if self.prune else ""
+        print(f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}"
+              f"{pruned}  ETA {eta:6.0f} s{status}", file=sys.stderr, flush=True)
 
     def run(self) -> Result:
         """The tuning. Ctrl-C stops the candidates under way at once (their runs are
@@ -458,9 +495,11 @@ class Tuner:
         s = self.settings
         pool = self._pool()
         try:
-            result = optimize(s.algorithm, lambda population: self._batch_fitness(pool, population),
+            result = optimize(s.algorithm,
+                              lambda population, bounds=None: self._batch_fitness(
+                                  pool, population, bounds),
                               s.space.lower, s.space.upper, s.evaluations, s.seed,
-                              x0=s.space.start(self.values), **s.options)
+                              x0=s.space.start(self.values), bounded=self.prune, **s.options)
         except KeyboardInterrupt:
             self.cancel.set()
             pool.shutdown(wait=True, cancel_futures=True)
@@ -480,14 +519,16 @@ class Tuner:
             for record in result.history:  # plain decimal text, full precision
                 writer.writerow([record.iteration, record.evaluations, repr(float(record.best_f)),
                                  repr(float(record.mean_f)), *(repr(float(v)) for v in record.best_x)])
-        failures = {}
+        failures, pruned = {}, 0
         for record in self.log.done.values():
-            if record.status != "ok":
+            if record.status == "pruned":
+                pruned += 1
+            elif record.status != "ok":
                 failures[record.status] = failures.get(record.status, 0) + 1
         summary = {**self.settings.describe(), "best_fitness": result.best_f,
                    "best_params": best_overrides, "evaluations_used": result.evaluations,
                    "iterations": result.iterations, "stop_reason": str(result.stop_reason.value),
-                   "failed_evaluations": failures,
+                   "failed_evaluations": failures, "pruned_evaluations": pruned,
                    "best_is_feasible": result.best_f < INFEASIBLE,
                    "best_at_bounds": at_bounds(self.settings.space, result.best_x),
                    "best_indices": _best_indices(self.log, best_overrides),

@@ -56,6 +56,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--resume", action="store_true",
                         help="continue the tuning in --out from its evaluation log")
+    parser.add_argument("--no-prune", action="store_true",
+                        help="run every in-process candidate to the end (pruning ends those "
+                        "that cannot matter; the result is the same)")
     parser.add_argument("--keep-bags", action="store_true",
                         help="keep every stack candidate's bag in OUT/runs (default: deleted "
                         "once scored)")
@@ -78,7 +81,7 @@ def main() -> None:
                                   args.seed, args.workers, args.in_process, args.fitness,
                                   args.timeout, options,
                                   tuple(Requirement.parse(text) for text in args.require),
-                                  args.keep_bags)
+                                  args.keep_bags, not args.no_prune)
         if not args.params and not args.quiet:
             print(f"tuning the default search space: {space.describe()}")
         if values["line.file"] and not args.require:
@@ -106,7 +109,8 @@ def main() -> None:
     indices = summary["best_indices"]
     if indices:
         print(f"  max |e| {indices['max_abs_error_kmh']:.4f} km/h, ITAE {indices['itae']:.6g}")
-    print(f"failed evaluations: {summary['failed_evaluations'] or 'none'}")
+    print(f"failed evaluations: {summary['failed_evaluations'] or 'none'}; pruned: "
+          f"{summary['pruned_evaluations']}")
     for name in summary["best_at_bounds"]:
         print(f"warning: the best {name} sits on its bound; a wider --params box may do "
               f"better", file=sys.stderr)

@@ -187,3 +187,29 @@ def test_apso_entropy_is_one_at_the_start_and_zero_when_converged():
     assert fitness_entropy(initial, edges) == pytest.approx(1.0)
     assert fitness_entropy(np.full(50, initial.min()), edges) == 0.0
     assert fitness_entropy(np.full(50, np.nan), edges) == 0.0
+
+
+def rastrigin(x: np.ndarray) -> np.ndarray:
+    return 10 * x.shape[1] + np.sum(x * x - 10 * np.cos(2 * np.pi * x), axis=1)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_pruned_values_above_the_bounds_change_no_result(name):
+    """A fitness that answers any value at or above its bound with a lower bound only
+    (what a pruned candidate returns) leaves best, best point and best-so-far history
+    as they are; the PSO and BAS-PSO moves do bound their candidates."""
+    lower, upper = np.full(4, -5.0), np.full(4, 5.0)
+    bounded_calls = []
+
+    def pruned(x, bounds=None):
+        values = rastrigin(x)
+        if bounds is None:
+            return values
+        bounded_calls.append(np.isfinite(bounds).sum())
+        return np.where(values >= bounds, np.minimum(values, bounds + 1e-3), values)
+
+    exact = optimize(name, rastrigin, lower, upper, budget=300, seed=5)
+    cut = optimize(name, pruned, lower, upper, budget=300, seed=5, bounded=True)
+    assert cut.best_f == exact.best_f and np.array_equal(cut.best_x, exact.best_x)
+    assert np.array_equal(cut.trace("best_f"), exact.trace("best_f"))
+    assert (sum(bounded_calls) > 0) == (name in ("pso", "bas-pso"))

@@ -7,12 +7,16 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ato_nodes.core.components import CONTROLLERS
+from ato_nodes.core.indices import RunningIndex
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.scoring import score_series
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.tuning import SearchSpace
+from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -74,3 +78,37 @@ def test_best_yaml_is_the_base_scenario_and_its_changes_and_history_is_plain_num
     cells = [[float(value) for value in row.values()] for row in rows]  # plain numbers
     best = [row[2] for row in cells]
     assert len(rows) == 2 and best == sorted(best, reverse=True)  # best so far never rises
+
+
+@pytest.mark.parametrize("name", RunningIndex.MONOTONE)
+def test_the_running_index_ends_at_the_scorers_value(name):
+    values = apply_overrides(load_scenario("seed004-metro-ato"), ["run.duration=30"])
+    series = simulate(values)
+    running = RunningIndex(name)
+    trace = [running.add(t, r - v) for t, r, v in zip(series["t"], series["target"],
+                                                        series["speed"])]
+    assert trace == sorted(trace)  # only grows
+    assert trace[-1] == pytest.approx(score_series(series, values)[name], rel=1e-12)
+
+
+@pytest.mark.parametrize("algorithm", ["pso", "bas-pso"])
+def test_pruning_leaves_the_tuning_result_as_it_is(tmp_path, algorithm):
+    values = apply_overrides(load_scenario("seed000"), ["run.duration=60"])
+    space = SearchSpace.parse(["adrc.mu1=600:60000,adrc.mu2=550:55000"], values)
+    results = {}
+    for prune in (True, False):
+        settings = TuningSettings(algorithm, "seed000", space, evaluations=60, seed=4,
+                                  workers=2, in_process=True, options={"population_size": 6},
+                                  prune=prune)
+        out = tmp_path / f"prune-{prune}"
+        result = Tuner(values, settings, out, progress=False).run()
+        records = [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
+        results[prune] = (result, records, json.loads((out / "summary.json").read_text()))
+    (cut, cut_log, cut_summary), (whole, whole_log, _) = results[True], results[False]
+    assert cut.best_f == whole.best_f and np.array_equal(cut.best_x, whole.best_x)
+    assert np.array_equal(cut.trace("best_f"), whole.trace("best_f"))
+    exact = {r["index"]: r["fitness"] for r in whole_log}
+    pruned = [r for r in cut_log if r["status"] == "pruned"]
+    assert pruned and cut_summary["pruned_evaluations"] == len(pruned)
+    for record in pruned:  # a lower bound of the candidate's true fitness
+        assert record["fitness"] <= exact[record["index"]] * (1 + 1e-9)

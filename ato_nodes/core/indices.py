@@ -55,3 +55,31 @@ def tracking_indices(t: np.ndarray, target: np.ndarray, speed: np.ndarray,
     if command is not None:
         result["j_seed004"] = seed004_j(t, error, np.asarray(command, dtype=float))
     return result
+
+
+class RunningIndex:
+    """ITAE, IAE or max abs(e) (m/s) of a run so far, one sample at a time, by the same
+    trapezoid rule as tracking_indices: each only grows along a run, so a run whose
+    value has passed a bound ends above it (a tuner's pruning). Summed step by step,
+    it may differ from the whole run's numpy sum in the last digits."""
+
+    MONOTONE = ("itae", "iae", "max_abs_error")
+
+    def __init__(self, name: str):
+        if name not in self.MONOTONE:
+            raise ValueError(f"{name} does not only grow along a run")
+        self.name = name
+        self.value = 0.0
+        self._last: tuple[float, float] | None = None
+
+    def add(self, t: float, error: float) -> float:
+        magnitude = abs(error)
+        if self.name == "max_abs_error":
+            self.value = max(self.value, magnitude)
+            return self.value
+        weighted = t * magnitude if self.name == "itae" else magnitude
+        if self._last is not None:
+            t0, w0 = self._last
+            self.value += 0.5 * (t - t0) * (weighted + w0)
+        self._last = (t, weighted)
+        return self.value

@@ -27,7 +27,7 @@ import dataclasses
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -190,12 +190,15 @@ SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", 
           "force", "resistance", "line_resistance", "speed_limit", "command")
 
 
-def simulate(values: dict[str, Any], deadline: float | None = None) -> dict[str, np.ndarray]:
+def simulate(values: dict[str, Any], deadline: float | None = None,
+             observe: Callable[[float, float, float], bool] | None = None
+             ) -> dict[str, np.ndarray]:
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
     ends early, as it does in the stack. Past `deadline` (time.monotonic()) it raises
-    TimeoutError (checked every 1024 steps)."""
+    TimeoutError (checked every 1024 steps). observe(t, target, true speed), called
+    after every step, ends the run early by returning True (a tuner's pruning)."""
     period = values["run.period"]
     line = load_line(values["line.file"]) if values["line.file"] else None
     profile = ProfileStage(NodeValues("profile", values), line)
@@ -216,7 +219,7 @@ def simulate(values: dict[str, Any], deadline: float | None = None) -> dict[str,
                      out.line_resistance, profile.speed_limit(out.position), c.u))
         extras.append(c.extras)
         horizons.append(horizon)
-        if plant.diverged:
+        if plant.diverged or (observe is not None and observe(k * period, horizon[0], out.speed)):
             break
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES))
     series = {name: table[:, i] for i, name in enumerate(SERIES)}

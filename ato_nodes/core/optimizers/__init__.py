@@ -57,11 +57,12 @@ def create(name: str, **options: Any) -> Optimizer:
 
 def optimize(name: str, fitness: Fitness, lower: Any, upper: Any, budget: int, seed: Seed, *,
              x0: Any = None, max_time: float | None = None, stall_iterations: int | None = None,
-             stall_tolerance: float = 0.0, **options: Any) -> Result:
-    """Minimise `fitness` over the box [lower, upper] with the algorithm `name`."""
+             stall_tolerance: float = 0.0, bounded: bool = False, **options: Any) -> Result:
+    """Minimise `fitness` over the box [lower, upper] with the algorithm `name`
+    (`bounded`: fitness(X, bounds), see base.py)."""
     return create(name, **options).minimize(
         fitness, lower, upper, budget, seed, x0=x0, max_time=max_time,
-        stall_iterations=stall_iterations, stall_tolerance=stall_tolerance)
+        stall_iterations=stall_iterations, stall_tolerance=stall_tolerance, bounded=bounded)
 
 
 __all__ = ["ALGORITHMS", "AdaptivePSO", "AdaptiveWeightPSO", "BeetleAntennaeSearch", "BeetleSwarm", "GeneticPSO",

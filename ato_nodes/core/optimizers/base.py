@@ -42,6 +42,16 @@ and evaluate the initial population, returning the algorithm's state) and
   time in seconds ("wall_time"; the initialisation always completes); optional
   stall ("stall"): the best value has not dropped by more than
   `stall_tolerance` (absolute) for `stall_iterations` iterations in a row.
+* Bounds for pruning (`minimize(..., bounded=True)`): an algorithm that can say,
+  per candidate, a value at or above which the candidate's exact fitness changes
+  nothing it will do passes it with the batch, and the fitness is then called as
+  f(X, bounds): it may stop a candidate as soon as its value provably reaches its
+  bound and return any value >= the bound (a lower bound of the true one). The
+  PSO and BAS-PSO moves bound each particle by its own best (a worse value only
+  sets the particle's current value, which they never use); GA-PSO, APSO and
+  AW-PSO use every current value, BAS's antennae need both exact values, WSO and
+  KH rank all: they pass none. Best-so-far and history are unchanged by it; the
+  iteration means then average lower bounds.
 * Start point x0 (e.g. a paper's gains): clipped into the box and placed as
   row 0 of the initial population, the rest being sampled as the algorithm
   does without it; single-agent algorithms start from it.
@@ -110,7 +120,8 @@ class Run:
     generator, the evaluation budget and the best point so far."""
 
     def __init__(self, fitness: Fitness, lower: np.ndarray, upper: np.ndarray, budget: int,
-                 rng: np.random.Generator, x0: np.ndarray | None, planned_iterations: int):
+                 rng: np.random.Generator, x0: np.ndarray | None, planned_iterations: int,
+                 bounded: bool = False):
         self.lower, self.upper = lower, upper
         self.span = upper - lower
         self.dim = len(lower)
@@ -123,6 +134,7 @@ class Run:
         self.best_x: np.ndarray | None = None
         self.best_f = np.inf
         self._fitness = fitness
+        self.bounded = bounded
         self._iteration_sum = 0.0
         self._iteration_count = 0
 
@@ -153,9 +165,9 @@ class Run:
         """n points uniform in the box, x0 (if given) first."""
         return self.with_start_point(self.uniform(n))
 
-    def evaluate(self, candidates: np.ndarray) -> np.ndarray:
+    def evaluate(self, candidates: np.ndarray, bounds: np.ndarray | None = None) -> np.ndarray:
         """Fitness of a batch, in one call; see the module docstring for the
-        budget truncation and the treatment of non-finite values."""
+        budget truncation, the treatment of non-finite values and `bounds`."""
         candidates = np.asarray(candidates, dtype=float)
         if candidates.ndim != 2 or candidates.shape[1] != self.dim:
             raise ValueError(f"a batch must have shape (n, {self.dim}), got {candidates.shape}")
@@ -165,7 +177,11 @@ class Run:
         count = min(len(candidates), self.remaining)
         if count == 0:
             return values
-        raw = np.asarray(self._fitness(candidates[:count].copy()), dtype=float)
+        if self.bounded and bounds is not None:
+            raw = self._fitness(candidates[:count].copy(), np.array(bounds[:count], dtype=float))
+        else:
+            raw = self._fitness(candidates[:count].copy())
+        raw = np.asarray(raw, dtype=float)
         if raw.shape != (count,):
             raise ValueError(f"the fitness must return shape ({count},), got {raw.shape}")
         values[:count] = np.where(np.isfinite(raw), np.clip(raw, -LARGEST_VALUE, LARGEST_VALUE),
@@ -260,8 +276,10 @@ class Optimizer(ABC):
 
     def minimize(self, fitness: Fitness, lower: Any, upper: Any, budget: int, seed: Seed, *,
                  x0: Any = None, max_time: float | None = None,
-                 stall_iterations: int | None = None, stall_tolerance: float = 0.0) -> Result:
-        """Minimise `fitness` over [lower, upper]; see the module docstring."""
+                 stall_iterations: int | None = None, stall_tolerance: float = 0.0,
+                 bounded: bool = False) -> Result:
+        """Minimise `fitness` over [lower, upper]; see the module docstring (with
+        `bounded`, the fitness takes (X, bounds))."""
         lower, upper, x0 = _box(lower, upper, x0)
         if int(budget) != budget or budget < 1:
             raise ValueError("budget must be a positive whole number of evaluations")
@@ -269,7 +287,7 @@ class Optimizer(ABC):
             raise ValueError("stall_iterations must be at least 1")
         budget = int(budget)
         planned = max(1, (budget - self.initial_evaluations()) // self.evaluations_per_iteration())
-        run = Run(fitness, lower, upper, budget, _as_generator(seed), x0, planned)
+        run = Run(fitness, lower, upper, budget, _as_generator(seed), x0, planned, bounded)
         started = time.monotonic()
         state = self._start(run)
         history = [run.close_iteration()]

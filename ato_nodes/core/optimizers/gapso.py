@@ -32,6 +32,7 @@ from .pso import VELOCITY_LIMIT, ParticleSwarm, Swarm, check_population
 
 class GeneticPSO(ParticleSwarm):
     name = "ga-pso"
+    own_best_bound = False  # its selection ranks the current values
 
     def __init__(self, population_size: int = 70, w_start: float = 0.93, w_end: float = 0.31,
                  c1: float = 2.0, c2: float = 2.0, velocity_limit: float = VELOCITY_LIMIT,

@@ -86,7 +86,11 @@ def check_population(size: int, minimum: int) -> int:
 
 class SwarmOptimizer(Optimizer):
     """A PSO-family algorithm: the PSO move with coefficients chosen by the
-    subclass, velocity clamping and absorbing walls."""
+    subclass, velocity clamping and absorbing walls. `own_best_bound`: the subclass
+    uses no particle's current value, only its own best, which then bounds each
+    move's evaluation (base.py: pruning)."""
+
+    own_best_bound = False
 
     def __init__(self, population_size: int, velocity_limit: float):
         self.population_size = check_population(population_size, 2)
@@ -127,11 +131,13 @@ class SwarmOptimizer(Optimizer):
         velocity[(x < run.lower) | (x > run.upper)] = 0.0
         x = run.clip(x)
         swarm.v = velocity
-        swarm.place(np.arange(swarm.size), x, run.evaluate(x))
+        bounds = swarm.best_f if self.own_best_bound else None
+        swarm.place(np.arange(swarm.size), x, run.evaluate(x, bounds))
 
 
 class ParticleSwarm(SwarmOptimizer):
     name = "pso"
+    own_best_bound = True
 
     def __init__(self, population_size: int = 40, w_start: float = 0.7298, w_end: float = 0.7298,
                  c1: float = 1.49618, c2: float = 1.49618,
