@@ -22,6 +22,7 @@ import math
 import os
 import shutil
 import sys
+import tempfile
 import threading
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
@@ -273,6 +274,42 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
     return Evaluation(index, overrides, value, status, elapsed, indices, message)
 
 
+def evaluate_in_stack_anywhere(values: dict[str, Any], overrides: dict[str, Any],
+                               objective: Objective | str, index: int,
+                               timeout: float = 300.0) -> Evaluation:
+    """evaluate_in_stack for a worker on any host (a Dask cluster): the bag goes to a
+    temporary directory of that host and is deleted once scored; the launcher takes
+    a free ROS domain of that host, with localhost discovery."""
+    workdir = Path(tempfile.mkdtemp(prefix="ato-candidate-"))
+    try:
+        return evaluate_in_stack(values, overrides, objective, index, workdir / "bag", timeout)
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
+
+
+def open_cluster(spec: str):
+    """(client, cluster or None) for --cluster: `local:N` starts a Dask LocalCluster of
+    N single-threaded worker processes on this machine, `tcp://HOST:PORT` connects to
+    a running scheduler (`dask scheduler`, `dask worker ...`)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ScenarioError("--cluster needs Dask: pip install 'dask[distributed]'") from None
+    if spec.startswith("local:"):
+        count = spec.partition(":")[2]
+        if not count.isdigit() or int(count) < 1:
+            raise ScenarioError(f"--cluster local:N needs a positive worker count, got {spec!r}")
+        cluster = LocalCluster(n_workers=int(count), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        return Client(cluster), cluster
+    if spec.startswith("tcp://"):
+        try:
+            return Client(spec, timeout=10), None
+        except OSError as exc:
+            raise ScenarioError(f"--cluster {spec}: no scheduler answers ({exc})") from None
+    raise ScenarioError(f"--cluster expects local:N or tcp://HOST:PORT, got {spec!r}")
+
+
 def conditions(values: dict[str, Any], settings: TuningSettings) -> str:
     """A digest of everything that makes a logged fitness mean what it means: every
     parameter of the base run, the text of its line and table files, the fitness,
@@ -361,6 +398,7 @@ class TuningSettings:
     requirements: tuple[Requirement, ...] = ()
     keep_bags: bool = False    # stack candidates' bags (runs/), else deleted once scored
     prune: bool = True         # in-process: end candidates that cannot matter (see Tuner)
+    cluster: str = ""          # "" = local worker processes; local:N or tcp://HOST:PORT = Dask
 
     @property
     def objective(self) -> Objective:
@@ -411,9 +449,18 @@ class Tuner:
         settings_file.write_text(json.dumps(described, indent=2))
         self.log = EvaluationLog(out / "evaluations.jsonl", resume, self.conditions)
         self.in_process_pool = evaluate is None and settings.in_process
-        self.evaluate = evaluate or (
-            functools.partial(evaluate_in_process, timeout=settings.timeout)
-            if settings.in_process else self._evaluate_in_stack)
+        if settings.cluster and settings.keep_bags:
+            raise ScenarioError("--keep-bags keeps bags on this host; not with --cluster")
+        if evaluate is not None:
+            self.evaluate = evaluate
+        elif settings.in_process:
+            self.evaluate = functools.partial(evaluate_in_process, timeout=settings.timeout)
+        elif settings.cluster:  # a remote worker cannot reach this tuner's OUT/runs
+            self.evaluate = functools.partial(evaluate_in_stack_anywhere,
+                                              timeout=settings.timeout)
+        else:
+            self.evaluate = self._evaluate_in_stack
+        self.client = self.local_cluster = None
         algorithm = create(settings.algorithm, **settings.options)
         # Pruning: in-process, a fitness that only grows, an algorithm that bounds its
         # candidates (optimizers/base.py); the result is the same as without.
@@ -444,9 +491,21 @@ class Tuner:
         return record
 
     def _pool(self) -> Executor:
+        """Where candidates run: local worker processes (in-process evaluations),
+        threads (stack runs are processes already), or a Dask cluster's workers; all
+        give the same fitness for the same candidate."""
+        if self.settings.cluster:
+            self.client, self.local_cluster = open_cluster(self.settings.cluster)
+            return self.client.get_executor(pure=False)
         if self.in_process_pool:
             return ProcessPoolExecutor(self.settings.workers)
-        return ThreadPoolExecutor(self.settings.workers)  # stack runs are processes already
+        return ThreadPoolExecutor(self.settings.workers)
+
+    def _close_cluster(self) -> None:
+        if self.client is not None:
+            self.client.close()
+        if self.local_cluster is not None:
+            self.local_cluster.close()
 
     def _batch_fitness(self, pool: Executor, population: np.ndarray,
                        bounds: np.ndarray | None = None) -> np.ndarray:
@@ -503,8 +562,10 @@ class Tuner:
         except KeyboardInterrupt:
             self.cancel.set()
             pool.shutdown(wait=True, cancel_futures=True)
+            self._close_cluster()
             raise
         pool.shutdown(wait=True)
+        self._close_cluster()
         self._write_outputs(result)
         return result
 

@@ -56,6 +56,10 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--resume", action="store_true",
                         help="continue the tuning in --out from its evaluation log")
+    parser.add_argument("--cluster", default="", metavar="local:N|tcp://HOST:PORT",
+                        help="evaluate on a Dask cluster: local:N starts N worker processes "
+                        "here, tcp://HOST:PORT uses a running scheduler (README, Tuning); "
+                        "the same candidates give the same fitness as without")
     parser.add_argument("--no-prune", action="store_true",
                         help="run every in-process candidate to the end (pruning ends those "
                         "that cannot matter; the result is the same)")
@@ -81,7 +85,7 @@ def main() -> None:
                                   args.seed, args.workers, args.in_process, args.fitness,
                                   args.timeout, options,
                                   tuple(Requirement.parse(text) for text in args.require),
-                                  args.keep_bags, not args.no_prune)
+                                  args.keep_bags, not args.no_prune, args.cluster)
         if not args.params and not args.quiet:
             print(f"tuning the default search space: {space.describe()}")
         if values["line.file"] and not args.require:
