@@ -138,3 +138,16 @@ def test_a_shared_parameter_given_to_one_node_only_is_refused_before_the_run(tmp
     assert "plant.train is" in line and "'metro-b' in plant" in line and "'' in" in line
     assert "give shared parameters under /**" in line
     assert not (tmp_path / "r.json").exists()
+
+
+def test_a_supervisor_whose_nodes_never_come_fails_and_names_them(tmp_path):
+    lock = DomainLock()
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "ato_nodes.nodes.supervisor", "--ros-args", "-p",
+             "supervisor.ready_timeout:=1.0"], env=node_environment(lock.domain_id), cwd=ROOT,
+            stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    finally:
+        lock.release()
+    assert result.returncode != 0
+    assert "controller, plant, profile, recorder" in result.stderr

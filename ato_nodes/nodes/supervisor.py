@@ -100,6 +100,7 @@ class SupervisorNode(AtoNode):
                 self.get_logger().error("nodes not ready after "
                                         f"{self.values['supervisor.ready_timeout']:g} s: "
                                         + ", ".join(sorted(self.waiting)))
+                self.exit_status = 1  # a run that never started is a failure
                 self.failed = True
                 self.shut_down_all()
             return
