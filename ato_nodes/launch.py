@@ -149,7 +149,7 @@ def node_environment(domain_id: int) -> dict[str, str]:
 
 @dataclass
 class RunOutcome:
-    status: str                  # "completed", "diverged", "failed", "interrupted", "timeout"
+    status: str  # "completed", "diverged", "pruned", "failed", "interrupted", "timeout"
     message: str = ""
     failed_node: str | None = None
     report: dict[str, Any] = field(default_factory=dict)
@@ -279,6 +279,9 @@ class Stack:
             return RunOutcome("failed", "the supervisor stopped the run before it completed "
                               "(a node never became ready)", failed_node="supervisor")
         report = json.loads(self.report_path.read_text())
+        if report.get("pruned"):
+            return RunOutcome("pruned", f"pruned at step {report['steps']}: the running "
+                              f"fitness {report['fitness']:.9g} passed its bound", report=report)
         if report.get("diverged"):
             return RunOutcome("diverged", f"the run diverged at step {report['steps']} (speed not "
                               "finite or beyond plant.max_speed)", report=report)

@@ -249,17 +249,27 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
 
 def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
                       objective: Objective | str, index: int, bag: Path,
-                      timeout: float, cancel: threading.Event | None = None) -> Evaluation:
-    """One candidate through the real node graph, scored from its bag."""
+                      timeout: float, cancel: threading.Event | None = None,
+                      bound: float = math.inf) -> Evaluation:
+    """One candidate through the real node graph, scored from its bag. With a finite
+    `bound` (see evaluate_in_process) the supervisor follows the running fitness and
+    ends a run that passes it: `pruned`, with the value it reached."""
     from ato_nodes.bagio import BagError, read_parameters, read_series
     from ato_nodes.launch import Stack
 
     started = time.perf_counter()
+    objective = objective_of(objective)
     try:
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
+    if objective.prunable and 0.0 < bound < INFEASIBLE:
+        run_values = {**run_values, "supervisor.fitness": FITNESS[objective.fitness],
+                      "supervisor.prune_above": bound * (1.0 + PRUNE_MARGIN)}
     outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel).run()
+    if outcome.status == "pruned":
+        return Evaluation(index, overrides, outcome.report["fitness"], "pruned",
+                          time.perf_counter() - started, message=outcome.message)
     indices = {}
     if bag.exists():
         try:
@@ -275,14 +285,15 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
 
 
 def evaluate_in_stack_anywhere(values: dict[str, Any], overrides: dict[str, Any],
-                               objective: Objective | str, index: int,
+                               objective: Objective | str, index: int, bound: float = math.inf,
                                timeout: float = 300.0) -> Evaluation:
     """evaluate_in_stack for a worker on any host (a Dask cluster): the bag goes to a
     temporary directory of that host and is deleted once scored; the launcher takes
     a free ROS domain of that host, with localhost discovery."""
     workdir = Path(tempfile.mkdtemp(prefix="ato-candidate-"))
     try:
-        return evaluate_in_stack(values, overrides, objective, index, workdir / "bag", timeout)
+        return evaluate_in_stack(values, overrides, objective, index, workdir / "bag", timeout,
+                                 bound=bound)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
 
@@ -462,9 +473,9 @@ class Tuner:
             self.evaluate = self._evaluate_in_stack
         self.client = self.local_cluster = None
         algorithm = create(settings.algorithm, **settings.options)
-        # Pruning: in-process, a fitness that only grows, an algorithm that bounds its
-        # candidates (optimizers/base.py); the result is the same as without.
-        self.prune = (settings.prune and self.in_process_pool and settings.objective.prunable
+        # Pruning: a fitness that only grows, an algorithm that bounds its candidates
+        # (optimizers/base.py); in-process or by the supervisor; the result is the same.
+        self.prune = (settings.prune and evaluate is None and settings.objective.prunable
                       and getattr(algorithm, "own_best_bound", False))
         self.initial_evaluations = algorithm.initial_evaluations()
         self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
@@ -479,13 +490,14 @@ class Tuner:
         record.conditions = self.conditions
         return record
 
-    def _evaluate_in_stack(self, values, overrides, objective, index) -> Evaluation:
+    def _evaluate_in_stack(self, values, overrides, objective, index,
+                           bound: float = math.inf) -> Evaluation:
         bag = self.out / "runs" / f"candidate-{index:05d}"
         if bag.exists():  # a candidate interrupted before it was logged: run it again
             shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
         record = evaluate_in_stack(values, overrides, objective, index, bag,
-                                   self.settings.timeout, self.cancel)
+                                   self.settings.timeout, self.cancel, bound)
         if not self.settings.keep_bags:  # scored; best.yaml reruns the best one
             shutil.rmtree(bag, ignore_errors=True)
         return record

@@ -3,6 +3,7 @@ nodes started straight from a shipped scenario file with no launcher in between.
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +19,7 @@ from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import kept_file, score_series
 from ato_nodes.core.schema import NODES
 from ato_nodes.launch import DomainLock, Stack, node_environment
+from ato_nodes.tuning import evaluate_in_process, evaluate_in_stack
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[1]
@@ -151,3 +153,33 @@ def test_a_supervisor_whose_nodes_never_come_fails_and_names_them(tmp_path):
         lock.release()
     assert result.returncode != 0
     assert "controller, plant, profile, recorder" in result.stderr
+
+
+def test_the_running_fitness_topic_grows_to_the_runs_final_fitness(tmp_path):
+    values = apply_overrides(load_scenario("seed000"), [
+        "run.duration=8", "run.real_time=true", "supervisor.fitness=itae"])
+    stack = Stack(values, tmp_path / "bag", quiet=True, timeout=120)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(stack.lock.domain_id),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "fitness_probe.py"), "60"],
+                             env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        assert probe.stdout.readline().strip() == "ready"
+        assert stack.run().ok
+        received = json.loads(probe.communicate(timeout=60)[0])
+    finally:
+        if probe.poll() is None:
+            probe.kill()
+    run = read_run(tmp_path / "bag")
+    final = score_series(run.series, run.parameters)["itae"]
+    assert len(received) > 100 and received == sorted(received) and received[0] < final / 2
+    assert received[-1] == pytest.approx(final, rel=1e-12)
+
+
+def test_a_candidate_the_supervisor_prunes_ends_where_the_in_process_one_does(tmp_path):
+    values = apply_overrides(load_scenario("seed000"), ["run.duration=60"])
+    in_process = evaluate_in_process(values, {}, "itae", 0, bound=20.0)
+    through_stack = evaluate_in_stack(values, {}, "itae", 0, tmp_path / "bag", 120.0,
+                                      bound=20.0)
+    assert in_process.status == through_stack.status == "pruned"
+    assert in_process.fitness == through_stack.fitness > 20.0

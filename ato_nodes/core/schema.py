@@ -14,6 +14,7 @@ from typing import Any
 
 from .components import CONTROLLERS, PROFILES
 from .errors import ScenarioError
+from .indices import RunningIndex
 from .limiter import LIMITER_PARAMETERS
 from .spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, param
 
@@ -105,6 +106,11 @@ BASE: tuple[ParamSpec, ...] = (
           "supervisor", 0.1, 3600.0),
     param("supervisor.report", "", "path of the JSON run report the supervisor writes",
           "supervisor"),
+    param("supervisor.fitness", "", "running fitness the supervisor computes and publishes on "
+          "/ato/running_fitness: itae, iae or max_abs_error ('' = none)", "supervisor",
+          choices=("", *RunningIndex.MONOTONE)),
+    param("supervisor.prune_above", 0.0, "end the run as pruned once the running fitness "
+          "passes this (a tuner's bound; 0 = never)", "supervisor", 0.0, 1e300),
     param("recorder.output", "", "bag directory to create (must not exist)", "recorder"),
 )
 

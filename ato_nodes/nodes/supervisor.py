@@ -3,6 +3,10 @@
 It waits until every node reports its edges matched, starts the plant's
 stepping, shows progress, and once the plant has finished and the recorder
 holds every step, writes the run report and tells every node to shut down.
+With supervisor.fitness it also follows the target and the true speed, publishes
+the running fitness every step, and ends the run as pruned once it passes
+supervisor.prune_above (core.indices.RunningIndex: the numbers simulate()'s
+pruning gives, bit for bit).
 """
 
 from __future__ import annotations
@@ -10,16 +14,21 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections import deque
 from pathlib import Path
 
 from rclpy.duration import Duration
 
+from std_msgs.msg import Float64
+
+from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.schema import steps
 from ato_nodes.nodes.base import AtoNode, run_node
 
 PARTICIPANTS = ("profile", "plant", "controller", "recorder")
 PROGRESS_PERIOD = 0.5  # s of wall time
 SHUTDOWN_ACK_TIMEOUT = 2.0  # s the supervisor waits for every node to have 'shutdown'
+FOLLOW_GRACE = 2.0  # s after 'recorded' for the running fitness to take the last steps
 
 
 class SupervisorNode(AtoNode):
@@ -39,6 +48,39 @@ class SupervisorNode(AtoNode):
         self.interactive = sys.stderr.isatty()
         self.last_line = 0.0
         self.create_timer(PROGRESS_PERIOD, self.on_tick, clock=self._wall_clock)
+        self.recorded = self.recorded_at = None
+        self.ended = False
+        self.running = None
+        if self.values["supervisor.fitness"]:
+            self.follow_fitness()
+
+    def follow_fitness(self) -> None:
+        self.running = RunningIndex(self.values["supervisor.fitness"])
+        self.prune_above = self.values["supervisor.prune_above"]
+        self.pruned = False
+        self.targets: deque[float] = deque()
+        self.speeds: deque[float] = deque()
+        self.paired = 0
+        self.fitness_out = self.publisher("running_fitness")
+        # on the lockstep fast path (base.spin_lockstep): two messages a step
+        self.subscription("target_speed", lambda msg: self.on_sample(self.targets, msg.data))
+        self.subscription("state", lambda msg: self.on_sample(self.speeds, msg.linear.x))
+
+    def on_sample(self, queue: deque, value: float) -> None:
+        """Step k's target and true speed, in either order; once both are in, the
+        running fitness moves on by step k (t_k = k run.period, as in simulate())."""
+        queue.append(value)
+        while self.targets and self.speeds and not self.pruned:
+            target, speed = self.targets.popleft(), self.speeds.popleft()
+            value = self.running.add(self.paired * self.period, target - speed)
+            self.paired += 1
+            self.fitness_out.publish(Float64(data=value))
+            if 0.0 < self.prune_above < value and not self.ended:
+                self.pruned = self.ended = True
+                self.report(self.paired, pruned=True)
+                self.shut_down_all()
+                return
+        self.finish_when_followed()
 
     def on_event(self, word: str, argument: str) -> None:
         if word == "parameters":
@@ -54,8 +96,20 @@ class SupervisorNode(AtoNode):
             count, _, reason = argument.partition(" ")
             self.finished_steps, self.diverged = int(count), reason == "diverged"
         elif word == "recorded":
-            self.report(int(argument))
-            self.shut_down_all()
+            self.recorded, self.recorded_at = int(argument), time.monotonic()
+            self.finish_when_followed()
+
+    def finish_when_followed(self) -> None:
+        """Report and end the run once the recorder holds every step and, with a running
+        fitness, once every step has reached it too (FOLLOW_GRACE at most)."""
+        if self.recorded is None or self.ended:
+            return
+        if (self.running is not None and self.paired < self.finished_steps
+                and time.monotonic() - self.recorded_at < FOLLOW_GRACE):
+            return
+        self.ended = True
+        self.report(self.recorded)
+        self.shut_down_all()
 
     def check_agreement(self, node: str, values: dict) -> None:
         """A parameter several nodes declare must have one value in all of them (a
@@ -105,6 +159,7 @@ class SupervisorNode(AtoNode):
                 self.shut_down_all()
             return
         if self.finished is not None:
+            self.finish_when_followed()
             return
         sim_time = self.get_clock().now().nanoseconds * 1e-9
         done = sim_time / (self.total_steps * self.period)
@@ -117,21 +172,24 @@ class SupervisorNode(AtoNode):
             self.last_line = now
             print(line, file=sys.stderr, flush=True)
 
-    def report(self, recorded_steps: int) -> None:
+    def report(self, recorded_steps: int, pruned: bool = False) -> None:
         if self.interactive:
             print(file=sys.stderr)
         loop_wall = (self.finished or time.monotonic()) - self.started
-        sim_time = self.finished_steps * self.period
+        done_steps = self.paired if pruned else self.finished_steps
+        sim_time = done_steps * self.period
         report = {
-            "steps": self.finished_steps,
+            "steps": done_steps,
             "diverged": self.diverged,
             "recorded_steps": recorded_steps,
             "sim_time": sim_time,
             "loop_wall_time": loop_wall,
-            "steps_per_second": self.finished_steps / loop_wall if loop_wall > 0 else None,
+            "steps_per_second": done_steps / loop_wall if loop_wall > 0 else None,
             "real_time_factor": sim_time / loop_wall if loop_wall > 0 else None,
             "startup_wall_time": self.started - self.created,
         }
+        if self.running is not None:
+            report.update(fitness=self.running.value, fitness_steps=self.paired, pruned=pruned)
         path = self.values["supervisor.report"]
         if path:
             Path(path).write_text(json.dumps(report, indent=2))
