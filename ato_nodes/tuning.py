@@ -134,6 +134,7 @@ class Evaluation:
 
 INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
 PRUNE_MARGIN = 1e-9  # relative: a pruned run's value is above its bound by more than this
+BAR_WIDTH = 30  # characters of the progress bar on a terminal
 
 
 @dataclass(frozen=True)
@@ -554,11 +555,19 @@ class Tuner:
         total = self.settings.evaluations
         eta = (time.monotonic() - self.started) / max(self.fresh, 1) * (total - done)
         iteration = max(0, done - self.initial_evaluations) // self.evaluations_per_iteration
-        status = ("" if record.status in ("ok", "pruned")
-                  else f" ({record.status}: candidate {record.index})")
         pruned = f"  pruned {self.pruned / max(self.fresh, 1):4.0%}" if self.prune else ""
-        print(f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}"
-              f"{pruned}  ETA {eta:6.0f} s{status}", file=sys.stderr, flush=True)
+        line = (f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}"
+                f"{pruned}  ETA {eta:6.0f} s")
+        notable = record.status not in ("ok", "pruned")
+        if sys.stderr.isatty():  # one bar redrawn in place; what went wrong stays above it
+            filled = round(BAR_WIDTH * done / max(total, 1))
+            if notable:
+                print(f"\r\033[Kcandidate {record.index}: {record.status}", file=sys.stderr)
+            print(f"\r\033[K[{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {line}",
+                  end="" if done < total else "\n", file=sys.stderr, flush=True)
+        else:
+            status = f" ({record.status}: candidate {record.index})" if notable else ""
+            print(line + status, file=sys.stderr, flush=True)
 
     def run(self) -> Result:
         """The tuning. Ctrl-C stops the candidates under way at once (their runs are
