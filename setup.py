@@ -28,7 +28,8 @@ setup(
     ],
     install_requires=["setuptools", "numpy", "scipy", "daqp", "PyYAML", "matplotlib", "rosbags", "mcap",
                       "mcap-ros2-support"],
-    extras_require={"dask": ["dask[distributed]"]},  # tune.py --cluster
+    extras_require={"dask": ["dask[distributed]"],  # tune.py --cluster
+                    "tables": ["pandas", "pyarrow"]},  # bagio.read_frame, export.py --parquet
     zip_safe=True,
     maintainer="ATO stack maintainers",
     description="ROS 2 automatic train operation stack: nodes, lockstep runs, MCAP scoring",

@@ -296,3 +296,30 @@ def read_parameters(bag: str | Path) -> dict | None:
         return json.loads(text)
     except (OSError, yaml.YAMLError, KeyError, TypeError, json.JSONDecodeError):
         return None  # someone else's bag, or one without metadata: no parameters
+
+
+def run_columns(run: Run) -> dict[str, np.ndarray]:
+    """The run's series as flat columns, one value per step, in simulate()'s order, then
+    the controller's outputs; the horizon becomes preview_0 .. preview_N (r_k .. r_k+N). Units as in the topic map (SI: s, m, m/s,
+    m/s^2, N/kN); t is the step's simulated time, s from the run's start."""
+    from ato_nodes.core.loop import SERIES
+    first = [name for name in SERIES if name in run.series]  # the simulation's order
+    columns = {}
+    others = [name for name in run.series if name not in first]  # outputs in their order
+    for name in first + sorted(others, key=lambda name: name == "preview"):  # horizon last
+        values = run.series[name]
+        if values.ndim == 2:
+            columns.update({f"{name}_{i}": values[:, i] for i in range(values.shape[1])})
+        else:
+            columns[name] = values
+    return columns
+
+
+def read_frame(bag: str | Path, mapping: dict[str, str] | None = None):
+    """A recorded run as a pandas.DataFrame, one row per step (run_columns), indexed
+    by t (simulated seconds from the run's start)."""
+    try:
+        import pandas
+    except ImportError:
+        raise BagError("read_frame needs pandas: pip install pandas") from None
+    return pandas.DataFrame(run_columns(read_run(bag, mapping))).set_index("t")

@@ -171,3 +171,22 @@ def test_unusable_inputs_are_one_line_and_exit_2(recorded, tmp_path, kind):
         assert result.returncode == 2, (name, result.stderr)
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: ") and problem in lines[0], lines
+
+
+def test_an_exported_run_reads_back_as_numbers_into_pandas(recorded, tmp_path):
+    import numpy as np
+    import pandas
+
+    from ato_nodes.bagio import read_frame, read_run
+    result = script("export.py", recorded, "--csv", tmp_path / "run.csv")
+    assert result.returncode == 0, result.stderr
+    table = pandas.read_csv(tmp_path / "run.csv")
+    assert all(dtype.kind == "f" for dtype in table.dtypes)
+    run = read_run(recorded)
+    np.testing.assert_array_equal(table["speed"], run.series["speed"])  # digits kept
+    np.testing.assert_array_equal(table["preview_0"], run.series["preview"][:, 0])
+    assert script("export.py", recorded, "--parquet", tmp_path / "run.parquet").returncode == 0
+    pandas.testing.assert_frame_equal(pandas.read_parquet(tmp_path / "run.parquet"),
+                                      read_frame(recorded))
+    again = script("export.py", recorded, "--csv", tmp_path / "run.csv")
+    assert again.returncode == 2 and "exists already" in again.stderr

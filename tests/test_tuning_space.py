@@ -75,6 +75,8 @@ def test_best_yaml_is_the_base_scenario_and_its_changes_and_history_is_plain_num
     assert f"run the best: python scripts/run_stack.py --scenario {out / 'best.yaml'}" in result.stdout
     with (out / "history.csv").open() as handle:
         rows = list(csv.DictReader(handle))
+    import pandas
+    assert all(dtype.kind in "if" for dtype in pandas.read_csv(out / "history.csv").dtypes)
     cells = [[float(value) for value in row.values()] for row in rows]  # plain numbers
     best = [row[2] for row in cells]
     assert len(rows) == 2 and best == sorted(best, reverse=True)  # best so far never rises
