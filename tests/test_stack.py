@@ -254,3 +254,25 @@ def test_line_scenarios_run_through_the_stack_exactly_as_in_process(tmp_path, sc
     from_bag = json.loads(scored.stdout)
     assert from_bag == pytest.approx(score_series(expected, values), nan_ok=True)
     assert from_bag["traction_energy_kwh"] > 0 and "overspeed_time" in from_bag
+
+
+def test_ros2_param_set_on_a_running_node_is_refused_not_ignored(tmp_path):
+    process = start_stack("--duration", "60", "--real-time", "--out", str(tmp_path / "bag"))
+    try:
+        banner = wait_for_stepping(process)[0]
+        domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
+        env = {**os.environ, "ROS_DOMAIN_ID": domain,
+               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        answers = []
+        for node, name, value in (("/controller", "adrc.mu1", "7000.0"),
+                                  ("/plant", "run.period", "0.1")):
+            probe = subprocess.run([sys.executable, str(ROOT / "tests" / "param_probe.py"),
+                                    node, name, value], capture_output=True, text=True,
+                                   timeout=60, env=env)
+            assert probe.returncode == 0, probe.stderr
+            answers.append(json.loads(probe.stdout))
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=60)
+    for answer in answers:
+        assert answer["successful"] is False and "read-only" in answer["reason"], answer

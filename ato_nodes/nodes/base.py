@@ -64,7 +64,10 @@ def message_class(type_name: str) -> type:
 
 
 def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    descriptor = ParameterDescriptor(name=spec.name, description=spec.description)
+    # read-only: a run's values are fixed when it starts (the stages are built from them),
+    # so `ros2 param set` is refused with the standard message instead of being ignored
+    descriptor = ParameterDescriptor(name=spec.name, description=spec.description,
+                                     read_only=True)
     if spec.low is not None and spec.value_type is float:
         descriptor.floating_point_range = [FloatingPointRange(
             from_value=float(spec.low), to_value=float(spec.high))]
@@ -109,24 +112,19 @@ class AtoNode(Node):
         relative file paths resolve from the parameter file's folder, else msg_config/.
         So a node started from a scenario file by any launcher runs the same train; the
         completed values are set back, so `ros2 param get` shows what the node uses."""
-        overrides = set(self._parameter_overrides)
+        overrides = self._parameter_overrides
         unknown = sorted(name for name in overrides
                          if name not in SPEC_BY_NAME and name != "use_sim_time")
         if unknown:
             raise ScenarioError(f"unknown parameter {unknown[0]!r}")
-        declared, given = {}, {}
-        for spec in for_node(self.role):
-            value = self.declare_parameter(spec.name, spec.default, _descriptor(spec)).value
-            declared[spec.name] = spec.check(value, self.role)
-            if spec.name in overrides:
-                given[spec.name] = declared[spec.name]
+        given = {spec.name: spec.check(overrides[spec.name].value, self.role)
+                 for spec in for_node(self.role) if spec.name in overrides}
         if given.get("plant.train"):
             train_preset(given["plant.train"])  # an unknown train: one line, exit 2
         values = NodeValues(self.role, complete(given, [*parameter_file_folders(), Path.cwd()]))
-        changed = [Parameter(name, value=value) for name, value in values.items()
-                   if value != declared[name]]
-        if changed:
-            self.set_parameters(changed)
+        for spec in for_node(self.role):  # declared with what the node runs with (read-only)
+            self.declare_parameter(spec.name, values[spec.name], _descriptor(spec),
+                                   ignore_override=True)
         return values
 
     def announce_parameters(self) -> None:
