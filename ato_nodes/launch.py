@@ -187,8 +187,9 @@ class Stack:
         env = node_environment(self.lock.domain_id)
         output = subprocess.DEVNULL if self.quiet else None
         for role in NODES:
+            # the nodes log to /rosout; the console keeps the launcher's concise lines
             command = [sys.executable, "-m", f"ato_nodes.nodes.{role}", "--ros-args",
-                       "--params-file", str(self.params_path)]
+                       "--params-file", str(self.params_path), "--disable-stdout-logs"]
             self.processes[role] = subprocess.Popen(
                 command, env=env, cwd=REPO_ROOT, stdin=subprocess.DEVNULL, stdout=output,
                 stderr=output, start_new_session=True, pass_fds=(self.lock.fileno(),),

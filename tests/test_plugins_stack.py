@@ -161,8 +161,9 @@ def test_the_running_fitness_topic_grows_to_the_runs_final_fitness(tmp_path):
     stack = Stack(values, tmp_path / "bag", quiet=True, timeout=120)
     env = {**os.environ, "ROS_DOMAIN_ID": str(stack.lock.domain_id),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "fitness_probe.py"), "60"],
-                             env=env, stdout=subprocess.PIPE, text=True)
+    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "topic_probe.py"),
+                              "/ato/running_fitness", "60"], env=env, stdout=subprocess.PIPE,
+                             text=True)
     try:
         assert probe.stdout.readline().strip() == "ready"
         assert stack.run().ok
@@ -183,3 +184,27 @@ def test_a_candidate_the_supervisor_prunes_ends_where_the_in_process_one_does(tm
                                       bound=20.0)
     assert in_process.status == through_stack.status == "pruned"
     assert in_process.fitness == through_stack.fitness > 20.0
+
+
+def test_the_nodes_log_their_run_to_rosout(tmp_path):
+    values = apply_overrides(load_scenario("seed000"), ["run.duration=3", "run.real_time=true"])
+    stack = Stack(values, tmp_path / "bag", quiet=True, timeout=120)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(stack.lock.domain_id),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "topic_probe.py"),
+                              "/rosout", "60", "10"], env=env, stdout=subprocess.PIPE,
+                             text=True)  # quiet 10 s: the run logs nothing while it steps
+    try:
+        assert probe.stdout.readline().strip() == "ready"
+        assert stack.run().ok
+        records = json.loads(probe.communicate(timeout=60)[0])
+    finally:
+        if probe.poll() is None:
+            probe.kill()
+    said = {(r["name"], r["msg"]) for r in records}
+    for node in NODES:  # the supervisor is the one that gathers the others' readiness
+        assert node == "supervisor" or (node, "every edge of the topic map matched: ready") \
+            in said, node
+        assert (node, "run event: start") in said, node
+    assert any(name == "recorder" and msg.startswith("run event: finished ")
+               for name, msg in said)

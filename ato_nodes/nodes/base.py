@@ -48,6 +48,7 @@ INTRUDER_POLL = 0.5    # s of wall time between checks for foreign publishers du
 HOUSEKEEPING_PERIOD = 0.02
 HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
+LOGGED_EVENTS = ("start", "finished", "recorded", "shutdown")  # INFO on /rosout
 
 
 def parameter_file_folders() -> list[Path]:
@@ -184,6 +185,7 @@ class AtoNode(Node):
             self._ready_timer.cancel()
             self.destroy_timer(self._ready_timer)
             self.announce(f"ready {self.role}")
+            self.get_logger().info("every edge of the topic map matched: ready")
             self.create_timer(INTRUDER_POLL, self._check_intruders, clock=self._wall_clock)
 
     def _check_intruders(self) -> bool:
@@ -191,8 +193,9 @@ class AtoNode(Node):
         process publishes on one of its inputs."""
         found = self.intruders()
         if found and not self.stop_requested:
-            print(f"{self.role}: error: {found[0]}: another process publishes in this run's "
-                  "ROS domain", file=sys.stderr, flush=True)
+            message = f"{found[0]}: another process publishes in this run's ROS domain"
+            self.get_logger().error(message)
+            print(f"{self.role}: error: {message}", file=sys.stderr, flush=True)
             self.exit_status = 1
             self.stop_requested = True
         return bool(found)
@@ -225,6 +228,8 @@ class AtoNode(Node):
 
     def _on_event_message(self, msg: String) -> None:
         word, _, argument = msg.data.partition(" ")
+        if word in LOGGED_EVENTS:
+            self.get_logger().info(f"run event: {word} {argument}".rstrip())
         if word == "shutdown":
             self.context.try_shutdown()
         else:

@@ -77,6 +77,9 @@ class SupervisorNode(AtoNode):
             self.fitness_out.publish(Float64(data=value))
             if 0.0 < self.prune_above < value and not self.ended:
                 self.pruned = self.ended = True
+                self.get_logger().info(f"pruned at step {self.paired}: running "
+                                       f"{self.values['supervisor.fitness']} {value:.9g} passed "
+                                       f"{self.prune_above:.9g}")
                 self.report(self.paired, pruned=True)
                 self.shut_down_all()
                 return
@@ -127,6 +130,7 @@ class SupervisorNode(AtoNode):
     def refuse(self, message: str) -> None:
         """End the run before it starts: one line, exit status 2. The nodes are told to
         shut down once each of them hears the run events (see on_tick)."""
+        self.get_logger().error(message)
         print(f"supervisor: error: {message}", file=sys.stderr, flush=True)
         self.exit_status = 2
         self.failed = True
