@@ -155,22 +155,27 @@ def test_a_supervisor_whose_nodes_never_come_fails_and_names_them(tmp_path):
     assert "controller, plant, profile, recorder" in result.stderr
 
 
-def test_the_running_fitness_topic_grows_to_the_runs_final_fitness(tmp_path):
-    values = apply_overrides(load_scenario("seed000"), [
-        "run.duration=8", "run.real_time=true", "supervisor.fitness=itae"])
-    stack = Stack(values, tmp_path / "bag", quiet=True, timeout=120)
+def echo_during_run(values: dict, bag: Path, topic: str, quiet: float) -> list:
+    """What tests/topic_probe.py (standing in for `ros2 topic echo`) receives on `topic`
+    while the stack runs `values` in the run's own domain."""
+    stack = Stack(values, bag, quiet=True, timeout=120)
     env = {**os.environ, "ROS_DOMAIN_ID": str(stack.lock.domain_id),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "topic_probe.py"),
-                              "/ato/running_fitness", "60"], env=env, stdout=subprocess.PIPE,
-                             text=True)
+    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "topic_probe.py"), topic,
+                              "60", str(quiet)], env=env, stdout=subprocess.PIPE, text=True)
     try:
         assert probe.stdout.readline().strip() == "ready"
         assert stack.run().ok
-        received = json.loads(probe.communicate(timeout=60)[0])
+        return json.loads(probe.communicate(timeout=60)[0])
     finally:
         if probe.poll() is None:
             probe.kill()
+
+
+def test_the_running_fitness_topic_grows_to_the_runs_final_fitness(tmp_path):
+    values = apply_overrides(load_scenario("seed000"), [
+        "run.duration=8", "run.real_time=true", "supervisor.fitness=itae"])
+    received = echo_during_run(values, tmp_path / "bag", "/ato/running_fitness", quiet=1.0)
     run = read_run(tmp_path / "bag")
     final = score_series(run.series, run.parameters)["itae"]
     assert len(received) > 100 and received == sorted(received) and received[0] < final / 2
@@ -188,19 +193,7 @@ def test_a_candidate_the_supervisor_prunes_ends_where_the_in_process_one_does(tm
 
 def test_the_nodes_log_their_run_to_rosout(tmp_path):
     values = apply_overrides(load_scenario("seed000"), ["run.duration=3", "run.real_time=true"])
-    stack = Stack(values, tmp_path / "bag", quiet=True, timeout=120)
-    env = {**os.environ, "ROS_DOMAIN_ID": str(stack.lock.domain_id),
-           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "topic_probe.py"),
-                              "/rosout", "60", "10"], env=env, stdout=subprocess.PIPE,
-                             text=True)  # quiet 10 s: the run logs nothing while it steps
-    try:
-        assert probe.stdout.readline().strip() == "ready"
-        assert stack.run().ok
-        records = json.loads(probe.communicate(timeout=60)[0])
-    finally:
-        if probe.poll() is None:
-            probe.kill()
+    records = echo_during_run(values, tmp_path / "bag", "/rosout", quiet=10.0)  # silent steps
     said = {(r["name"], r["msg"]) for r in records}
     for node in NODES:  # the supervisor is the one that gathers the others' readiness
         assert node == "supervisor" or (node, "every edge of the topic map matched: ready") \
