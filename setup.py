@@ -24,6 +24,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/launch", ["launch/stack.launch.py"]),
         *config_files(),
     ],
     install_requires=["setuptools", "numpy", "scipy", "daqp", "PyYAML", "matplotlib", "rosbags", "mcap",

@@ -1,0 +1,52 @@
+"""The five nodes of one run, as a standard ROS 2 launch file:
+
+    ros2 launch ato_nodes stack.launch.py scenario:=seed004-metro out:=bags/metro
+
+`scenario` is a shipped scenario's name or a scenario file; every node reads that file
+(its `/**` and own sections) and completes it as `scripts/run_stack.py` does (train
+preset, relative paths), so both give the same run. `out` is the bag directory to
+create (default bags/<scenario>-launch). The run ends when the supervisor ends it; the
+ROS domain is the environment's (ROS_DOMAIN_ID). Without a ROS install,
+`python scripts/run_stack.py --scenario NAME` is the same run.
+"""
+
+from pathlib import Path
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+from launch.event_handlers import OnProcessExit
+from launch.events import Shutdown
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from ato_nodes.core.scenario import resolve_scenario
+from ato_nodes.core.schema import NODES
+
+
+def nodes(context):
+    scenario = LaunchConfiguration("scenario").perform(context)
+    path = resolve_scenario(scenario).resolve()  # a name, or a file
+    out = LaunchConfiguration("out").perform(context) or f"bags/{path.stem}-launch"
+    report = LaunchConfiguration("report").perform(context)
+    run_parameters = {"recorder.output": str(Path(out).resolve()), "supervisor.report": report}
+    launched = [Node(package="ato_nodes", executable=role, name=role, output="screen",
+                     parameters=[str(path), {name: value for name, value in
+                                             run_parameters.items() if name.startswith(role)}])
+                for role in NODES]
+    supervisor = next(node for node in launched if node.node_executable == "supervisor")
+    ended = RegisterEventHandler(OnProcessExit(target_action=supervisor, on_exit=[
+        EmitEvent(event=Shutdown(reason="the supervisor ended the run"))]))
+    return [*launched, ended]
+
+
+def generate_launch_description() -> LaunchDescription:
+    return LaunchDescription([
+        DeclareLaunchArgument("scenario", default_value="seed000",
+                              description="a shipped scenario's name or a scenario file"),
+        DeclareLaunchArgument("out", default_value="",
+                              description="bag directory to create (default "
+                                          "bags/<scenario>-launch)"),
+        DeclareLaunchArgument("report", default_value="",
+                              description="path of the supervisor's JSON run report"),
+        OpaqueFunction(function=nodes),
+    ])
