@@ -5,15 +5,18 @@
 `scenario` is a shipped scenario's name or a scenario file; every node reads that file
 (its `/**` and own sections) and completes it as `scripts/run_stack.py` does (train
 preset, relative paths), so both give the same run. `out` is the bag directory to
-create (default bags/<scenario>-launch). The run ends when the supervisor ends it; the
-ROS domain is the environment's (ROS_DOMAIN_ID). Without a ROS install,
-`python scripts/run_stack.py --scenario NAME` is the same run.
+create (default bags/<scenario>-launch). The run ends when the supervisor ends it: every
+node exits on its 'shutdown' and the launch ends with the last of them (a node still
+running STOP_GRACE s after the supervisor, or one that fails, shuts the launch down, as
+run_stack.py does). The ROS domain is the environment's (ROS_DOMAIN_ID). Without a ROS
+install, `python scripts/run_stack.py --scenario NAME` is the same run.
 """
 
 from pathlib import Path
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, OpaqueFunction, RegisterEventHandler
+from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
+                            RegisterEventHandler, TimerAction)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
@@ -21,6 +24,8 @@ from launch_ros.actions import Node
 
 from ato_nodes.core.scenario import resolve_scenario
 from ato_nodes.core.schema import NODES
+
+STOP_GRACE = 5.0  # s the other nodes have to exit after the supervisor (as in run_stack.py)
 
 
 def nodes(context):
@@ -33,10 +38,26 @@ def nodes(context):
                      parameters=[str(path), {name: value for name, value in
                                              run_parameters.items() if name.startswith(role)}])
                 for role in NODES]
-    supervisor = next(node for node in launched if node.node_executable == "supervisor")
-    ended = RegisterEventHandler(OnProcessExit(target_action=supervisor, on_exit=[
-        EmitEvent(event=Shutdown(reason="the supervisor ended the run"))]))
-    return [*launched, ended]
+    # A Shutdown as soon as the supervisor exits would SIGINT nodes that are already
+    # exiting on its 'shutdown' (launch then reports them as died, exit code -2): the
+    # launch ends by itself once every node has exited; the grace timer is the fallback.
+    running = set(NODES)
+    grace = TimerAction(period=STOP_GRACE, actions=[EmitEvent(event=Shutdown(
+        reason=f"a node still ran {STOP_GRACE:g} s after the supervisor ended the run"))])
+
+    def exited(event, context):
+        role = event.action.node_executable
+        running.discard(role)
+        if event.returncode != 0 and not context.is_shutdown:
+            reason = f"{role} exited with status {event.returncode}"
+            return [EmitEvent(event=Shutdown(reason=reason))]
+        if not running:
+            grace.cancel()
+        elif role == "supervisor":
+            return [grace]
+        return None
+
+    return [*launched, RegisterEventHandler(OnProcessExit(on_exit=exited))]
 
 
 def generate_launch_description() -> LaunchDescription:

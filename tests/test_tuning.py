@@ -1,6 +1,7 @@
 """The tuner: search space, equal fitness in both modes, faulty candidates, resume."""
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import pytest
 
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.launch import node_processes as launched_nodes
 from ato_nodes.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings, evaluate_in_process,
                               evaluate_in_stack)
 
@@ -26,14 +28,9 @@ def short(duration):
 
 
 def node_processes():
-    found = []
-    for entry in Path("/proc").iterdir():
-        try:
-            if entry.name.isdigit() and b"ato_nodes.nodes." in (entry / "cmdline").read_bytes():
-                found.append(int(entry.name))
-        except OSError:
-            pass
-    return found
+    """Node processes this test process started and that still run (other runs on the
+    machine are not this test's business)."""
+    return sorted(launched_nodes(os.getpid()).values())
 
 
 def test_search_space_parsing():

@@ -193,9 +193,7 @@ class AtoNode(Node):
         process publishes on one of its inputs."""
         found = self.intruders()
         if found and not self.stop_requested:
-            message = f"{found[0]}: another process publishes in this run's ROS domain"
-            self.get_logger().error(message)
-            print(f"{self.role}: error: {message}", file=sys.stderr, flush=True)
+            self.error(f"{found[0]}: another process publishes in this run's ROS domain")
             self.exit_status = 1
             self.stop_requested = True
         return bool(found)
@@ -223,6 +221,14 @@ class AtoNode(Node):
             time.sleep(1.0)
 
     # Run events -----------------------------------------------------------
+    def error(self, message: str) -> None:
+        """A failure, as early as it is known: an ERROR record on /rosout and, when the
+        node's console logs are off (the launcher's `--disable-stdout-logs`), one
+        `node: error: ...` line on stderr, so a console shows it once either way."""
+        self.get_logger().error(message)
+        if "--disable-stdout-logs" in sys.argv:
+            print(f"{self.role}: error: {message}", file=sys.stderr, flush=True)
+
     def announce(self, text: str) -> None:
         self.events_out.publish(String(data=text))
 

@@ -108,10 +108,8 @@ class RecorderNode(AtoNode):
 
     def write_failed(self, exc: OSError) -> None:
         """A full disk (or any failed write): stop recording, keep what is on disk."""
-        self.get_logger().error(f"cannot write the bag: {exc.strerror or exc}; recording "
-                                f"stopped at {min(self.counts.values())} steps")
-        print(f"recorder: error: cannot write the bag {self.output}: {exc.strerror or exc}",
-              file=sys.stderr, flush=True)
+        self.error(f"cannot write the bag {self.output}: {exc.strerror or exc}; recording "
+                   f"stopped at {min(self.counts.values())} steps")
         writer, self.writer = self.writer, None
         try:
             writer.abort()

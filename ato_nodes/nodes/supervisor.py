@@ -130,8 +130,7 @@ class SupervisorNode(AtoNode):
     def refuse(self, message: str) -> None:
         """End the run before it starts: one line, exit status 2. The nodes are told to
         shut down once each of them hears the run events (see on_tick)."""
-        self.get_logger().error(message)
-        print(f"supervisor: error: {message}", file=sys.stderr, flush=True)
+        self.error(message)
         self.exit_status = 2
         self.failed = True
 
