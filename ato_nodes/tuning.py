@@ -208,6 +208,15 @@ def objective_of(objective: Objective | str) -> Objective:
     return objective if isinstance(objective, Objective) else Objective(objective)
 
 
+def prune_limit(objective: Objective, bound: float) -> float | None:
+    """The running fitness past which a candidate with this bound is pruned, or None: only
+    a fitness that only grows, and only below INFEASIBLE (any infeasible run ends above
+    it); the margin covers the rounding of a step-by-step sum."""
+    if objective.prunable and 0.0 < bound < INFEASIBLE:
+        return bound * (1.0 + PRUNE_MARGIN)
+    return None
+
+
 def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
                         objective: Objective | str, index: int, bound: float = math.inf,
                         timeout: float | None = None) -> Evaluation:
@@ -223,9 +232,9 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
     running, observe = None, None
-    if objective.prunable and 0.0 < bound < INFEASIBLE:  # any infeasible run ends above
+    limit = prune_limit(objective, bound)
+    if limit is not None:
         running = RunningIndex(FITNESS[objective.fitness])
-        limit = bound * (1.0 + PRUNE_MARGIN)  # rounding of a step-by-step sum
 
         def observe(t: float, target: float, speed: float) -> bool:
             return running.add(t, target - speed) > limit
@@ -235,7 +244,7 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
     except TimeoutError as exc:
         return Evaluation(index, overrides, PENALTY, "timeout", time.perf_counter() - started,
                           message=f"{exc} ({timeout:g} s)")
-    if running is not None and running.value > limit:
+    if limit is not None and running.value > limit:
         return Evaluation(index, overrides, running.value, "pruned",
                           time.perf_counter() - started,
                           message=f"{objective.fitness} passed {bound:.9g} at t = "
@@ -264,9 +273,10 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    if objective.prunable and 0.0 < bound < INFEASIBLE:
+    limit = prune_limit(objective, bound)
+    if limit is not None:
         run_values = {**run_values, "supervisor.fitness": FITNESS[objective.fitness],
-                      "supervisor.prune_above": bound * (1.0 + PRUNE_MARGIN)}
+                      "supervisor.prune_above": limit}
     outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel).run()
     if outcome.status == "pruned":
         return Evaluation(index, overrides, outcome.report["fitness"], "pruned",

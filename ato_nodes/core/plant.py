@@ -89,6 +89,19 @@ class TrainParameters:
         return self.disturbance_amplitude * math.sin(self.disturbance_frequency * t
                                                      + self.disturbance_phase)
 
+    def net_traction(self, v: float, share: float, line_resistance: float = 0.0,
+                     powered: bool = True) -> float:
+        """What `share` of the traction envelope leaves at v against the basic and
+        `line_resistance`, N/kN (negative: the share cannot hold v); no traction when not
+        `powered` (a neutral section). Times xi: the acceleration a plan may ask."""
+        traction = self.force_limits(v)[1] if powered else 0.0
+        return share * traction - self.resistance(v) - line_resistance
+
+    def net_braking(self, v: float, share: float, line_resistance: float = 0.0) -> float:
+        """What `share` of the brake envelope gives at v, helped by the basic and
+        `line_resistance`, N/kN. Times xi: the deceleration a plan may ask."""
+        return self.resistance(v) + line_resistance - share * self.force_limits(v)[0]
+
     def force_limits(self, v: float) -> tuple[float, float]:
         """(most negative, most positive) achievable specific force at speed v, N/kN."""
         weight = self.mass * self.gravity  # kN

@@ -96,11 +96,11 @@ class FeasiblePlan:
             xi = train.xi
             for k in range(len(speeds) - 1):  # forward: the acceleration it can give
                 v = speeds[k]
-                reach = v + period * xi * (share * train.force_limits(v)[1] - train.resistance(v))
+                reach = v + period * xi * train.net_traction(v, share)
                 speeds[k + 1] = min(speeds[k + 1], max(reach, 0.0))
             for k in range(len(speeds) - 2, -1, -1):  # backward: the braking it can give
                 v = speeds[k + 1]
-                reach = v + period * xi * (train.resistance(v) - share * train.force_limits(v)[0])
+                reach = v + period * xi * train.net_braking(v, share)
                 speeds[k] = min(speeds[k], reach)
         if jerk > 0.0:
             acceleration = np.diff(speeds) / period
@@ -330,9 +330,8 @@ class AtoCurve:
         v2 = squared[0] = self.start_speed ** 2
         for i in range(len(x) - 1):
             v = math.sqrt(v2)
-            high = train.force_limits(v)[1] if powered[i] else 0.0
             planned = a if v <= vp else a * vp / v
-            rate = min(planned, xi * (share * high - train.resistance(v) - line_resistance[i]))
+            rate = min(planned, xi * train.net_traction(v, share, line_resistance[i], powered[i]))
             v2 = min(max(v2 + 2.0 * rate * (x[i + 1] - x[i]), self.start_speed ** 2),
                      caps[i + 1] ** 2)
             squared[i + 1] = v2
@@ -340,9 +339,7 @@ class AtoCurve:
         v2 = squared[-1] = 0.0
         for i in range(len(x) - 2, -1, -1):
             v = math.sqrt(v2)
-            low = train.force_limits(v)[0]
-            rate = min(self.deceleration,
-                       xi * (train.resistance(v) + line_resistance[i] - share * low))
+            rate = min(self.deceleration, xi * train.net_braking(v, share, line_resistance[i]))
             v2 = min(v2 + 2.0 * max(rate, 0.0) * (x[i + 1] - x[i]), squared[i], stopping[i])
             squared[i] = v2
         return np.sqrt(squared)
