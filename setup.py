@@ -6,6 +6,9 @@ from setuptools import find_packages, setup
 
 PACKAGE = "ato_nodes"
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
+# The user-facing commands (ato_nodes.cli), named as their scripts in scripts/ are
+# (`ros2 run ato_nodes run_stack` = scripts/run_stack.py)
+COMMANDS = ("run_stack", "tune", "analyze", "replay_bag", "score_bag")
 
 
 def config_files():
@@ -37,6 +40,7 @@ setup(
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": [f"{node} = {PACKAGE}.nodes.{node}:main" for node in NODES],
+        "console_scripts": [f"{node} = {PACKAGE}.nodes.{node}:main" for node in NODES]
+        + [f"{command} = {PACKAGE}.cli.console:{command}" for command in COMMANDS],
     },
 )

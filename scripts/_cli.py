@@ -1,61 +1,11 @@
-"""Shared by the scripts: make the repo importable and report errors in one line."""
+"""Shared by the scripts: make the repo importable, then the helpers of ato_nodes.cli."""
 
-from __future__ import annotations
-
-import math
-import os
-import signal
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `score_bag.py ... | head` ends quietly
 
+from ato_nodes.cli import (fail, handle_signals_while_starting, interrupted_quietly,  # noqa: E402,F401
+                           new_directory, seconds, start)
 
-def _interrupted_while_starting(signum, frame) -> None:
-    """Ctrl-C before main() runs (while importing): nothing started, nothing to keep."""
-    os.write(2, b"interrupted\n")
-    os._exit(130)
-
-
-# Ctrl-C means interrupt, even when started from a shell's background job (which
-# hands its children SIGINT ignored); interrupted_quietly() takes over in main().
-signal.signal(signal.SIGINT, _interrupted_while_starting)
-
-
-def fail(message: str, status: int = 2) -> None:
-    print(f"error: {message}", file=sys.stderr)
-    sys.exit(status)
-
-
-def new_directory(path: Path, what: str = "--out") -> None:
-    """Fail (one line, exit 2) unless `path` can be created as a new directory: checked
-    before anything starts, not when the first file is written."""
-    if any(len(part.encode()) > 255 for part in path.parts):
-        fail(f"{what} {path}: a name in it is longer than 255 bytes")
-    if path.exists() or path.is_symlink():
-        fail(f"{what} {path} exists already; choose another")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        fail(f"{what} {path}: cannot create {path.parent}: {exc.strerror or exc}")
-    if not path.parent.is_dir() or not os.access(path.parent, os.W_OK | os.X_OK):
-        fail(f"{what} {path}: {path.parent} is not a writable directory")
-
-
-def seconds(value: float | None, what: str) -> None:
-    """A wall-time option: positive and finite, or not given."""
-    if value is not None and not (math.isfinite(value) and value > 0):
-        fail(f"{what} must be a positive number of seconds, not {value}")
-
-
-def interrupted_quietly(main):
-    """Run a script's main(); a Ctrl-C outside its own handling is one line, exit 130."""
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        main()
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        sys.exit(130)
-    finally:  # its outcome is decided: a Ctrl-C while the interpreter exits changes nothing
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+handle_signals_while_starting()  # before the script's own (slower) imports

@@ -1,36 +1,8 @@
 #!/usr/bin/env python3
-"""Score a recorded run from its bag alone: ITAE, IAE, ISE, max |e|, seed 004's J.
-
-    python scripts/score_bag.py BAG [--json] [--map role=/topic]
-
-BAG is a rosbag2 directory or a lone .mcap file.
-"""
-
-from __future__ import annotations
-
-import argparse
-import json
+"""The `score_bag` command (`ros2 run ato_nodes score_bag`), run from the checkout; its code
+and --help are in ato_nodes/cli/score_bag.py."""
 
 import _cli
 
-from ato_nodes.bagio import BagError, parse_mapping, read_run
-from ato_nodes.core.scoring import format_indices, score_series
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("bag", help="rosbag2 directory (metadata.yaml + .mcap)")
-    parser.add_argument("--json", action="store_true", help="print the indices as JSON")
-    parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC",
-                        help="read a role from another topic (see analyze.py --help)")
-    args = parser.parse_args()
-    try:
-        run = read_run(args.bag, parse_mapping(args.map))
-    except BagError as exc:
-        _cli.fail(str(exc))
-    indices = score_series(run.series, run.parameters)
-    print(json.dumps(indices, indent=2) if args.json else format_indices(indices))
-
-
 if __name__ == "__main__":
-    main()
+    _cli.start("score_bag")

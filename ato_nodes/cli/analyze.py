@@ -1,0 +1,40 @@
+"""Report on recorded runs: index table and the seed papers' plots (Markdown + HTML).
+
+    python scripts/analyze.py BAG [BAG ...] [TUNING_DIR ...] --out DIR [--map role=/topic]
+
+BAG is a rosbag2 directory or a lone .mcap file, the stack's own or anyone's with
+standard message types; several bags overlay on each figure. A TUNING_DIR (the
+--out of tune.py) adds its convergence history. Roles for --map: target_speed,
+state, measured_speed, command, controller_state, position.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ato_nodes import cli
+from ato_nodes.analysis import run_indices, write_report
+from ato_nodes.bagio import BagError, parse_mapping, read_run
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("inputs", nargs="+", type=Path, help="bags and tuning directories")
+    parser.add_argument("--out", type=Path, required=True, help="report directory")
+    parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC")
+    args = parser.parse_args()
+    try:
+        mapping = parse_mapping(args.map)
+        tunings = [p for p in args.inputs if (p / "history.csv").is_file()]
+        runs = [read_run(p, mapping) for p in args.inputs if p not in tunings]
+    except BagError as exc:
+        cli.fail(str(exc))
+    md_path, html_path = write_report(runs, tunings, args.out)
+    for run in runs:
+        skipped = run_indices(run)["skipped"]
+        if skipped:
+            print(f"{run.path}: no {', '.join(skipped)} topic; indices needing them skipped")
+    print(f"report: {md_path} and {html_path}")

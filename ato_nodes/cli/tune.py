@@ -1,0 +1,124 @@
+"""Tune controller parameters with a swarm optimizer.
+
+Each candidate relaunches the node graph with the candidate's parameters, is
+recorded to MCAP and scored from its bag (or, with --in-process, runs the same
+core code without ROS). Example, seed 000's BAS-PSO on the paper's gains:
+
+    python scripts/tune.py --algorithm bas-pso --scenario seed000 --in-process \\
+        --params adrc.mu1=100:20000,adrc.mu2=100:20000,adrc.beta1=50:3000 \\
+        --evaluations 2700 --seed 1 --workers 2 --out bags/tune-baspso-1
+
+Outputs in --out: best.yaml (a scenario run_stack.py accepts as it is),
+evaluations.jsonl (every evaluation, appended as it finishes), history.csv
+(best and mean fitness per iteration), convergence.png, summary.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ato_nodes import cli
+from ato_nodes.core.optimizers import ALGORITHMS
+from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.tuning import FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningSettings
+
+
+def parse_args() -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser.add_argument("--algorithm", default="bas-pso", choices=sorted(ALGORITHMS))
+    parser.add_argument("--scenario", default="seed000")
+    parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",
+                        help="parameters to tune and their bounds (repeatable; default: the "
+                        "default search space of the scenario's controller kind)")
+    parser.add_argument("--evaluations", type=int, default=300, help="budget of fitness evaluations")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=1, help="candidates run in parallel")
+    parser.add_argument("--fitness", default="itae", choices=sorted(FITNESS))
+    parser.add_argument("--require", action="append", default=[], metavar="INDEX<=VALUE",
+                        help="operational requirement on a scored index (repeatable), e.g. "
+                        "abs_stopping_error<=0.3: a candidate that breaks one is infeasible and "
+                        "ranks after every feasible one, by how far it misses")
+    parser.add_argument("--population", type=int, help="population size (default: the paper's)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="fixed parameter override for every candidate (repeatable)")
+    parser.add_argument("--in-process", action="store_true",
+                        help="score candidates with the core code in worker processes, no ROS")
+    parser.add_argument("--timeout", type=float, default=300.0,
+                        help="wall seconds before a candidate (stack or in-process) counts as hung")
+    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the tuning in --out from its evaluation log")
+    parser.add_argument("--cluster", default="", metavar="local:N|tcp://HOST:PORT",
+                        help="evaluate on a Dask cluster: local:N starts N worker processes "
+                        "here, tcp://HOST:PORT uses a running scheduler (README, Tuning); "
+                        "the same candidates give the same fitness as without")
+    parser.add_argument("--no-prune", action="store_true",
+                        help="run every in-process candidate to the end (pruning ends those "
+                        "that cannot matter; the result is the same)")
+    parser.add_argument("--keep-bags", action="store_true",
+                        help="keep every stack candidate's bag in OUT/runs (default: deleted "
+                        "once scored)")
+    parser.add_argument("--quiet", action="store_true")
+    return parser.parse_args()
+
+
+def main() -> None:
+    cli.interrupted_quietly(tune)
+
+
+def tune() -> None:
+    args = parse_args()
+    if args.evaluations < 1 or args.workers < 1 or (args.population or 2) < 2:
+        cli.fail("--evaluations and --workers must be positive and --population at least 2")
+    cli.seconds(args.timeout, "--timeout")
+    try:
+        check_given_once(args.set)
+        values = apply_overrides(load_scenario(args.scenario), args.set)
+        space = (SearchSpace.parse(args.params, values) if args.params
+                 else SearchSpace.default(values))
+        options = {"population_size": args.population} if args.population else {}
+        settings = TuningSettings(args.algorithm, args.scenario, space, args.evaluations,
+                                  args.seed, args.workers, args.in_process, args.fitness,
+                                  args.timeout, options,
+                                  tuple(Requirement.parse(text) for text in args.require),
+                                  args.keep_bags, not args.no_prune, args.cluster)
+        if not args.params and not args.quiet:
+            print(f"tuning the default search space: {space.describe()}")
+        if values["line.file"] and not args.require:
+            print("warning: tuning on a line without --require: a candidate that stops short "
+                  "or overspeeds can win (e.g. --require 'abs_stopping_error<=0.5' --require "
+                  "'overspeed_time<=0')", file=sys.stderr)
+        if args.out.exists() and any(args.out.iterdir()) and not args.resume:
+            raise ScenarioError(f"{args.out} is not empty; use --resume or another --out")
+        tuner = Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet)
+        result = tuner.run()
+    except (ScenarioError, ValueError) as exc:
+        cli.fail(str(exc).splitlines()[0])
+    except KeyboardInterrupt:
+        print(f"interrupted; every finished evaluation is in {args.out / 'evaluations.jsonl'}; "
+              "continue with --resume", file=sys.stderr)
+        sys.exit(130)
+    summary = json.loads((args.out / "summary.json").read_text())
+    if result.best_f >= PENALTY:
+        cli.fail(f"every one of the {result.evaluations} candidates failed "
+                 f"({summary['failed_evaluations']}); see {args.out / 'evaluations.jsonl'}", 1)
+    print(f"best {args.fitness} {result.best_f:.6g} after {result.evaluations} evaluations, "
+          f"{result.iterations} iterations ({summary['stop_reason']})")
+    for name, value in summary["best_params"].items():
+        print(f"  {name} = {value:.6g}")
+    indices = summary["best_indices"]
+    if indices:
+        print(f"  max |e| {indices['max_abs_error_kmh']:.4f} km/h, ITAE {indices['itae']:.6g}")
+    print(f"failed evaluations: {summary['failed_evaluations'] or 'none'}; pruned: "
+          f"{summary['pruned_evaluations']}")
+    for name in summary["best_at_bounds"]:
+        print(f"warning: the best {name} sits on its bound; a wider --params box may do "
+              f"better", file=sys.stderr)
+    print(f"outputs: {args.out}/best.yaml, evaluations.jsonl, history.csv, convergence.png")
+    print(f"run the best: python scripts/run_stack.py --scenario {args.out / 'best.yaml'}")
