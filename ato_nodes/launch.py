@@ -4,11 +4,14 @@ Used by scripts/run_stack.py and by the tuner. It writes the run's ROS
 parameter file, starts the five node processes, watches them, and stops
 every one of them on the way out, whatever happened (end of run, a node
 that died, Ctrl-C, a timeout).
+
+The node processes are forked from a server that has imported rclpy and the
+node modules once (ato_nodes.nodefork): importing them was most of a tuning
+candidate's relaunch overhead.
 """
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
 import shutil
@@ -29,6 +32,7 @@ import yaml
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.scenario import ros_parameter_file
 from ato_nodes.core.schema import NODES
+from ato_nodes.nodefork import NODE_NAME_PREFIX, ForkedNode, fork_server
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
@@ -37,8 +41,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 DOMAIN_LOCK_PORT = 30300
 DOMAIN_IDS = range(1, 102)  # 0 is left for the user's own ROS graph
 STOP_GRACE = 5.0           # s for nodes to exit after SIGINT before SIGTERM / SIGKILL
-POLL = 0.05                # s between checks of the children
-PR_SET_PDEATHSIG = 1
+POLL = 0.05                # s between checks of the children (an exit is seen at once)
 STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
@@ -47,19 +50,20 @@ def _interrupt(signum, frame) -> None:
 
 
 def node_processes(launcher: int) -> dict[str, int]:
-    """The node processes a launcher process started, {role: pid} (from /proc)."""
+    """The node processes a launcher process started, {role: pid} (from /proc: named
+    ato-ROLE, children of the launcher's fork server)."""
+    def parent(pid: str) -> int:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
     found = {}
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         try:
-            stat = (entry / "stat").read_text()
-            cmdline = (entry / "cmdline").read_bytes().split(b"\0")
-        except OSError:
+            name = (entry / "comm").read_text().strip()
+            if name.startswith(NODE_NAME_PREFIX) and parent(str(parent(entry.name))) == launcher:
+                found[name[len(NODE_NAME_PREFIX):]] = int(entry.name)
+        except (OSError, ValueError):
             continue
-        module = next((a.decode() for a in cmdline if a.startswith(b"ato_nodes.nodes.")), None)
-        if module and int(stat.rsplit(")", 1)[1].split()[1]) == launcher:
-            found[module.rsplit(".", 1)[1]] = int(entry.name)
     return found
 
 
@@ -96,21 +100,9 @@ class DomainLock:
         self._socket.close()
 
 
-def _death_signal(signum: int):
-    """Child side of fork: get `signum` if the launcher itself dies; SIGINT and SIGTERM
-    held (blocked) until the node has its own handlers (run_node unblocks them), so a
-    stop that comes while it is still importing is kept, not a traceback."""
-    def arm() -> None:
-        signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signum)
-    return arm
-
-
-# If the launcher dies (even by SIGKILL) the nodes go too: SIGKILL for those with
-# nothing to save, SIGTERM for the recorder, which then drains and closes its bag.
-# Each node also holds the domain's lock port (inherited), so a node that outlives
-# its launcher keeps its domain from the next run.
+# If the launcher dies (even by SIGKILL) its fork server ends, and the nodes go too:
+# SIGKILL for those with nothing to save, SIGTERM for the recorder, which then drains
+# and closes its bag.
 DEATH_SIGNAL = {role: signal.SIGTERM if role == "recorder" else signal.SIGKILL
                 for role in NODES}
 WORKDIR_PREFIX = "ato-run-"
@@ -173,7 +165,8 @@ class Stack:
         self.timeout = timeout
         self.cancel = cancel  # set by another thread (a tuner stopping): stop now
         self.lock = DomainLock(domain_id)
-        self.processes: dict[str, subprocess.Popen] = {}
+        self.processes: dict[str, ForkedNode] = {}
+        self.node_ended = threading.Event()  # set whenever one of them ends
         _remove_stale_workdirs()
         self.workdir = Path(tempfile.mkdtemp(prefix=f"{WORKDIR_PREFIX}{os.getpid()}-"))
         self.report_path = self.workdir / "report.json"
@@ -185,15 +178,20 @@ class Stack:
     def _start(self) -> None:
         self.params_path.write_text(self.params_yaml)
         env = node_environment(self.lock.domain_id)
-        output = subprocess.DEVNULL if self.quiet else None
-        for role in NODES:
-            # the nodes log to /rosout; the console keeps the launcher's concise lines
-            command = [sys.executable, "-m", f"ato_nodes.nodes.{role}", "--ros-args",
-                       "--params-file", str(self.params_path), "--disable-stdout-logs"]
-            self.processes[role] = subprocess.Popen(
-                command, env=env, cwd=REPO_ROOT, stdin=subprocess.DEVNULL, stdout=output,
-                stderr=output, start_new_session=True, pass_fds=(self.lock.fileno(),),
-                preexec_fn=_death_signal(DEATH_SIGNAL[role]))
+        server = fork_server(env, REPO_ROOT)
+        console = (open(os.devnull, "wb") if self.quiet else None)
+        output = (console.fileno(),) * 2 if console else (1, 2)
+        try:
+            for role in NODES:
+                # the nodes log to /rosout; the console keeps the launcher's concise lines
+                argv = [f"ato_nodes.nodes.{role}", "--ros-args", "--params-file",
+                        str(self.params_path), "--disable-stdout-logs"]
+                self.processes[role] = server.fork(role, argv, env, REPO_ROOT,
+                                                   DEATH_SIGNAL[role], output,
+                                                   self.lock.fileno(), self.node_ended)
+        finally:
+            if console:
+                console.close()
 
     def stop(self) -> None:
         """SIGINT every live node (the recorder drains and closes its bag), SIGCONT so a
@@ -218,6 +216,7 @@ class Stack:
         early_exit: dict[str, float] = {}
         stopped_since: dict[str, float] = {}
         while True:
+            self.node_ended.clear()
             codes = {role: process.poll() for role, process in self.processes.items()}
             if codes["supervisor"] == 0:
                 return self._finish()
@@ -242,7 +241,7 @@ class Stack:
                 return RunOutcome("timeout", f"run did not finish within {self.timeout:g} s")
             if self.cancel is not None and self.cancel.is_set():
                 return RunOutcome("interrupted", "stopped by its tuning")
-            time.sleep(POLL)
+            self.node_ended.wait(POLL)
 
     def _stall(self) -> str:
         """Where a run that timed out stood: the topic with the fewest recorded messages

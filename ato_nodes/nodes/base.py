@@ -100,6 +100,9 @@ class AtoNode(Node):
         self.events_out = self.create_publisher(String, events.name, QOS["events"])
         self.events_in = self.create_subscription(String, events.name, self._on_event_message,
                                                   QOS["events"])
+        # on the fast path too: a run's start and end wait on few events, each of which
+        # would otherwise wait up to HOUSEKEEPING_PERIOD for the executor
+        self.lockstep_inputs.append((self.events_in, self._on_event_message))
         self._ready_timer = None
         self._wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
         fault = parse_fault(self.values["run.fault"])
@@ -275,7 +278,8 @@ def spin_lockstep(node: AtoNode, executor: SingleThreadedExecutor) -> None:
     subscription is taken and handled at once (in arrival order per topic,
     as the executor would). The executor serves everything else (run events,
     /clock for the node's sim time, timers, parameter services) every
-    HOUSEKEEPING_PERIOD, so /clock, published every step, costs no callback.
+    HOUSEKEEPING_PERIOD, so /clock, published every step, costs no callback. Run
+    events are on the fast path as well (see AtoNode.__init__).
     """
     context = node.context
     lockstep = LockstepInputs(node)
@@ -286,15 +290,12 @@ def spin_lockstep(node: AtoNode, executor: SingleThreadedExecutor) -> None:
             _housekeeping(executor)
             next_housekeeping = now + HOUSEKEEPING_PERIOD
             continue
-        if not lockstep.inputs:
-            time.sleep(next_housekeeping - now)
-            continue
         lockstep.take(next_housekeeping - now)
 
 
 class LockstepInputs:
-    """A wait set of a node's per-step subscriptions: wait, then take and handle every
-    queued message of each ready one (in arrival order per topic)."""
+    """A wait set of a node's per-step subscriptions and run events: wait, then take and
+    handle every queued message of each ready one (in arrival order per topic)."""
 
     def __init__(self, node: AtoNode):
         self.inputs = [(sub.handle, sub.msg_type, sub.raw, callback)

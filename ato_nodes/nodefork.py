@@ -1,0 +1,260 @@
+"""Node processes forked from a server that has imported rclpy and the node modules.
+
+Importing rclpy, the message packages and a node's modules costs 0.5-1 s of CPU
+per process: with five processes on two cores, most of a tuning candidate's
+relaunch overhead. So the launcher starts one fork server per launcher process
+(`python -m ato_nodes.nodefork`, started at the first run), which imports them
+once, before any ROS context exists, and forks each node on request. A forked node
+makes itself what a freshly started `python -m ato_nodes.nodes.ROLE` is (own
+session, environment, arguments, working directory, console), then runs the
+node's main(), which initialises its own context in its own domain.
+
+Protocol, over a Unix SOCK_SEQPACKET socket pair: the launcher sends a JSON
+request {role, argv, env, cwd, death_signal} with the node's stdout, stderr and
+lock file descriptors attached; the server answers {"pid": PID} and, once the
+node has ended and been reaped, {"exited": PID, "status": CODE} (CODE as
+subprocess's returncode: negative for a signal). The server ends when the
+launcher does (end of file on the socket); its nodes then get their death
+signals.
+"""
+
+from __future__ import annotations
+
+import atexit
+import ctypes
+import importlib
+import json
+import os
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import traceback
+from pathlib import Path
+
+from ato_nodes.core.schema import NODES
+
+PR_SET_PDEATHSIG = 1
+PR_SET_NAME = 15
+NODE_NAME_PREFIX = "ato-"  # a forked node's process name (/proc/PID/comm): ato-ROLE
+MESSAGE_SIZE = 1 << 20     # bytes: a request carries the node's whole environment
+STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+# Server side ---------------------------------------------------------------
+def _exit_status(wait_status: int) -> int:
+    return -os.WTERMSIG(wait_status) if os.WIFSIGNALED(wait_status) \
+        else os.WEXITSTATUS(wait_status)
+
+
+def _become_node(connection: socket.socket, request: dict, fds: list[int]) -> None:
+    """In the forked child: become the node's process and run it; never returns.
+    SIGINT and SIGTERM stay held (the server holds them) until the node has its own
+    handlers (run_node unblocks them), so a stop that comes while it starts is kept.
+    The lock fd (the domain's lock port) stays open for the process's lifetime: a
+    node that outlives its launcher keeps its domain from the next run."""
+    status = 1
+    try:
+        connection.close()
+        os.setsid()
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, request["death_signal"])
+        libc.prctl(PR_SET_NAME, f"{NODE_NAME_PREFIX}{request['role']}".encode())
+        stdout, stderr, _lock = fds
+        os.dup2(stdout, 1)
+        os.dup2(stderr, 2)
+        os.close(stdout)
+        os.close(stderr)
+        os.environ.clear()
+        os.environ.update(request["env"])
+        os.chdir(request["cwd"])
+        sys.argv = request["argv"]
+        importlib.import_module(f"ato_nodes.nodes.{request['role']}").main()
+        status = 0
+    except SystemExit as exc:
+        status = exc.code if isinstance(exc.code, int) else (exc.code is not None)
+        if isinstance(exc.code, str):
+            print(exc.code, file=sys.stderr)
+    except BaseException:  # what an uncaught exception does to a fresh process
+        traceback.print_exc()
+    finally:
+        atexit._run_exitfuncs()  # as a fresh process's interpreter would at exit
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+
+
+def serve(connection: socket.socket) -> None:
+    """Fork a node per request until the launcher closes its end; report each node's
+    end as soon as SIGCHLD tells of it."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)  # inherited by every node
+    wake_read, wake_write = os.pipe()
+    os.set_blocking(wake_write, False)
+    signal.signal(signal.SIGCHLD, lambda signum, frame: None)  # the wakeup fd does the work
+    signal.set_wakeup_fd(wake_write)
+    children: set[int] = set()
+    while True:
+        readable, _, _ = select.select([connection, wake_read], [], [])
+        if wake_read in readable:
+            os.read(wake_read, 4096)
+        if connection in readable:
+            message, fds, _, _ = socket.recv_fds(connection, MESSAGE_SIZE, 3)
+            if not message:
+                return  # the launcher is gone; PDEATHSIG takes the nodes
+            pid = os.fork()
+            if pid == 0:
+                signal.set_wakeup_fd(-1)
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                os.close(wake_read)
+                os.close(wake_write)
+                _become_node(connection, json.loads(message), fds)
+            for fd in fds:
+                os.close(fd)
+            children.add(pid)
+            connection.send(json.dumps({"pid": pid}).encode())
+        for pid in list(children):
+            ended, wait_status = os.waitpid(pid, os.WNOHANG)
+            if ended:
+                children.discard(pid)
+                connection.send(json.dumps({"exited": pid,
+                                            "status": _exit_status(wait_status)}).encode())
+
+
+# Interfaces every node's rclpy.Node uses besides the topic map's: its parameter
+# services and events, /rosout, /clock, the type description service.
+NODE_INTERFACES = (
+    "std_msgs/msg/String", "rcl_interfaces/msg/ParameterEvent", "rcl_interfaces/msg/Log",
+    "rosgraph_msgs/msg/Clock", *(f"rcl_interfaces/srv/{name}" for name in (
+        "DescribeParameters", "GetParameters", "GetParameterTypes", "ListParameters",
+        "SetParameters", "SetParametersAtomically")),
+    "type_description_interfaces/srv/GetTypeDescription")
+
+
+def warm_up() -> None:
+    """Before any fork: import the node modules and what a node otherwise loads on
+    its first steps (the parsed topic map, every message and service type support,
+    numpy.random), so that no forked node pays for it."""
+    import numpy.random  # noqa: F401  (the plant's sensor noise)
+    from rclpy.type_support import check_for_type_support
+    from ato_nodes.core.topics import topic_map
+    for role in NODES:
+        importlib.import_module(f"ato_nodes.nodes.{role}")
+    for name in {topic.type for topic in topic_map().values()} | set(NODE_INTERFACES):
+        package, kind, type_name = name.split("/")
+        check_for_type_support(getattr(importlib.import_module(f"{package}.{kind}"),
+                                       type_name))
+
+
+def main() -> None:
+    warm_up()
+    serve(socket.socket(fileno=int(sys.argv[1])))
+
+
+# Launcher side -------------------------------------------------------------
+class ForkedNode:
+    """A node process forked by the server, with the part of subprocess.Popen's
+    interface the launcher uses (pid, poll, wait, send_signal)."""
+
+    def __init__(self, pid: int, notify: threading.Event):
+        self.pid = pid
+        self.returncode: int | None = None
+        self._ended = threading.Event()
+        self._notify = notify  # set too when this node ends (a launcher watching several)
+
+    def _exited(self, status: int) -> None:
+        self.returncode = status
+        self._ended.set()
+        self._notify.set()
+
+    def poll(self) -> int | None:
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        if not self._ended.wait(timeout):
+            raise subprocess.TimeoutExpired(f"node process {self.pid}", timeout)
+        return self.returncode
+
+    def send_signal(self, signum: int) -> None:
+        """Signal the node unless it has ended (reaped, its end not yet heard: gone)."""
+        if self.returncode is None:
+            try:
+                os.kill(self.pid, signum)
+            except ProcessLookupError:
+                pass
+
+
+class ForkServer:
+    """The launcher process's connection to its fork server (one per process, shared
+    by every run of every thread: see `fork_server()`)."""
+
+    def __init__(self, env: dict[str, str], cwd: Path):
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "ato_nodes.nodefork", str(theirs.fileno())], env=env,
+            cwd=cwd, stdin=subprocess.DEVNULL, pass_fds=(theirs.fileno(),),
+            start_new_session=True)  # a Ctrl-C at the terminal is the launcher's to pass on
+        theirs.close()
+        self.connection = ours
+        self.requests = threading.Lock()  # one request at a time: replies come in order
+        self.replies: list[int] = []
+        self.replied = threading.Condition()
+        self.nodes: dict[int, ForkedNode] = {}
+        self.early_exits: dict[int, int] = {}  # exited before its pid reply was handled
+        self.alive = True
+        threading.Thread(target=self._read, name="fork-server", daemon=True).start()
+
+    def _read(self) -> None:
+        while True:
+            message = self.connection.recv(MESSAGE_SIZE)
+            with self.replied:
+                if not message:  # the server died: its nodes went with it
+                    self.alive = False
+                    for node in self.nodes.values():
+                        if node.returncode is None:
+                            node._exited(-signal.SIGKILL)
+                    self.replied.notify_all()
+                    return
+                reply = json.loads(message)
+                if "pid" in reply:
+                    self.replies.append(reply["pid"])
+                    self.replied.notify_all()
+                elif reply["exited"] in self.nodes:
+                    self.nodes.pop(reply["exited"])._exited(reply["status"])
+                else:
+                    self.early_exits[reply["exited"]] = reply["status"]
+
+    def fork(self, role: str, argv: list[str], env: dict[str, str], cwd: Path,
+             death_signal: int, output: tuple[int, int], lock_fd: int,
+             notify: threading.Event) -> ForkedNode:
+        request = json.dumps({"role": role, "argv": argv, "env": env, "cwd": str(cwd),
+                              "death_signal": int(death_signal)}).encode()
+        with self.requests:
+            socket.send_fds(self.connection, [request], [*output, lock_fd])
+            with self.replied:
+                self.replied.wait_for(lambda: self.replies or not self.alive)
+                if not self.alive:
+                    raise RuntimeError("the node fork server has died")
+                node = ForkedNode(self.replies.pop(0), notify)
+                self.nodes[node.pid] = node
+                if node.pid in self.early_exits:
+                    self.nodes.pop(node.pid)._exited(self.early_exits.pop(node.pid))
+        return node
+
+
+_server: ForkServer | None = None
+_server_lock = threading.Lock()
+
+
+def fork_server(env: dict[str, str], cwd: Path) -> ForkServer:
+    """This process's fork server, started at the first call (again if it died)."""
+    global _server
+    with _server_lock:
+        if _server is None or not _server.alive:
+            _server = ForkServer(env, cwd)
+        return _server
+
+
+if __name__ == "__main__":
+    main()
