@@ -1,28 +1,30 @@
-"""Reports on recorded runs: the index table and the seed papers' figures.
+"""Reports on recorded runs: the verdict, the run's identity and the seed papers' figures.
 
 One scorer (core.scoring.score_series) gives the indices, so a report and
-score_bag.py always agree. Plots are PNG (matplotlib, Agg); the report is
-Markdown plus a self-contained HTML page with the PNGs embedded.
+score_bag.py always agree. Each index stands beside the run's requirement
+(report.require, kept in the bag with the run's other parameters) and passes or
+fails. The report is Markdown with PNG figures (matplotlib, Agg) and an interactive,
+self-contained HTML page (ato_nodes.report_html, Plotly).
 """
 
 from __future__ import annotations
 
-import base64
 import csv
-import html
+import itertools
 import json
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ato_nodes.bagio import Run
-from ato_nodes.core.components import CONTROLLERS
+from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
-from ato_nodes.core.scoring import observer_b0, score_series, total_disturbance
+from ato_nodes.core.schema import SPEC_BY_NAME
+from ato_nodes.core.scoring import observer_b0, run_line, score_series, total_disturbance
 
-SEED000_BANDS_KMH = (0.05, 0.4)  # seed 000: body text and abstract
 INDEX_COLUMNS = [  # (key, heading, format)
     ("steps", "steps", "{:d}"),
     ("itae", "ITAE", "{:.6g}"),
@@ -46,7 +48,10 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("overspeed_time", "overspeed s", "{:.2f}"),
     ("max_overspeed_kmh", "max overspeed km/h", "{:.3f}"),
     ("stopping_error", "stopping error m", "{:+.3f}"),
+    ("abs_stopping_error", "abs(stopping error) m", "{:.3f}"),
+    ("arrival_time", "arrival s", "{:.2f}"),
     ("running_time_error", "run-time error s", "{:+.2f}"),
+    ("stepped_time", "stepped approach s", "{:.1f}"),
 ]
 
 
@@ -61,17 +66,30 @@ def markdown_table(results: dict[str, dict], keys: tuple[str, ...] = TRACKING_KE
     """One row per run (`results`: label -> indices), one column per index of `keys`
     that some run has, formatted as in INDEX_COLUMNS; `extra` adds text columns
     (heading -> label -> text)."""
-    columns = {key: (heading, form) for key, heading, form in INDEX_COLUMNS}
     present = [key for key in keys if any(key in r for r in results.values())]
     extra = extra or {}
-    lines = ["| run | " + " | ".join([columns[k][0] for k in present] + list(extra)) + " |",
+    lines = ["| run | " + " | ".join([heading(k) for k in present] + list(extra)) + " |",
              "|---|" + "---|" * (len(present) + len(extra))]
     for name, indices in results.items():
-        cells = [columns[k][1].format(int(indices[k]) if columns[k][1] == "{:d}" else indices[k])
-                 if k in indices else "-" for k in present]
+        cells = [format_index(k, indices[k]) if k in indices else "-" for k in present]
         cells += [texts.get(name, "") for texts in extra.values()]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+COLUMNS = {key: (title, form) for key, title, form in INDEX_COLUMNS}
+OTHER_FORMAT = "{:.4g}"  # an index the tables do not list, named by a requirement
+
+
+def heading(key: str) -> str:
+    return COLUMNS.get(key, (key, ""))[0]
+
+
+def format_index(key: str, value) -> str:
+    form = COLUMNS.get(key, ("", OTHER_FORMAT))[1]
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return form.format(int(value) if form == "{:d}" else value)
 
 
 @dataclass
@@ -106,9 +124,9 @@ def _save(figure, path: Path) -> Path:
 
 
 def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
-             target=None, bands: bool = False, limit=None) -> Path:
+             target=None, bands: tuple[float, ...] = (), limit=None) -> Path:
     """One line per run of y(series) against x(series); optionally the first run's
-    target as a dashed line, its speed limit, and seed 000's error bands."""
+    target as a dashed line, its speed limit, and reference bands +-band."""
     plt = _pyplot()
     figure, axes = plt.subplots(figsize=(9, 4.5))
     if target is not None:
@@ -117,11 +135,10 @@ def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
         axes.plot(x(runs[0].series), limit(runs[0].series), "r-", lw=1, label="speed limit")
     for run in runs:
         axes.plot(x(run.series), y(run.series), lw=0.9, label=label(run))
-    if bands:
-        for band, style in zip(SEED000_BANDS_KMH, (":", "-.")):
-            for sign in (1, -1):
-                axes.axhline(sign * band, color="grey", ls=style, lw=1,
-                             label=f"±{band} km/h (seed 000)" if sign > 0 else None)
+    for band, style in zip(bands, itertools.cycle((":", "-.", "--"))):
+        for sign in (1, -1):
+            axes.axhline(sign * band, color="grey", ls=style, lw=1,
+                         label=f"±{band:g} km/h (scenario's band)" if sign > 0 else None)
     axes.set(xlabel=labels[0], ylabel=labels[1], title=labels[2])
     axes.grid(alpha=0.3)
     axes.legend()
@@ -129,7 +146,7 @@ def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
 
 
 def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
-    """Speed against time and distance, error with seed 000's bands, force, observer."""
+    """Speed against time and distance, error with the scenarios' bands, force, observer."""
     def time(s):
         return s["t"]
 
@@ -153,7 +170,8 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
             out / "speed_distance.png", target=target, limit=limit)))
     figures.append(Figure("Tracking error", _overlay(
         runs, time, lambda s: (s["target"] - s["speed"]) * MS_TO_KMH,
-        ("time (s)", "target - speed (km/h)", "Tracking error"), out / "error.png", bands=True)))
+        ("time (s)", "target - speed (km/h)", "Tracking error"), out / "error.png",
+        bands=tuple(sorted({band for run in runs for band in run_bands(run)})))))
     with_command = [run for run in runs if "command" in run.series]
     if with_command:
         figures.append(Figure("Control force", _overlay(
@@ -231,56 +249,208 @@ def plot_convergence(tunings: list[Path], path: Path) -> Figure:
     return Figure("Tuning convergence", _save(figure, path))
 
 
-def index_table(runs: list[Run], indices: list[dict]) -> tuple[list[str], list[list[str]]]:
-    present = [c for c in INDEX_COLUMNS if any(c[0] in i for i in indices)]
-    header = ["run"] + [heading for _, heading, _ in present] + ["skipped roles"]
+PASS, FAIL, UNMEASURED = "pass", "fail", "not measured"
+
+
+@dataclass
+class RunReport:
+    """One run as the report judges it: its indices, its own requirements (from its
+    parameters, so runs of different scenarios are each judged by theirs), the
+    reference bands of its tracking-error plot and what the run was."""
+
+    run: Run
+    label: str
+    indices: dict
+    requirements: dict  # index -> tuning.Requirement
+    bands: tuple[float, ...]
+    identity: dict[str, str]
+
+    def status(self, key: str) -> str:
+        """PASS, FAIL or UNMEASURED for a required index, "" for one without requirement."""
+        requirement = self.requirements.get(key)
+        if requirement is None:
+            return ""
+        value = self.indices.get(key)
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            return UNMEASURED
+        return PASS if requirement.violation(self.indices) == 0.0 else FAIL
+
+    def requirement_text(self, key: str) -> str:
+        return f"{heading(key)} <= {self.requirements[key].limit:g}"
+
+    @property
+    def summary(self) -> tuple[str, str]:
+        """(overall status, one line): FAIL if any requirement is broken, else
+        UNMEASURED if any cannot be judged from the bag, else PASS ("" without any)."""
+        statuses = {key: self.status(key) for key in self.requirements}
+        broken = [f"{heading(k)} {format_index(k, self.indices[k])} > "
+                  f"{self.requirements[k].limit:g}" for k, v in statuses.items() if v == FAIL]
+        unmeasured = [heading(k) for k, v in statuses.items() if v == UNMEASURED]
+        if not statuses:
+            return "", f"{self.label}: no requirements (the scenario sets no report.require)"
+        text = f"{self.label}: {len(statuses) - len(broken) - len(unmeasured)} of " \
+               f"{len(statuses)} requirements met"
+        text += "".join(f"; {what}: {', '.join(items)}" for what, items in
+                        (("broken", broken), (UNMEASURED, unmeasured)) if items)
+        overall = FAIL if broken else UNMEASURED if unmeasured else PASS
+        return overall, text
+
+
+def _checked_text(run: Run, name: str) -> str:
+    """A report.* parameter of the run (its default for a bag without parameters),
+    checked as a scenario's is: a bag is anyone's file."""
+    value = (run.parameters or {}).get(name, SPEC_BY_NAME[name].default)
+    return SPEC_BY_NAME[name].check(value, label(run))
+
+
+def run_requirements(run: Run) -> dict:
+    """The run's report.require as tune.py's Requirements, by index name."""
+    from ato_nodes.tuning import Requirement  # here, not above: tuning imports this module
+    items = [item for item in _checked_text(run, "report.require").split(",") if item.strip()]
+    try:
+        return {r.name: r for r in map(Requirement.parse, items)}
+    except ScenarioError as exc:
+        raise ScenarioError(f"{label(run)}: report.require: {exc}") from None
+
+
+def run_bands(run: Run) -> tuple[float, ...]:
+    """The run's report.error_bands, km/h."""
+    return tuple(float(item) for item in _checked_text(run, "report.error_bands").split(",")
+                 if item.strip())
+
+
+def scenario_name(run: Run) -> str:
+    """The scenario run_stack.py named in the bag's summary.json; '-' for other bags."""
+    try:
+        return str(json.loads((run.path / "summary.json").read_text())["scenario"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "-"
+
+
+def _value(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else Path(value).name \
+        if isinstance(value, str) and "/" in value else str(value)
+
+
+def identity(run: Run) -> dict[str, str]:
+    """What the run was: scenario, train, target, controller and its gains, line."""
+    p = run.parameters
+    if not p:
+        return {"scenario": "-", "parameters": "none in the bag (not recorded by this stack)"}
+    described = {"scenario": scenario_name(run)}
+    described["train"] = (p.get("plant.train") or "the scenario's own plant.* values") + \
+        f" ({p.get('plant.mass', math.nan):g} t; speed sensor noise " \
+        f"{p.get('plant.speed_noise', 0.0):g} m/s)"
+    for registry in (PROFILES, CONTROLLERS):
+        kind = p.get(registry.kind_parameter.name, "")
+        try:
+            component = registry[kind]
+        except ScenarioError:
+            described[registry.role] = f"{kind} (a kind this version does not know)"
+            continue
+        described[registry.role] = f"{kind}: {component.description}"
+        if registry is CONTROLLERS:
+            described["gains"] = ", ".join(f"{spec.name.split('.', 1)[1]} {_value(p[spec.name])}"
+                                           for spec in component.parameters
+                                           if spec.name in p) or "-"
+    described["limits"] = (f"u in [{p.get('controller.u_min', math.nan):g}, "
+                           f"{p.get('controller.u_max', math.nan):g}] N/kN, rate "
+                           f"{p.get('controller.max_rate', math.nan):g} N/kN/s, preview "
+                           f"{p.get('controller.preview', 0)} steps")
+    line = run_line(p)
+    described["line"] = "open track (no line file)" if line is None else (
+        f"{line.name}: {line.length / 1000:g} km, stop at {line.stop_position:g} m"
+        + (f", planned run time {line.planned_run_time:g} s" if line.planned_run_time else ""))
+    described["run"] = (f"{p.get('run.duration', math.nan):g} s in steps of "
+                        f"{p.get('run.period', math.nan):g} s")
+    return described
+
+
+def judge(run: Run) -> RunReport:
+    return RunReport(run, label(run), run_indices(run), run_requirements(run), run_bands(run),
+                     identity(run))
+
+
+@dataclass
+class VerdictRow:
+    """One index across the runs: its requirement ("" none, "per run" if they differ)
+    and per run the value's text and its status."""
+
+    key: str
+    heading: str
+    requirement: str
+    cells: list[tuple[str, str]] = field(default_factory=list)
+
+
+def verdict_rows(reports: list[RunReport]) -> list[VerdictRow]:
+    """One row per index: the required ones first (in the order the scenarios name
+    them), then every other index some run has, in INDEX_COLUMNS order."""
+    required = list(dict.fromkeys(k for r in reports for k in r.requirements))
+    listed = [key for key, _, _ in INDEX_COLUMNS if any(key in r.indices for r in reports)]
     rows = []
-    for run, values in zip(runs, indices):
-        cells = [label(run)]
-        for key, _, fmt in present:
-            cells.append(fmt.format(values[key]) if key in values else "")
-        cells.append(", ".join(values["skipped"]) or "-")
-        rows.append(cells)
-    return header, rows
+    for key in required + [k for k in listed if k not in required]:
+        limits = {f"<= {r.requirements[key].limit:g}" for r in reports if key in r.requirements}
+        row = VerdictRow(key, heading(key), limits.pop() if len(limits) == 1 else
+                         "per run" if limits else "")
+        for report in reports:
+            text = format_index(key, report.indices[key]) if key in report.indices else "-"
+            if row.requirement == "per run" and key in report.requirements:
+                text += f" (<= {report.requirements[key].limit:g})"
+            row.cells.append((text, report.status(key)))
+        rows.append(row)
+    return rows
+
+
+MARK = {PASS: "pass", FAIL: "**FAIL**", UNMEASURED: "not measured", "": ""}
+
+
+def _markdown_rows(header: list[str], rows: list[list[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + \
+        ["| " + " | ".join(row) + " |" for row in rows]
+
+
+def markdown_report(reports: list[RunReport], rows: list[VerdictRow],
+                    figures: list[Figure]) -> str:
+    labels = [r.label for r in reports]
+    lines = ["# ATO run report", ""]
+    for report in reports:
+        overall, text = report.summary
+        lines.append(f"- **{overall.upper() or 'NO VERDICT'}** {text}")
+    if reports:
+        keys = list(dict.fromkeys(k for r in reports for k in r.identity))
+        lines += ["", "## The run" + ("s" if len(reports) > 1 else ""), ""]
+        lines += _markdown_rows([""] + labels, [[key] + [r.identity.get(key, "-") for r in reports]
+                                                for key in keys])
+        lines += ["", "## Verdict", "", "Indices from the bags alone (e = target - true speed, "
+                  "trapezoidal integrals from t = 0), against each run's requirements "
+                  "(`report.require` of its scenario).", ""]
+        lines += _markdown_rows(["index", "requirement"] + labels, [
+            [row.heading, row.requirement] + [" ".join(filter(None, (text, MARK[status])))
+                                              for text, status in row.cells] for row in rows])
+    notes = [f"{r.label}: no {', '.join(r.indices['skipped'])} topic; indices needing them "
+             f"skipped" for r in reports if r.indices["skipped"]]
+    notes += [f"{r.label}: {note}" for r in reports for note in r.run.notes]
+    lines += [""] + [f"- {note}" for note in notes]
+    for figure in figures:
+        lines += ["", f"## {figure.title}", "", f"![{figure.title}]({figure.path.name})"]
+    return "\n".join(lines) + "\n"
 
 
 def write_report(runs: list[Run], tunings: list[Path], out: Path) -> tuple[Path, Path]:
+    """report.md with the PNG figures, report.html (interactive) and indices.json in
+    `out`. Every run is judged before anything is written: a bad report.* parameter
+    in a bag is a ScenarioError (one line)."""
+    reports = [judge(run) for run in runs]
+    rows = verdict_rows(reports)
     out.mkdir(parents=True, exist_ok=True)
-    indices = [run_indices(run) for run in runs]
     figures = plot_runs(runs, out) if runs else []
     if tunings:
         figures.append(plot_convergence(tunings, out / "convergence.png"))
-    header, rows = index_table(runs, indices)
-    notes = [f"{label(run)}: {note}" for run in runs for note in run.notes]
-    markdown = ["# ATO run report", "", "Indices from the bags alone (e = target - true speed, "
-                "trapezoidal integrals from t = 0).", ""]
-    if rows:
-        markdown += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        markdown += ["| " + " | ".join(row) + " |" for row in rows]
-    markdown += [""] + [f"- {note}" for note in notes]
-    for figure in figures:
-        markdown += ["", f"## {figure.title}", "", f"![{figure.title}]({figure.path.name})"]
     (out / "indices.json").write_text(json.dumps(
-        {label(run): values for run, values in zip(runs, indices)}, indent=2))
+        {report.label: report.indices for report in reports}, indent=2))
     md_path = out / "report.md"
-    md_path.write_text("\n".join(markdown) + "\n")
-
-    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>ATO run report</title>",
-             "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}"
-             "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
-             "text-align:right}img{max-width:100%}</style></head><body><h1>ATO run report</h1>"]
-    if rows:
-        parts.append("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header)
-                     + "</tr>")
-        parts += ["<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>"
-                  for row in rows]
-        parts.append("</table>")
-    parts += [f"<p>{html.escape(note)}</p>" for note in notes]
-    for figure in figures:
-        data = base64.b64encode(figure.path.read_bytes()).decode()
-        parts.append(f"<h2>{html.escape(figure.title)}</h2>"
-                     f"<img alt='{html.escape(figure.title)}' src='data:image/png;base64,{data}'>")
-    parts.append("</body></html>")
+    md_path.write_text(markdown_report(reports, rows, figures))
     html_path = out / "report.html"
-    html_path.write_text("\n".join(parts))
+    from ato_nodes import report_html  # here, not above: it imports this module
+    report_html.write_html(reports, rows, tunings, html_path)
     return md_path, html_path

@@ -1,9 +1,10 @@
-"""Report on recorded runs: index table and the seed papers' plots (Markdown + HTML).
+"""Report on recorded runs: a verdict on each index, what the run was, and figures.
 
     python scripts/analyze.py BAG [BAG ...] [TUNING_DIR ...] --out DIR [--map role=/topic]
 
 BAG is a rosbag2 directory or a lone .mcap file, the stack's own or anyone's with
-standard message types; several bags overlay on each figure. A TUNING_DIR (the
+standard message types; several bags overlay on each figure (with their differences
+in report.html). Each run is judged by its scenario's report.require. A TUNING_DIR (the
 --out of tune.py) adds its convergence history. Roles for --map: target_speed,
 state, measured_speed, command, controller_state, position.
 """
@@ -16,6 +17,7 @@ from pathlib import Path
 from ato_nodes import cli
 from ato_nodes.analysis import run_indices, write_report
 from ato_nodes.bagio import BagError, parse_mapping, read_run
+from ato_nodes.core.errors import ScenarioError
 
 
 def main() -> None:
@@ -32,7 +34,10 @@ def main() -> None:
         runs = [read_run(p, mapping) for p in args.inputs if p not in tunings]
     except BagError as exc:
         cli.fail(str(exc))
-    md_path, html_path = write_report(runs, tunings, args.out)
+    try:
+        md_path, html_path = write_report(runs, tunings, args.out)
+    except ScenarioError as exc:  # a bag's report.* parameters
+        cli.fail(str(exc))
     for run in runs:
         skipped = run_indices(run)["skipped"]
         if skipped:

@@ -16,11 +16,19 @@ from .components import CONTROLLERS, PROFILES
 from .errors import ScenarioError
 from .indices import RunningIndex
 from .limiter import LIMITER_PARAMETERS
-from .spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, param
+from .spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, TextForm, param
 
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 LOOP_NODES = ("profile", "plant", "controller")
 KMH = 1.0 / 3.6
+_UNSIGNED = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_REQUIREMENT = rf"\s*\w+\s*<=\s*[-+]?{_UNSIGNED}\s*"
+_BAND = rf"\s*{_UNSIGNED}\s*"
+REQUIREMENTS_FORM = TextForm(rf"\s*|{_REQUIREMENT}(?:,{_REQUIREMENT})*",
+                             "INDEX<=VALUE items separated by commas, e.g. "
+                             "'max_abs_error_kmh<=1, overspeed_time<=0'")
+BANDS_FORM = TextForm(rf"\s*|{_BAND}(?:,{_BAND})*",
+                      "numbers of km/h separated by commas, e.g. '0.05, 0.4'")
 
 BASE: tuple[ParamSpec, ...] = (
     param("run.period", 0.05, "control period and lockstep step, s", NODES, 1e-4, 10.0),
@@ -112,6 +120,13 @@ BASE: tuple[ParamSpec, ...] = (
     param("supervisor.prune_above", 0.0, "end the run as pruned once the running fitness "
           "passes this (a tuner's bound; 0 = never)", "supervisor", 0.0, 1e300),
     param("recorder.output", "", "bag directory to create (must not exist)", "recorder"),
+    # What the run is judged against (scripts/analyze.py's verdict): declared by the loop's
+    # nodes, whose values the bag keeps, so that a bag carries its own targets.
+    param("report.require", "", "the run's requirements, each index of the scorer at most "
+          "a value in the index's unit (tune.py --require's form): the report's verdict "
+          "passes or fails each ('' = none)", LOOP_NODES, form=REQUIREMENTS_FORM),
+    param("report.error_bands", "", "reference bands +-X km/h the report draws on the "
+          "tracking error ('' = none)", LOOP_NODES, form=BANDS_FORM),
 )
 
 SPECS: tuple[ParamSpec, ...] = (*BASE, *PROFILES.parameters(), *CONTROLLERS.parameters())

@@ -7,10 +7,20 @@ core (gains, train parameters, profiles) are built from the schema's values.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, fields
 from typing import Any
 
 from .errors import ScenarioError
+
+
+@dataclass(frozen=True)
+class TextForm:
+    """The form a string parameter's value must have: a regular expression the whole
+    value matches, and the same said for a person (the error names it)."""
+
+    pattern: str
+    wording: str
 
 
 @dataclass(frozen=True)
@@ -22,6 +32,7 @@ class ParamSpec:
     low: float | None = None
     high: float | None = None
     choices: tuple[str, ...] | None = None
+    form: TextForm | None = None  # what a string must look like
 
     @property
     def value_type(self) -> type:
@@ -48,6 +59,9 @@ class ParamSpec:
         if self.choices is not None and value not in self.choices:
             raise ScenarioError(f"{prefix}{self.name} must be one of {', '.join(self.choices)}; "
                                 f"got {value!r}")
+        if self.form is not None and not re.fullmatch(self.form.pattern, value):
+            raise ScenarioError(f"{prefix}{self.name} must be {self.form.wording}, "
+                                f"not {value!r}")
         if self.low is not None and not (self.low <= value <= self.high):
             raise ScenarioError(f"{prefix}{self.name} = {value} is out of range "
                                 f"[{self.low:g}, {self.high:g}]")
@@ -56,10 +70,10 @@ class ParamSpec:
 
 def param(name: str, default: Any, description: str, nodes: str | tuple[str, ...],
           low: float | None = None, high: float | None = None,
-          choices: tuple[str, ...] | None = None) -> ParamSpec:
+          choices: tuple[str, ...] | None = None, form: TextForm | None = None) -> ParamSpec:
     if isinstance(nodes, str):
         nodes = (nodes,)
-    return ParamSpec(name, default, description, tuple(nodes), low, high, choices)
+    return ParamSpec(name, default, description, tuple(nodes), low, high, choices, form)
 
 
 def settings(cls, group: str, values) -> Any:
