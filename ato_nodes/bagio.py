@@ -14,7 +14,9 @@ the latest message at or before each stamp.
 
 from __future__ import annotations
 
+import base64
 import json
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -25,7 +27,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scoring import run_line
+from ato_nodes.core.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
 from ato_nodes.core.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
@@ -63,6 +65,9 @@ class Run:
     roles: dict[str, str]                       # role -> topic found
     missing: list[str] = field(default_factory=list)  # roles not in the bag
     notes: list[str] = field(default_factory=list)
+    # live controller parameters changed during the run: {step: {name: value}}, as
+    # core.loop.simulate(changes=...) takes them
+    parameter_changes: dict[int, dict[str, float]] = field(default_factory=dict)
 
 
 def parse_mapping(items: list[str]) -> dict[str, str]:
@@ -160,16 +165,23 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
         role_of = {topic: role for role, topic in found.items()}
         stamps: dict[str, list[int]] = {role: [] for role in found}
         raws: dict[str, list[bytes]] = {role: [] for role in found}
+        changes_topic = names["parameter_changes"]
+        changes: dict[int, dict[str, float]] = {}
         for topic, stamp, raw in messages:
             role = role_of.get(topic)
             if role is not None:
                 stamps[role].append(stamp)
                 raws[role].append(raw)
+            elif topic == changes_topic:
+                change = json.loads(TYPESTORE.deserialize_cdr(raw, "std_msgs/msg/String").data)
+                changes.setdefault(change["step"], {}).update(change["parameters"])
     except BagError:
         raise
     except Exception as exc:  # rosbags and mcap raise many unrelated types for bad files
         raise _unreadable(path, exc) from None
-    return _assemble(path, found, stamps, raws, types)
+    run = _assemble(path, found, stamps, raws, types)
+    run.parameter_changes = changes
+    return run
 
 
 def _assemble(path, found, stamps, raws, types) -> Run:
@@ -323,3 +335,29 @@ def read_frame(bag: str | Path, mapping: dict[str, str] | None = None):
     except ImportError:
         raise BagError("read_frame needs pandas: pip install pandas") from None
     return pandas.DataFrame(run_columns(read_run(bag, mapping))).set_index("t")
+
+
+def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The run simulated in-process from its bag alone: its parameters, the files it
+    keeps (line, tables, model) and its live parameter changes. Returns the series and
+    the names of the recorded series that differ from it over the steps the bag holds
+    (empty: bit for bit; an interrupted run's bag is compared over what it holds)."""
+    from ato_nodes.core.loop import simulate
+    if not run.parameters:
+        raise BagError(f"{run.path}: the bag keeps no run parameters to simulate from")
+    values = dict(run.parameters)
+    with tempfile.TemporaryDirectory() as folder:
+        kept = {"line.file": base64.b64decode(values[LINE_BASE64])
+                if values.get(LINE_BASE64) else None}
+        kept.update({name: kept_file(values, name) for name in KEPT_FILES})
+        for name, content in kept.items():
+            if content is not None:
+                copy = Path(folder) / Path(values[name]).name
+                copy.write_bytes(content)
+                values[name] = str(copy)
+        series = simulate(values, changes=run.parameter_changes)
+    steps = len(run.series["t"])
+    differ = [name for name, recorded in run.series.items()
+              if name != "t" and name in series and not (
+                  len(series[name]) >= steps and np.array_equal(series[name][:steps], recorded))]
+    return series, differ

@@ -32,7 +32,7 @@ import yaml
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.scenario import ros_parameter_file
 from ato_nodes.core.schema import NODES
-from ato_nodes.nodefork import NODE_NAME_PREFIX, ForkedNode, fork_server
+from ato_nodes.nodefork import NODE_NAME_PREFIX, ForkedNode, NodeStartError, fork_server
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
@@ -249,13 +249,14 @@ class Stack:
         the plant waits for it, run.record_lag)."""
         from ato_nodes.bagio import BagError, message_counts
         from ato_nodes.core.topics import step_topics
-        try:
-            counts = message_counts(self.bag)
+        publishers = {topic.name: topic.publishers[0] for topic in step_topics()}
+        try:  # per-step topics only (live parameter changes are few, or none)
+            counts = {name: count for name, count in message_counts(self.bag).items()
+                      if name in publishers}
         except BagError:
             return ""
         if not counts:
             return ""
-        publishers = {topic.name: topic.publishers[0] for topic in step_topics()}
         fewest = min(counts.values())
         if max(counts.values()) - fewest <= 2:
             return f"; every topic stops near step {fewest}: the recorder stopped taking steps"
@@ -301,6 +302,8 @@ class Stack:
                 outcome = self._watch()
             except KeyboardInterrupt:
                 outcome = RunOutcome("interrupted", "interrupted by the user")
+            except NodeStartError as exc:
+                outcome = RunOutcome("failed", str(exc))
             finally:
                 blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if main else None
                 try:

@@ -140,7 +140,10 @@ def warm_up() -> None:
     from rclpy.type_support import check_for_type_support
     from ato_nodes.core.topics import topic_map
     for role in NODES:
-        importlib.import_module(f"ato_nodes.nodes.{role}")
+        try:
+            importlib.import_module(f"ato_nodes.nodes.{role}")
+        except Exception:  # the forked node imports it again and fails as a node would
+            pass
     for name in {topic.type for topic in topic_map().values()} | set(NODE_INTERFACES):
         package, kind, type_name = name.split("/")
         check_for_type_support(getattr(importlib.import_module(f"{package}.{kind}"),
@@ -153,6 +156,10 @@ def main() -> None:
 
 
 # Launcher side -------------------------------------------------------------
+class NodeStartError(RuntimeError):
+    """The fork server could not start a node (it died: see its stderr)."""
+
+
 class ForkedNode:
     """A node process forked by the server, with the part of subprocess.Popen's
     interface the launcher uses (pid, poll, wait, send_signal)."""
@@ -207,7 +214,10 @@ class ForkServer:
 
     def _read(self) -> None:
         while True:
-            message = self.connection.recv(MESSAGE_SIZE)
+            try:
+                message = self.connection.recv(MESSAGE_SIZE)
+            except OSError:  # reset by a server that died
+                message = b""
             with self.replied:
                 if not message:  # the server died: its nodes went with it
                     self.alive = False
@@ -231,11 +241,15 @@ class ForkServer:
         request = json.dumps({"role": role, "argv": argv, "env": env, "cwd": str(cwd),
                               "death_signal": int(death_signal)}).encode()
         with self.requests:
-            socket.send_fds(self.connection, [request], [*output, lock_fd])
+            try:
+                socket.send_fds(self.connection, [request], [*output, lock_fd])
+            except OSError:  # the server has gone; the reply wait below says so
+                pass
             with self.replied:
                 self.replied.wait_for(lambda: self.replies or not self.alive)
                 if not self.alive:
-                    raise RuntimeError("the node fork server has died")
+                    raise NodeStartError("the node fork server (python -m ato_nodes.nodefork) "
+                                         f"ended with status {self.process.wait()}")
                 node = ForkedNode(self.replies.pop(0), notify)
                 self.nodes[node.pid] = node
                 if node.pid in self.early_exits:

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Speed of tuning on this machine (prints figures; asserts nothing).
 
-    python scripts/benchmark_tuning.py [--candidates 4] [--baspso]
+    python scripts/benchmark_tuning.py [--candidates 4] [--baspso [--baspso-reference DIR]]
 
 Measures: the per-candidate overhead of relaunching the node graph (a one-step
 run, start to exit), stack-mode candidates per minute on the full seed-000 run
@@ -9,12 +9,21 @@ with 1 and 2 workers, the time of one in-process evaluation of the full run,
 in-process evaluations per second with 1 and 2 workers, the Dask overhead per task
 (a LocalCluster of 2 workers against the local pool, on one-step candidates; with
 dask installed), and with --baspso the wall time and pruned share of a full
-in-process BAS-PSO tuning of the seed-000 ADRC, 30 particles for 30 iterations.
+in-process BAS-PSO tuning of the seed-000 ADRC, 30 particles for 30 iterations;
+--baspso-reference DIR checks its best, best parameters and best-so-far history
+against the same tuning run without pruning, made beforehand by
+
+    python scripts/tune.py --algorithm bas-pso --scenario seed000 --in-process \
+        --params SEED000_SPACE --evaluations 2730 --population 30 --seed 1 --workers 2 \
+        --no-prune --out DIR
+
+(SEED000_SPACE as below).
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import statistics
 import tempfile
@@ -84,10 +93,20 @@ def dask_overhead(values, count: int = 60) -> float | None:
     return (on_dask - local) / count * 2  # two tasks run at a time
 
 
+def best_so_far(tuning: Path) -> list[list[str]]:
+    """history.csv without its mean_fitness column (a pruned candidate's is a bound)."""
+    with (tuning / "history.csv").open() as handle:
+        rows = list(csv.reader(handle))
+    drop = rows[0].index("mean_fitness")
+    return [row[:drop] + row[drop + 1:] for row in rows]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--candidates", type=int, default=4, help="stack candidates per setting")
     parser.add_argument("--baspso", action="store_true", help="also time a 30 x 30 BAS-PSO run")
+    parser.add_argument("--baspso-reference", type=Path, metavar="DIR",
+                        help="the same BAS-PSO tuning without pruning (see above) to compare with")
     args = parser.parse_args()
     values = load_scenario("seed000")
     with tempfile.TemporaryDirectory() as tmp:
@@ -123,9 +142,19 @@ def main() -> None:
             result = Tuner(values, settings, Path(tmp), progress=False).run()
             wall = time.monotonic() - started
             summary = json.loads((Path(tmp) / "summary.json").read_text())
+            history = best_so_far(Path(tmp))
         print(f"BAS-PSO 30 particles x 30 iterations ({result.evaluations} evaluations, "
               f"antennae included), in-process, 2 workers: {wall:.0f} s (target <= 180 s), "
-              f"pruned {summary['pruned_evaluations'] / result.evaluations:.0%}")
+              f"pruned {summary['pruned_evaluations'] / result.evaluations:.0%}, "
+              f"best ITAE {result.best_f!r}")
+        if args.baspso_reference:
+            reference = json.loads((args.baspso_reference / "summary.json").read_text())
+            same = (reference["best_fitness"] == summary["best_fitness"]
+                    and reference["best_params"] == summary["best_params"]
+                    and best_so_far(args.baspso_reference) == history)
+            print(f"same best, best parameters and best-so-far history as the tuning without "
+                  f"pruning in {args.baspso_reference} ({reference['wall_time']:.0f} s): "
+                  + ("yes" if same else "NO"))
 
 
 if __name__ == "__main__":

@@ -1,7 +1,10 @@
 """The loop's pairing and look-ahead rules (what the nodes and the simulation share)."""
 
+import numpy as np
 import pytest
 
+from ato_nodes.core.components import CONTROLLERS
+from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import ControllerStage, ProfileStage, simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 
@@ -52,3 +55,42 @@ def test_simulation_records_the_target_of_each_step_whatever_the_preview():
     preview = simulate(values("run.duration=5", "controller.preview=1"))
     assert list(base["target"]) == list(preview["target"])
     assert list(base["command"]) != list(preview["command"])
+
+
+LIVE_GAINS = [("seed000", "adrc.mu1", 7000.0), ("seed003-maglev", "nladrc.kp", 3.0),
+              ("seed004-metro", "dadrc.b1", 50.0), ("seed004-metro-ato", "ladrc.omega_c", 3.0),
+              ("hsr-neutral-ato", "ladrc.omega_o", 7.0), ("seed000-pid", "pid.kp", 80.0)]
+
+
+def run_of(scenario, seconds=60):
+    return apply_overrides(load_scenario(scenario), [f"run.duration={seconds}"])
+
+
+@pytest.mark.parametrize("scenario,name,value", LIVE_GAINS)
+def test_a_live_gain_set_to_its_own_value_changes_nothing(scenario, name, value):
+    """The rebuild carries every bit of state over (observer, filters, model, limiter)."""
+    run = run_of(scenario)
+    plain = simulate(run)
+    retuned = simulate(run, changes={300: {name: run[name]}, 700: {name: run[name]}})
+    assert all(np.array_equal(plain[key], retuned[key]) for key in plain)
+
+
+@pytest.mark.parametrize("scenario,name,value", LIVE_GAINS)
+def test_a_live_gain_acts_from_its_step_on(scenario, name, value):
+    run = run_of(scenario)
+    plain, changed = simulate(run), simulate(run, changes={400: {name: value}})
+    assert np.array_equal(plain["command"][:400], changed["command"][:400])
+    assert not np.array_equal(plain["command"][400:], changed["command"][400:])
+    from_start = simulate(apply_overrides(run, [f"{name}={value}"]))
+    assert all(np.array_equal(from_start[key], simulate(run, changes={0: {name: value}})[key])
+               for key in from_start)
+
+
+def test_only_a_kinds_own_float_parameters_are_live():
+    han = CONTROLLERS["han_adrc"].live_parameters
+    assert "adrc.mu1" in han and "adrc.implicit_nlsef" not in han
+    assert "ladrc.feedforward" not in CONTROLLERS["linear_adrc"].live_parameters
+    assert CONTROLLERS["gpc"].live_parameters == ()  # no state declared: nothing live
+    stage = ControllerStage(values())
+    with pytest.raises(ScenarioError, match="controller.preview cannot change during a run"):
+        stage.retune({"controller.preview": 3})

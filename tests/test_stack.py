@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from ato_nodes.bagio import read_series
+from ato_nodes.bagio import read_run, read_series, resimulate
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
@@ -256,23 +256,42 @@ def test_line_scenarios_run_through_the_stack_exactly_as_in_process(tmp_path, sc
     assert from_bag["traction_energy_kwh"] > 0 and "overspeed_time" in from_bag
 
 
-def test_ros2_param_set_on_a_running_node_is_refused_not_ignored(tmp_path):
-    process = start_stack("--duration", "60", "--real-time", "--out", str(tmp_path / "bag"))
+def test_ros2_param_set_refuses_fixed_parameters_and_applies_live_gains_reproducibly(tmp_path):
+    """A gain set on the live controller takes effect at a step boundary, is recorded with
+    its step, and the bag alone re-simulates the run bit for bit; parameters fixed at
+    start-up are refused with rclpy's standard read-only answer."""
+    bag = tmp_path / "bag"
+    process = start_stack("--duration", "60", "--real-time", "--out", str(bag))
     try:
         banner = wait_for_stepping(process)[0]
         domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
         env = {**os.environ, "ROS_DOMAIN_ID": domain,
                "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-        answers = []
+        answers = {}
         for node, name, value in (("/controller", "adrc.mu1", "7000.0"),
-                                  ("/plant", "run.period", "0.1")):
+                                  ("/plant", "run.period", "0.1"),
+                                  ("/controller", "controller.preview", "3")):
             probe = subprocess.run([sys.executable, str(ROOT / "tests" / "param_probe.py"),
                                     node, name, value], capture_output=True, text=True,
                                    timeout=60, env=env)
             assert probe.returncode == 0, probe.stderr
-            answers.append(json.loads(probe.stdout))
+            answers[name] = json.loads(probe.stdout)
     finally:
         process.send_signal(signal.SIGINT)
         process.communicate(timeout=60)
-    for answer in answers:
-        assert answer["successful"] is False and "read-only" in answer["reason"], answer
+    assert answers["adrc.mu1"]["successful"] is True, answers
+    for name in ("run.period", "controller.preview"):
+        assert answers[name]["successful"] is False and "read-only" in answers[name]["reason"]
+    run = read_run(bag)
+    ((step, changes),) = run.parameter_changes.items()
+    assert changes == {"adrc.mu1": 7000.0} and 0 < step < len(run.series["t"])
+    resimulated, differ = resimulate(run)
+    assert differ == [] and len(resimulated["command"]) > step
+    unchanged = simulate(apply_overrides(load_scenario("seed000"), ["run.duration=60"]))
+    recorded = run.series["command"]
+    assert np.array_equal(recorded[:step], unchanged["command"][:step])
+    assert not np.array_equal(recorded[step:], unchanged["command"][step:len(recorded)])
+    score = subprocess.run([*SCORE_BAG, str(bag), "--resimulate"], capture_output=True,
+                           text=True, timeout=120)
+    assert score.returncode == 0 and "(1 live parameter change(s)): every recorded series " \
+        "identical" in score.stdout, score.stdout + score.stderr

@@ -1,6 +1,6 @@
 """Score a recorded run from its bag alone: ITAE, IAE, ISE, max |e|, seed 004's J.
 
-    python scripts/score_bag.py BAG [--json] [--map role=/topic]
+    python scripts/score_bag.py BAG [--json] [--map role=/topic] [--resimulate]
 
 BAG is a rosbag2 directory or a lone .mcap file.
 """
@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from ato_nodes import cli
-from ato_nodes.bagio import BagError, parse_mapping, read_run
+from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring import format_indices, score_series
 
 
@@ -21,10 +22,24 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print the indices as JSON")
     parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC",
                         help="read a role from another topic (see analyze.py --help)")
+    parser.add_argument("--resimulate", action="store_true",
+                        help="also run the same run in-process from the bag alone (its "
+                        "parameters, kept files and live gain changes) and check that every "
+                        "recorded series is reproduced bit for bit (exit 1 if not)")
     args = parser.parse_args()
     try:
         run = read_run(args.bag, parse_mapping(args.map))
+        differ = resimulate(run)[1] if args.resimulate else []
     except BagError as exc:
         cli.fail(str(exc))
     indices = score_series(run.series, run.parameters)
+    if args.resimulate:
+        indices["resimulated_identical"] = not differ
     print(json.dumps(indices, indent=2) if args.json else format_indices(indices))
+    if args.resimulate and not args.json:
+        changes = sum(len(c) for c in run.parameter_changes.values())
+        print(f"re-simulated in-process from the bag ({changes} live parameter change(s)): "
+              + ("every recorded series identical, bit for bit" if not differ else
+                 "differs in " + ", ".join(differ)))
+    if differ:
+        sys.exit(1)

@@ -33,6 +33,7 @@ import numpy as np
 
 from .components import CONTROLLERS
 from .context import RunContext
+from .errors import ScenarioError
 from .limiter import CommandLimiter
 from .line import Line, load_line
 from .plant import PointMassTrain, TrainParameters, TrainState
@@ -156,26 +157,59 @@ class PlantStage:
 
 class ControllerStage:
     """The controller (built at once from the registry) and its pairing rule: step k
-    needs the measured speed y_k and the horizon r_k .. r_k+N; it tracks r_k+N."""
+    needs the measured speed y_k and the horizon r_k .. r_k+N; it tracks r_k+N.
+
+    Live parameters (the controller kind's `live_parameters`): changes put in
+    `pending` take effect at the next step boundary, before the next step is
+    computed; `applied` lists them as (step, changes), step being the first one
+    computed with them. The node fills `pending` from `ros2 param set`, simulate()
+    from a run's recorded changes, so both give the same numbers."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
+        self.values = values
         self.component = CONTROLLERS.chosen(values)
         self.context = RunContext(values, line)
-        self.controller = self.component.factory(values, self.context,
-                                                 CommandLimiter.from_values(values))
+        self.limiter = CommandLimiter.from_values(values)
+        self.controller = self.component.factory(values, self.context, self.limiter)
         self.preview = values["controller.preview"]
         self.horizons: deque[list[float]] = deque()
         self.speeds: deque[float] = deque()
         self.step_index = 0
+        self.pending: dict[str, float] = {}
+        self.applied: list[tuple[int, dict[str, float]]] = []
 
     @property
     def output_names(self) -> tuple[str, ...]:
         return self.component.output_names
 
+    def retune(self, changes: dict[str, float]) -> None:
+        """Rebuild the controller with `changes` to its live parameters, carrying its
+        state (the kind's `state` paths) and the limiter's over: the run goes on as if
+        the new values had been set between two steps."""
+        live = self.component.live_parameters
+        refused = sorted(set(changes) - set(live))
+        if refused:
+            raise ScenarioError(f"{refused[0]} cannot change during a run (live parameters "
+                                f"of {self.component.kind}: {', '.join(live) or 'none'})")
+        values = type(self.values)(self.values.node, {**self.values, **changes}) \
+            if isinstance(self.values, NodeValues) else {**self.values, **changes}
+        rebuilt = self.component.factory(values, self.context, self.limiter)
+        for path in self.component.state:
+            *owners, name = path.split(".")
+            old, new = self.controller, rebuilt
+            for owner in owners:
+                old, new = getattr(old, owner), getattr(new, owner)
+            setattr(new, name, getattr(old, name))
+        self.controller, self.values = rebuilt, values
+
     def ready(self) -> list:
         """Run every step whose inputs have both arrived; their outputs in order."""
         outputs = []
         while self.speeds and self.horizons:
+            if self.pending:
+                self.retune(self.pending)
+                self.applied.append((self.step_index, self.pending))
+                self.pending = {}
             horizon = self.horizons.popleft()
             speed = self.speeds.popleft()
             reference = horizon[self.preview]
@@ -191,14 +225,17 @@ SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", 
 
 
 def simulate(values: dict[str, Any], deadline: float | None = None,
-             observe: Callable[[float, float, float], bool] | None = None
+             observe: Callable[[float, float, float], bool] | None = None,
+             changes: dict[int, dict[str, float]] | None = None
              ) -> dict[str, np.ndarray]:
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
     ends early, as it does in the stack. Past `deadline` (time.monotonic()) it raises
     TimeoutError (checked every 1024 steps). observe(t, target, true speed), called
-    after every step, ends the run early by returning True (a tuner's pruning)."""
+    after every step, ends the run early by returning True (a tuner's pruning).
+    changes {step: {name: value}}: live controller parameters changed before that
+    step, as a run's bag records them (bagio.Run.parameter_changes)."""
     period = values["run.period"]
     line = load_line(values["line.file"]) if values["line.file"] else None
     profile = ProfileStage(NodeValues("profile", values), line)
@@ -212,6 +249,8 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
         controller.horizons.extend(profile.on_position(out.position))
         horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
+        if changes and k in changes:
+            controller.pending = dict(changes[k])
         (c,) = controller.ready()
         plant.apply(c.u)
         rows.append((k * period, horizon[0], out.position, out.measured_speed, out.speed,

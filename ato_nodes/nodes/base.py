@@ -64,11 +64,11 @@ def message_class(type_name: str) -> type:
     return getattr(importlib.import_module(f"{package}.msg"), name)
 
 
-def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    # read-only: a run's values are fixed when it starts (the stages are built from them),
-    # so `ros2 param set` is refused with the standard message instead of being ignored
+def _descriptor(spec: ParamSpec, live: bool) -> ParameterDescriptor:
+    # read-only unless live: a run's values are fixed when it starts (the stages are built
+    # from them), so `ros2 param set` is refused with the standard message, not ignored
     descriptor = ParameterDescriptor(name=spec.name, description=spec.description,
-                                     read_only=True)
+                                     read_only=not live)
     if spec.low is not None and spec.value_type is float:
         descriptor.floating_point_range = [FloatingPointRange(
             from_value=float(spec.low), to_value=float(spec.high))]
@@ -126,10 +126,15 @@ class AtoNode(Node):
         if given.get("plant.train"):
             train_preset(given["plant.train"])  # an unknown train: one line, exit 2
         values = NodeValues(self.role, complete(given, [*parameter_file_folders(), Path.cwd()]))
-        for spec in for_node(self.role):  # declared with what the node runs with (read-only)
-            self.declare_parameter(spec.name, values[spec.name], _descriptor(spec),
-                                   ignore_override=True)
+        live = self.live_parameters(values)
+        for spec in for_node(self.role):  # declared with what the node runs with
+            self.declare_parameter(spec.name, values[spec.name],
+                                   _descriptor(spec, spec.name in live), ignore_override=True)
         return values
+
+    def live_parameters(self, values: NodeValues) -> tuple[str, ...]:
+        """The parameters `ros2 param set` may change during the run (none: read-only)."""
+        return ()
 
     def announce_parameters(self) -> None:
         """Tell the run which values this node runs with: the supervisor checks that the

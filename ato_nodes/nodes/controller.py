@@ -1,12 +1,23 @@
 """Speed-tracking controller node: pairs step k's measured speed with its target
 horizon (by arrival order; Float64 carries no stamp) and publishes the command and
-the controller's named outputs."""
+the controller's named outputs.
+
+The controller kind's gains are live (core.registry.Component.state): a `ros2 param
+set` is checked against the schema, takes effect at the next step boundary
+(loop.ControllerStage.pending), and is published on the parameter_changes topic with
+the step it took effect at, for the bag."""
 
 from __future__ import annotations
 
-from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension
+import json
 
+from rcl_interfaces.msg import SetParametersResult
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
+
+from ato_nodes.core.components import CONTROLLERS
+from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import ControllerStage
+from ato_nodes.core.schema import SPEC_BY_NAME
 from ato_nodes.nodes.base import AtoNode, run_node
 
 
@@ -23,9 +34,29 @@ class ControllerNode(AtoNode):
         # The outputs' names travel with every message: a bag says what it holds.
         self.outputs_msg.layout.dim = [MultiArrayDimension(
             label=",".join(names), size=len(names), stride=len(names))]
+        self.changes_pub = self.publisher("parameter_changes")
+        self.live = self.stage.component.live_parameters
+        self.add_on_set_parameters_callback(self.on_set_parameters)
         self.subscription("target_preview", self.on_horizon)
         self.subscription("measured_speed", self.on_speed)
         self.ready_when_matched()
+
+    def live_parameters(self, values) -> tuple[str, ...]:
+        return CONTROLLERS.chosen(values).live_parameters
+
+    def on_set_parameters(self, parameters) -> SetParametersResult:
+        """A live gain: checked as the schema checks it at start-up, then pending until
+        the next step boundary (read-only ones never get here: rclpy refuses them)."""
+        changes = {}
+        for parameter in parameters:
+            if parameter.name in self.live:
+                try:
+                    changes[parameter.name] = SPEC_BY_NAME[parameter.name].check(
+                        parameter.value, self.role)
+                except ScenarioError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+        self.stage.pending.update(changes)
+        return SetParametersResult(successful=True)
 
     def on_horizon(self, msg: Float64MultiArray) -> None:
         self.stage.horizons.append(msg.data)
@@ -36,6 +67,12 @@ class ControllerNode(AtoNode):
         self.publish(self.stage.ready())
 
     def publish(self, outputs) -> None:
+        for step, changes in self.stage.applied:
+            self.changes_pub.publish(String(data=json.dumps({"step": step,
+                                                             "parameters": changes})))
+            self.get_logger().info(f"from step {step} (t = {step * self.stage.context.period:g}"
+                                   f" s): " + ", ".join(f"{n} = {v!r}" for n, v in changes.items()))
+        self.stage.applied.clear()
         for out in outputs:
             self.inject_fault(self.stage.step_index)
             self.command_msg.data = out.u

@@ -1,5 +1,6 @@
 """Recorder node: writes every per-step topic of the topic map to a rosbag2
-MCAP bag, as the raw CDR bytes received.
+MCAP bag, as the raw CDR bytes received, and the controller's live parameter
+changes (stamped with the step they took effect at).
 
 Each message is stamped with the simulated time of its step (the k-th message
 of a topic belongs to step k), so a run's bag is identical however the
@@ -26,7 +27,8 @@ import signal
 import sys
 from pathlib import Path
 
-from std_msgs.msg import UInt64
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import String, UInt64
 
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -69,6 +71,9 @@ class RecorderNode(AtoNode):
             connection = self.writer.add_connection(topic.name, topic.type, typestore=typestore)
             self.counts[topic.name] = 0
             self.subscription(topic.key, self._make_callback(topic.name, connection), raw=True)
+        self.typestore = typestore
+        self.changes_connection = None  # added with the first change: most runs have none
+        self.subscription("parameter_changes", self.record_change, raw=True)
         self.flush(0)  # the topics are on disk before any step: a kill leaves a bag to repair
         self.ready_when_matched()
 
@@ -93,6 +98,20 @@ class RecorderNode(AtoNode):
             if self.expected is not None:
                 self._check_complete()
         return record
+
+    def record_change(self, data: bytes) -> None:
+        """A live parameter change, stamped with the time of the step it took effect at."""
+        if self.writer is None:
+            return
+        step = json.loads(deserialize_message(data, String).data)["step"]
+        try:
+            if self.changes_connection is None:
+                topic = self.topics["parameter_changes"]
+                self.changes_connection = self.writer.add_connection(
+                    topic.name, topic.type, typestore=self.typestore)
+            self.writer.write(self.changes_connection, round(step * self.period_ns), data)
+        except OSError as exc:
+            self.write_failed(exc)
 
     def flush(self, steps: int) -> None:
         """Close the MCAP chunk being filled and hand it to the operating system, then
