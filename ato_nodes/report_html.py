@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import csv
 import html
-import inspect
 import itertools
 from pathlib import Path
 
@@ -24,12 +23,11 @@ from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
 from ato_nodes.core.line import Line
-from ato_nodes.core.operation import JERK_WINDOW, operation_indices
+from ato_nodes.core.operation import JERK_WINDOW, SWITCH_THRESHOLD, drive_modes, windowed_jerk
 from ato_nodes.core.scoring import observer_b0, run_line, total_disturbance
 
 # The scorer's traction/brake threshold (N/kN), so the mode timeline shows the switches
 # that switch_count counts.
-SWITCH_THRESHOLD = inspect.signature(operation_indices).parameters["switch_threshold"].default
 MODES = ((1, "traction", "#2ca02c"), (0, "coast", "#bbbbbb"), (-1, "brake", "#d62728"))
 STATUS_COLOURS = {PASS: "#d8f3dc", FAIL: "#ffccd5", UNMEASURED: "#fff3bf", "": "#eeeeee"}
 ERROR_INDICES = ("max_abs_error_kmh", "max_abs_error_outside_steps_kmh", "p95_abs_error_kmh")
@@ -62,11 +60,6 @@ def _f32(values) -> np.ndarray:
     return np.asarray(values, dtype=np.float32)
 
 
-def drive_modes(force: np.ndarray) -> np.ndarray:
-    """+1 traction, -1 braking, 0 coasting, per step, as switch_count sees them."""
-    return np.where(np.abs(force) > SWITCH_THRESHOLD, np.sign(force), 0).astype(int)
-
-
 def mode_segments(t: np.ndarray, modes: np.ndarray, mode: int) -> list:
     """x of the stretches spent in `mode`, each as start, end, None (a gap in the
     line), from a step's time to the next step's."""
@@ -76,14 +69,6 @@ def mode_segments(t: np.ndarray, modes: np.ndarray, mode: int) -> list:
     for first, last in zip(changes[::2], changes[1::2]):
         xs += [float(t[first]), float(ends[last - 1]), None]
     return xs
-
-
-def windowed_jerk(t: np.ndarray, acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(centre times, mean jerk over JERK_WINDOW): the quantity whose largest magnitude
-    is the max_jerk index."""
-    lag = max(1, min(len(t) - 1, round(JERK_WINDOW / float(np.median(np.diff(t))))))
-    jerk = (acceleration[lag:] - acceleration[:-lag]) / (t[lag:] - t[:-lag])
-    return (t[lag:] + t[:-lag]) / 2, jerk
 
 
 def _limits(reports: list[RunReport], keys: tuple[str, ...]) -> dict[float, str]:

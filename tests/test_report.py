@@ -13,7 +13,8 @@ from ato_nodes.bagio import Run
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario, scenario_names
-from ato_nodes.report_html import drive_modes, mode_segments, windowed_jerk
+from ato_nodes.core.operation import drive_modes, windowed_jerk
+from ato_nodes.report_html import mode_segments
 
 
 def make_run(tmp_path: Path, name: str, overrides=()) -> Run:

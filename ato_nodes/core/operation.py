@@ -38,17 +38,26 @@ JERK_WINDOW = 1.0  # s
 KJ_PER_KWH = 3600.0
 
 
+SWITCH_THRESHOLD = 0.5  # N/kN: a force this small or smaller is coasting
+
+
+def drive_modes(force: np.ndarray, threshold: float = SWITCH_THRESHOLD) -> np.ndarray:
+    """+1 traction, -1 braking, 0 coasting, per step."""
+    return np.where(np.abs(force) > threshold, np.sign(force), 0).astype(int)
+
+
 def _switch_count(force: np.ndarray, threshold: float) -> int:
-    modes = np.sign(force[np.abs(force) > threshold])
-    return int(np.count_nonzero(np.diff(modes)))
+    """Changes between traction and braking (coasting in between does not count)."""
+    modes = drive_modes(force, threshold)
+    return int(np.count_nonzero(np.diff(modes[modes != 0])))
 
 
-def _windowed_jerk(t: np.ndarray, acceleration: np.ndarray, window: float) -> float:
-    if len(t) < 2:
-        return 0.0
+def windowed_jerk(t: np.ndarray, acceleration: np.ndarray, window: float = JERK_WINDOW
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(centre times, mean jerk over `window`): max_jerk is its largest magnitude."""
     lag = max(1, min(len(t) - 1, round(window / float(np.median(np.diff(t))))))
-    change = acceleration[lag:] - acceleration[:-lag]
-    return float(np.max(np.abs(change / (t[lag:] - t[:-lag]))))
+    jerk = (acceleration[lag:] - acceleration[:-lag]) / (t[lag:] - t[:-lag])
+    return (t[lag:] + t[:-lag]) / 2, jerk
 
 
 def _arrival_time(t: np.ndarray, speed: np.ndarray) -> float:
@@ -61,7 +70,7 @@ def _arrival_time(t: np.ndarray, speed: np.ndarray) -> float:
 def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float = 9.8,
                       efficiency: float = 0.9, stop_position: float | None = None,
                       planned_run_time: float | None = None,
-                      switch_threshold: float = 0.5) -> dict[str, float]:
+                      switch_threshold: float = SWITCH_THRESHOLD) -> dict[str, float]:
     """Every operation index of a run, as a flat dict (see the module docstring)."""
     t, position, speed, acceleration, force = (
         np.asarray(series[name], dtype=float)
@@ -78,7 +87,8 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
         "traction_energy_kwh": traction,
         "regenerated_energy_kwh": regenerated,
         "net_energy_kwh": traction - regenerated,
-        "max_jerk": _windowed_jerk(t, acceleration, JERK_WINDOW),
+        "max_jerk": float(np.max(np.abs(windowed_jerk(t, acceleration)[1]))) if len(t) > 1
+        else 0.0,
         "max_jerk_sampled": float(np.max(np.abs(da / dt))) if len(t) > 1 else 0.0,
         "comfort_index": float(np.sum(np.abs(da))) / span if span > 0 else 0.0,
         "switch_count": _switch_count(force, switch_threshold),
