@@ -120,8 +120,8 @@ def main() -> None:
     parser.add_argument("--readme", type=Path, default=ROOT / "README.md")
     parser.add_argument("--quick", action="store_true", help="skip the slow blocks")
     parser.add_argument("--only", metavar="TEXT",
-                        help="only the commands containing TEXT (and every quick one "
-                        "before them, which they may need)")
+                        help="only the blocks with a command containing TEXT (and every quick "
+                        "block before them, whose output they may need)")
     parser.add_argument("--list", action="store_true", help="list the commands, run nothing")
     args = parser.parse_args()
     if not args.readme.is_file():
@@ -130,12 +130,11 @@ def main() -> None:
     if args.quick:
         commands = [command for command in commands if not command.slow]
     if args.only is not None:
-        last = max((k for k, command in enumerate(commands) if args.only in shown(command)),
-                   default=None)
-        if last is None:
+        chosen = {command.block for command in commands if args.only in shown(command)}
+        if not chosen:
             _cli.fail(f"no runnable command contains {args.only!r}")
-        commands = [command for k, command in enumerate(commands[:last + 1])
-                    if args.only in shown(command) or not command.slow]
+        commands = [command for command in commands if command.block in chosen
+                    or (not command.slow and command.block < max(chosen))]
     if args.list:
         for command in commands:
             print(f"{args.readme.name}:{command.line} block {command.block}"
