@@ -6,7 +6,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -48,6 +47,13 @@ def by_topic(messages):
     return topics
 
 
+def stopped(process):
+    """A process this test started does not outlive it, whatever the test's outcome."""
+    if process.poll() is None:
+        process.kill()
+        process.communicate()
+
+
 def domain_env(domain):
     return {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 
@@ -59,10 +65,13 @@ def test_replay_delivers_every_message_in_order_with_identical_values(recorded):
                               *(f"{t}:{ty}:{len(recorded_topics[t])}"
                                 for t, ty in STEP_TOPICS.items())],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
-                    "--domain-id", "150")
-    assert replay.returncode == 0, replay.stderr
-    out, err = probe.communicate(timeout=90)
+    try:
+        replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
+                        "--domain-id", "150")
+        assert replay.returncode == 0, replay.stderr
+        out, err = probe.communicate(timeout=90)
+    finally:
+        stopped(probe)
     assert probe.returncode == 0, err
     received = json.loads(out)
     assert set(received) == set(recorded_topics)
@@ -77,12 +86,16 @@ def test_a_replay_re_recorded_gives_the_same_bag_data(recorded, tmp_path):
         [PYTHON, "-m", "ato_nodes.nodes.recorder", "--ros-args", "-p",
          f"recorder.output:={copy}", "-p", "run.period:=0.05", "-p", "use_sim_time:=true"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
-    replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
-                    "--domain-id", "151")
-    assert replay.returncode == 0, replay.stderr
-    time.sleep(1.0)  # let the recorder take the last messages
-    recorder.send_signal(signal.SIGINT)
-    recorder.communicate(timeout=30)
+    try:
+        # the replay exits once the recorder has acknowledged every message; on SIGINT
+        # the recorder writes what it holds, then closes the bag
+        replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
+                        "--domain-id", "151")
+        assert replay.returncode == 0, replay.stderr
+        recorder.send_signal(signal.SIGINT)
+        recorder.communicate(timeout=30)
+    finally:
+        stopped(recorder)
     assert recorder.returncode == 0
     assert sorted(bag_messages(copy)) == sorted(bag_messages(recorded))
 
