@@ -231,16 +231,11 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    running, observe = None, None
     limit = prune_limit(objective, bound)
-    if limit is not None:
-        running = RunningIndex(FITNESS[objective.fitness])
-
-        def observe(t: float, target: float, speed: float) -> bool:
-            return running.add(t, target - speed) > limit
+    running = RunningIndex(FITNESS[objective.fitness]) if limit is not None else None
     try:
         series = simulate(run_values, None if timeout is None else time.monotonic() + timeout,
-                          observe)
+                          (running, limit) if running is not None else None)
     except TimeoutError as exc:
         return Evaluation(index, overrides, PENALTY, "timeout", time.perf_counter() - started,
                           message=f"{exc} ({timeout:g} s)")

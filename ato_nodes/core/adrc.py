@@ -36,18 +36,21 @@ Discretisation (the papers give continuous-time equations):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
-from .limiter import CommandLimiter
+from .kernels import jitable
+from .limiter import CommandLimiter, limit_command
 from .registry import Component, Output
 from .spec import param, settings
 from .train_model import NominalTrain
 
 
+@jitable
 def sign(x: float) -> float:
     return (x > 0.0) - (x < 0.0)
 
 
+@jitable
 def fal(e: float, alpha: float, delta: float) -> float:
     """Han's fal(): linear inside |e| <= delta, |e|^alpha outside."""
     if abs(e) <= delta:
@@ -55,6 +58,7 @@ def fal(e: float, alpha: float, delta: float) -> float:
     return sign(e) * abs(e) ** alpha
 
 
+@jitable
 def fal_gain(e: float, alpha: float, delta: float) -> float:
     """fal(e)/e, the local gain of fal (its limit delta^(alpha-1) at e = 0)."""
     a = abs(e)
@@ -63,6 +67,7 @@ def fal_gain(e: float, alpha: float, delta: float) -> float:
     return a ** (alpha - 1.0)
 
 
+@jitable
 def fhan(x1: float, x2: float, r: float, h0: float) -> float:
     """Han's time-optimal synthesis function (seed 000 eq. 7); sign() is written
     out as comparisons because this runs every step of every candidate."""
@@ -78,6 +83,14 @@ def fhan(x1: float, x2: float, r: float, h0: float) -> float:
     return -r * (a / d - sign_a) * sa - r * sign_a
 
 
+@jitable
+def td_update(v1: float, v2: float, target: float, r0: float, h0: float, h: float
+              ) -> tuple[float, float]:
+    """One step of Han's discrete TD."""
+    fh = fhan(v1 - target, v2, r0, h0)
+    return v1 + h * v2, v2 + h * fh
+
+
 class TrackingDifferentiator:
     """Han's discrete TD: v1 follows the input, v2 its derivative."""
 
@@ -86,9 +99,7 @@ class TrackingDifferentiator:
         self.v1, self.v2 = v1, v2
 
     def update(self, target: float) -> tuple[float, float]:
-        fh = fhan(self.v1 - target, self.v2, self.r0, self.h0)
-        self.v1 += self.h * self.v2
-        self.v2 += self.h * fh
+        self.v1, self.v2 = td_update(self.v1, self.v2, target, self.r0, self.h0, self.h)
         return self.v1, self.v2
 
 
@@ -106,18 +117,24 @@ class NonlinearESO:
         self.z1, self.z2, self.z3 = z1, 0.0, 0.0
 
     def update(self, y: float, u: float) -> tuple[float, float, float]:
-        h = self.h
-        z1, z2, z3 = self.z1, self.z2, self.z3
-        predicted = z1 + h * z2 - y
-        k1 = h * self.beta1
-        k2 = h * self.beta2 * fal_gain(predicted, 0.5, self.delta)
-        k3 = h * self.beta3 * fal_gain(predicted, 0.25, self.delta)
-        # Closed-form solution of (I - hA) z+ = z + h c for the error E = z1+ - y.
-        e = (z1 - y + h * z2 + h * h * (z3 + self.b0 * u)) / (1.0 + k1 + h * k2 + h * h * k3)
-        self.z3 = z3 - k3 * e
-        self.z2 = z2 + h * self.z3 - k2 * e + h * self.b0 * u
-        self.z1 = y + e
+        self.z1, self.z2, self.z3 = eso_update(self.z1, self.z2, self.z3, y, u, self.beta1,
+                                               self.beta2, self.beta3, self.b0, self.delta, self.h)
         return self.z1, self.z2, self.z3
+
+
+@jitable
+def eso_update(z1: float, z2: float, z3: float, y: float, u: float, beta1: float, beta2: float,
+               beta3: float, b0: float, delta: float, h: float) -> tuple[float, float, float]:
+    """One linearly-implicit Euler step of the nonlinear ESO (see the module docstring)."""
+    predicted = z1 + h * z2 - y
+    k1 = h * beta1
+    k2 = h * beta2 * fal_gain(predicted, 0.5, delta)
+    k3 = h * beta3 * fal_gain(predicted, 0.25, delta)
+    # Closed-form solution of (I - hA) z+ = z + h c for the error E = z1+ - y.
+    e = (z1 - y + h * z2 + h * h * (z3 + b0 * u)) / (1.0 + k1 + h * k2 + h * h * k3)
+    z3 = z3 - k3 * e
+    z2 = z2 + h * z3 - k2 * e + h * b0 * u
+    return y + e, z2, z3
 
 
 HAN_ADRC_PARAMETERS = (
@@ -184,6 +201,7 @@ class HanADRC:
         self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
         self.eso = NonlinearESO(gains.beta1, gains.beta2, gains.beta3, gains.b0,
                                 gains.delta, period)
+        self.gains_tuple = astuple(gains)  # the compiled step's argument (HanADRCGains order)
         self.u_applied = 0.0
 
     def start(self, target: float, measured: float) -> None:
@@ -191,23 +209,42 @@ class HanADRC:
         self.td.v1, self.eso.z1 = target, measured
 
     def control_law(self, e1: float, e2: float, z2: float) -> float:
-        """NLSEF (eq. 12), implicit or literal (see module docstring): u0 from the
-        errors e1 = v1 - z1, e2 = v2 - z2."""
-        g = self.gains
-        if not g.implicit_nlsef:
-            return g.mu1 * fal(e1, g.alpha1, g.delta) + g.mu2 * fal(e2, g.alpha2, g.delta)
-        h = self.td.h
-        k1 = g.mu1 * fal_gain(e1, g.alpha1, g.delta)
-        k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
-        return (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
+        """NLSEF (eq. 12): u0 from the errors e1 = v1 - z1, e2 = v2 - z2."""
+        return nlsef(e1, e2, z2, self.gains_tuple, self.td.h)
 
     def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
-        z1, z2, z3 = self.eso.update(measured, self.u_applied)
-        v1, v2 = self.td.update(target)
-        u0 = self.control_law(v1 - z1, v2 - z2, z2)
-        u = self.limiter.apply((u0 - z3) / self.gains.b0, target, measured)
-        self.u_applied = u
-        return ControllerOutput(u, (z1, z2, z3, v1, v2))
+        td, eso, limiter = self.td, self.eso, self.limiter
+        u, eso.z1, eso.z2, eso.z3, td.v1, td.v2 = han_adrc_step(
+            eso.z1, eso.z2, eso.z3, td.v1, td.v2, self.u_applied, target, measured,
+            self.gains_tuple, td.h, limiter.last, limiter.settings)
+        self.u_applied = limiter.last = u
+        return ControllerOutput(u, (eso.z1, eso.z2, eso.z3, td.v1, td.v2))
+
+
+@jitable
+def nlsef(e1: float, e2: float, z2: float, gains, h: float) -> float:
+    """NLSEF (eq. 12), implicit or literal (see module docstring): u0 from the
+    errors e1 = v1 - z1, e2 = v2 - z2; `gains` HanADRC.gains_tuple."""
+    mu1, mu2, alpha1, alpha2, _, _, _, _, _, _, delta, implicit = gains
+    if not implicit:
+        return mu1 * fal(e1, alpha1, delta) + mu2 * fal(e2, alpha2, delta)
+    k1 = mu1 * fal_gain(e1, alpha1, delta)
+    k2 = mu2 * fal_gain(e2, alpha2, delta)
+    return (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
+
+
+@jitable
+def han_adrc_step(z1: float, z2: float, z3: float, v1: float, v2: float, u_applied: float,
+                  target: float, measured: float, gains, h: float, last: float,
+                  limits) -> tuple[float, float, float, float, float, float]:
+    """One step of Han's ADRC: (u, z1, z2, z3, v1, v2) after it; `gains`
+    HanADRC.gains_tuple, `last` and `limits` the limiter's (CommandLimiter)."""
+    _, _, _, _, r0, h0, beta1, beta2, beta3, b0, delta, _ = gains
+    z1, z2, z3 = eso_update(z1, z2, z3, measured, u_applied, beta1, beta2, beta3, b0, delta, h)
+    v1, v2 = td_update(v1, v2, target, r0, h0, h)
+    u0 = nlsef(v1 - z1, v2 - z2, z2, gains, h)
+    u = limit_command((u0 - z3) / b0, target, measured, last, limits)
+    return u, z1, z2, z3, v1, v2
 
 
 NLADRC_PARAMETERS = (

@@ -6,7 +6,11 @@ e = target - true speed, in m/s; `*_kmh` fields are the same in km/h.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from .kernels import jitable
 
 MS_TO_KMH = 3.6
 
@@ -57,29 +61,40 @@ def tracking_indices(t: np.ndarray, target: np.ndarray, speed: np.ndarray,
     return result
 
 
+RUNNING_KINDS = ("itae", "iae", "max_abs_error")  # RunningIndex.kind: the position here
+
+
+@jitable
+def running_add(kind: int, value: float, last_t: float, last_w: float, t: float,
+                error: float) -> tuple[float, float, float]:
+    """RunningIndex.add on its state (value, last_t, last_w; last_t NaN before the
+    first sample): the state after adding (t, error)."""
+    magnitude = abs(error)
+    if kind == 2:
+        return max(value, magnitude), last_t, last_w
+    weighted = t * magnitude if kind == 0 else magnitude
+    if last_t == last_t:  # not NaN: a previous sample exists
+        value += 0.5 * (t - last_t) * (weighted + last_w)
+    return value, t, weighted
+
+
 class RunningIndex:
     """ITAE, IAE or max abs(e) (m/s) of a run so far, one sample at a time, by the same
     trapezoid rule as tracking_indices: each only grows along a run, so a run whose
     value has passed a bound ends above it (a tuner's pruning). Summed step by step,
     it may differ from the whole run's numpy sum in the last digits."""
 
-    MONOTONE = ("itae", "iae", "max_abs_error")
+    MONOTONE = RUNNING_KINDS
 
     def __init__(self, name: str):
         if name not in self.MONOTONE:
             raise ValueError(f"{name} does not only grow along a run")
         self.name = name
+        self.kind = RUNNING_KINDS.index(name)
         self.value = 0.0
-        self._last: tuple[float, float] | None = None
+        self.last_t, self.last_w = math.nan, 0.0
 
     def add(self, t: float, error: float) -> float:
-        magnitude = abs(error)
-        if self.name == "max_abs_error":
-            self.value = max(self.value, magnitude)
-            return self.value
-        weighted = t * magnitude if self.name == "itae" else magnitude
-        if self._last is not None:
-            t0, w0 = self._last
-            self.value += 0.5 * (t - t0) * (weighted + w0)
-        self._last = (t, weighted)
+        self.value, self.last_t, self.last_w = running_add(self.kind, self.value, self.last_t,
+                                                           self.last_w, t, error)
         return self.value

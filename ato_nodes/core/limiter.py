@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from .kernels import jitable
 from .spec import param
 
 LIMITER_PARAMETERS = (
@@ -21,8 +22,29 @@ LIMITER_PARAMETERS = (
 )
 
 
+STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
+
+
+@jitable
 def clamp(x: float, low: float, high: float) -> float:
     return low if x < low else high if x > high else x
+
+
+@jitable
+def limit_command(u: float, target: float, speed: float, last: float, settings) -> float:
+    """The command the limiter lets through (see CommandLimiter); `last` the previous
+    one, `settings` CommandLimiter.settings."""
+    u_min, u_max, max_change, mode_band, holding_brake, holding_target = settings
+    if holding_brake > 0.0 and target <= holding_target and speed < STOPPED:
+        u = min(u, -holding_brake)
+    if mode_band > 0.0:
+        if speed > target + mode_band:
+            u = min(u, 0.0)
+        elif speed < target - mode_band:
+            u = max(u, 0.0)
+    if max_change > 0.0:
+        u = clamp(u, last - max_change, last + max_change)
+    return clamp(u, u_min, u_max)
 
 
 class CommandLimiter:
@@ -40,8 +62,6 @@ class CommandLimiter:
       station; without it a controller dithers about zero speed and creeps.
     """
 
-    STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
-
     def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
                  mode_band: float = 0.0, holding_brake: float = 0.0,
                  holding_target: float = 0.0):
@@ -49,20 +69,11 @@ class CommandLimiter:
         self.max_change = max_rate * period
         self.mode_band = mode_band
         self.holding_brake, self.holding_target = holding_brake, holding_target
+        self.settings = (u_min, u_max, self.max_change, mode_band, holding_brake, holding_target)
         self.last = 0.0
 
     def apply(self, u: float, target: float, speed: float) -> float:
-        if self.holding_brake > 0.0 and target <= self.holding_target and speed < self.STOPPED:
-            u = min(u, -self.holding_brake)
-        band = self.mode_band
-        if band > 0.0:
-            if speed > target + band:
-                u = min(u, 0.0)
-            elif speed < target - band:
-                u = max(u, 0.0)
-        if self.max_change > 0.0:
-            u = clamp(u, self.last - self.max_change, self.last + self.max_change)
-        self.last = clamp(u, self.u_min, self.u_max)
+        self.last = limit_command(u, target, speed, self.last, self.settings)
         return self.last
 
     @classmethod

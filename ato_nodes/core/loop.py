@@ -27,12 +27,14 @@ import dataclasses
 import time
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
+from . import fast_loop
 from .components import CONTROLLERS
 from .context import RunContext
+from .indices import RunningIndex
 from .errors import ScenarioError
 from .limiter import CommandLimiter
 from .line import Line, load_line
@@ -225,22 +227,27 @@ SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", 
 
 
 def simulate(values: dict[str, Any], deadline: float | None = None,
-             observe: Callable[[float, float, float], bool] | None = None,
+             prune: tuple[RunningIndex, float] | None = None,
              changes: dict[int, dict[str, float]] | None = None
              ) -> dict[str, np.ndarray]:
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
     ends early, as it does in the stack. Past `deadline` (time.monotonic()) it raises
-    TimeoutError (checked every 1024 steps). observe(t, target, true speed), called
-    after every step, ends the run early by returning True (a tuner's pruning).
-    changes {step: {name: value}}: live controller parameters changed before that
-    step, as a run's bag records them (bagio.Run.parameter_changes)."""
+    TimeoutError (checked every 1024 steps). prune (running, limit): a tuner's pruning,
+    `running` takes every step's (t, target - true speed) and the run ends once its
+    value passes `limit`. changes {step: {name: value}}: live controller parameters
+    changed before that step, as a run's bag records them (bagio.Run.parameter_changes).
+    The runs core/fast_loop.py covers run compiled (when numba is installed), to the
+    same bits and without the deadline (they take milliseconds)."""
     period = values["run.period"]
     line = load_line(values["line.file"]) if values["line.file"] else None
     profile = ProfileStage(NodeValues("profile", values), line)
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)
+    if fast_loop.covers(profile, plant, controller, changes):
+        rows, extras, horizons = fast_loop.run(profile, plant, controller, len(SERIES), prune)
+        return _series(rows, extras, horizons, controller.output_names)
     rows, extras, horizons = [], [], []
     for k in range(steps(values)):
         if deadline is not None and not k & 1023 and time.monotonic() > deadline:
@@ -258,11 +265,15 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
                      out.line_resistance, profile.speed_limit(out.position), c.u))
         extras.append(c.extras)
         horizons.append(horizon)
-        if plant.diverged or (observe is not None and observe(k * period, horizon[0], out.speed)):
+        if plant.diverged or (prune is not None
+                              and prune[0].add(k * period, horizon[0] - out.speed) > prune[1]):
             break
+    return _series(rows, extras, horizons, controller.output_names)
+
+
+def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndarray]:
     table = np.array(rows, dtype=float).reshape(-1, len(SERIES))
     series = {name: table[:, i] for i, name in enumerate(SERIES)}
-    names = controller.output_names
     extra_table = np.array(extras, dtype=float).reshape(-1, len(names))
     series.update({name: extra_table[:, i] for i, name in enumerate(names)})
     series["preview"] = np.array(horizons, dtype=float).reshape(len(rows), -1)

@@ -26,10 +26,12 @@ period, the command held constant over the period (zero-order hold).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import deque
 from dataclasses import dataclass
 
+from .kernels import jitable
 from .line import Line
 
 
@@ -81,13 +83,11 @@ class TrainParameters:
 
     def resistance(self, v: float) -> float:
         """Basic running resistance w0 in N/kN, opposing the motion."""
-        speed = abs(v)
-        return math.copysign(self.davis_a + self.davis_b * speed + self.davis_c * speed * speed, v) \
-            if v != 0.0 else 0.0
+        return basic_resistance(v, self.davis_a, self.davis_b, self.davis_c)
 
     def disturbance(self, t: float) -> float:
-        return self.disturbance_amplitude * math.sin(self.disturbance_frequency * t
-                                                     + self.disturbance_phase)
+        return disturbance(t, self.disturbance_amplitude, self.disturbance_frequency,
+                           self.disturbance_phase)
 
     def net_traction(self, v: float, share: float, line_resistance: float = 0.0,
                      powered: bool = True) -> float:
@@ -104,11 +104,103 @@ class TrainParameters:
 
     def force_limits(self, v: float) -> tuple[float, float]:
         """(most negative, most positive) achievable specific force at speed v, N/kN."""
-        weight = self.mass * self.gravity  # kN
-        speed = max(abs(v), 1e-6)
-        traction = min(self.max_traction_force, self.max_traction_power / speed)
-        brake = min(self.max_brake_force, self.max_brake_power / speed)
-        return -brake * 1000.0 / weight, traction * 1000.0 / weight
+        return force_limits(v, self.envelope)
+
+    @property
+    def envelope(self) -> tuple[float, float, float, float, float]:
+        """(weight kN, max traction force kN, power kW, max brake force kN, power kW)."""
+        return (self.mass * self.gravity, self.max_traction_force, self.max_traction_power,
+                self.max_brake_force, self.max_brake_power)
+
+    def constants(self, limited: bool) -> tuple:
+        """What rates() needs of the train, in its order."""
+        return (self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
+                self.disturbance_frequency, self.disturbance_phase, limited, self.actuator_lag,
+                self.hold_at_standstill, self.envelope)
+
+
+@jitable
+def basic_resistance(v: float, a: float, b: float, c: float) -> float:
+    """Davis resistance w0 in N/kN at v, opposing the motion."""
+    speed = v if v >= 0.0 else -v
+    return math.copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
+
+
+@jitable
+def disturbance(t: float, amplitude: float, omega: float, phase: float) -> float:
+    """phi(t), m/s^2."""
+    return amplitude * math.sin(omega * t + phase)
+
+
+@jitable
+def force_limits(v: float, envelope) -> tuple[float, float]:
+    """(most negative, most positive) achievable specific force at speed v, N/kN, from
+    TrainParameters.envelope."""
+    weight, max_traction_force, max_traction_power, max_brake_force, max_brake_power = envelope
+    speed = max(abs(v), 1e-6)
+    traction = min(max_traction_force, max_traction_power / speed)
+    brake = min(max_brake_force, max_brake_power / speed)
+    return -brake * 1000.0 / weight, traction * 1000.0 / weight
+
+
+@jitable
+def achievable(command: float, v: float, limited: bool, envelope) -> float:
+    """The command cut to the envelope at v (unchanged without one)."""
+    if limited:
+        low, high = force_limits(v, envelope)
+        return low if command < low else high if command > high else command
+    return command
+
+
+@jitable
+def rates(t: float, v: float, force: float, command: float, powered: bool,
+          line_resistance: float, constants) -> tuple[float, float]:
+    """(dv/dt, dG/dt), G the lag's state, `line_resistance` the belt's at the position,
+    `constants` TrainParameters.constants(). Unpowered (pantograph in a neutral
+    section), traction is gone at once, from the lag's input and from its output alike."""
+    xi, a, b, c, amplitude, omega, phase, limited, tau, hold, envelope = constants
+    resistance = basic_resistance(v, a, b, c) + line_resistance
+    if not powered and command > 0.0:
+        command = 0.0
+    if tau > 0.0:  # `force` is the lag's state; the envelope holds at every speed
+        dforce = (achievable(command, v, limited, envelope) - force) / tau
+        force = achievable(force, v, limited, envelope)
+    else:
+        force, dforce = achievable(command, v, limited, envelope), 0.0
+    if not powered and force > 0.0:
+        force = 0.0
+    acceleration = xi * (force - resistance) + disturbance(t, amplitude, omega, phase)
+    if hold and v <= 0.0 and acceleration < 0.0:  # held by the brakes
+        acceleration = 0.0
+    return acceleration, dforce
+
+
+@jitable
+def rk4_substep(t: float, x: float, v: float, f: float, h: float, command: float,
+                powered: bool, constants, belt_resistance) -> tuple[float, float, float]:
+    """One classic RK4 step of length h on (s, v, G), the command held;
+    belt_resistance(x) the line's resistance at the position, N/kN."""
+    a1, g1 = rates(t, v, f, command, powered, belt_resistance(x), constants)
+    x2, v2 = x + h / 2 * v, v + h / 2 * a1
+    a2, g2 = rates(t + h / 2, v2, f + h / 2 * g1, command, powered, belt_resistance(x2),
+                   constants)
+    x3, v3 = x + h / 2 * v2, v + h / 2 * a2
+    a3, g3 = rates(t + h / 2, v3, f + h / 2 * g2, command, powered, belt_resistance(x3),
+                   constants)
+    x4, v4 = x + h * v3, v + h * a3
+    a4, g4 = rates(t + h, v4, f + h * g3, command, powered, belt_resistance(x4), constants)
+    x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+    v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+    f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
+    if constants[9] and v < 0.0:  # held at standstill
+        v, x_next = 0.0, max(x, x_next)
+    return x_next, v, f
+
+
+@jitable
+def no_line(x: float) -> float:
+    """The belt resistance of the open track of seed 000: none."""
+    return 0.0
 
 
 @dataclass
@@ -138,49 +230,9 @@ class PointMassTrain:
         self.acting = 0.0  # the command that acted over the last period (after the delay)
         self.powered = True  # whether the last sub-step had traction power
         self.lag_state = self.state.force  # the lag's output before the envelope
-        self.rates = self._make_rates()
-
-    def _make_rates(self):
-        """rates(t, x, v, G, command, powered) -> (dv/dt, dG/dt), G the lag's state, with
-        every constant bound once: this runs four times per sub-step, in every node and
-        every tuning candidate. Unpowered (pantograph in a neutral section), traction
-        is gone at once, from the lag's input and from its output alike."""
-        p = self.p
-        xi, a, b, c = p.xi, p.davis_a, p.davis_b, p.davis_c
-        amplitude, omega, phase = (p.disturbance_amplitude, p.disturbance_frequency,
-                                   p.disturbance_phase)
-        sin, copysign = math.sin, math.copysign
-        limits, limited, tau = p.force_limits, self.limited, p.actuator_lag
-        line, length, hold = self.line, p.length, p.hold_at_standstill
-
-        def achievable(command: float, v: float) -> float:
-            if limited:
-                low, high = limits(v)
-                return low if command < low else high if command > high else command
-            return command
-
-        def rates(t: float, x: float, v: float, force: float, command: float,
-                  powered: bool = True) -> tuple[float, float]:
-            speed = v if v >= 0.0 else -v
-            resistance = copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
-            if line is not None:
-                resistance += line.additional_resistance(x, length)
-            if not powered and command > 0.0:
-                command = 0.0
-            if tau > 0.0:  # `force` is the lag's state; the envelope holds at every speed
-                dforce = (achievable(command, v) - force) / tau
-                force = achievable(force, v)
-            else:
-                force, dforce = achievable(command, v), 0.0
-            if not powered and force > 0.0:
-                force = 0.0
-            acceleration = xi * (force - resistance) + amplitude * sin(omega * t + phase)
-            if hold and v <= 0.0 and acceleration < 0.0:  # held by the brakes
-                acceleration = 0.0
-            return acceleration, dforce
-
-        self.achievable = achievable
-        return rates
+        self.constants = params.constants(self.limited)
+        self.belt_resistance = no_line if line is None else functools.partial(
+            line.additional_resistance, train_length=params.length)
 
     def line_resistance(self) -> float:
         """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
@@ -191,39 +243,28 @@ class PointMassTrain:
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""
         s = self.state
-        return self.rates(s.time, s.position, s.speed, self.lag_state, self.acting,
-                          self.powered)[0]
+        return rates(s.time, s.speed, self.lag_state, self.acting, self.powered,
+                     self.belt_resistance(s.position), self.constants)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
         if self.delayed:
             self.delayed.append(command)
             command = self.delayed.popleft()
-        s, rates, line, hold = self.state, self.rates, self.line, self.p.hold_at_standstill
+        s, line, constants = self.state, self.line, self.constants
         h = self.period / self.substeps
         start = s.time
         x, v, f = s.position, s.speed, self.lag_state
         powered = True
         for i in range(self.substeps):
-            t = start + i * h
             powered = line is None or not line.in_neutral_section(x - self.p.pantograph_offset)
-            a1, g1 = rates(t, x, v, f, command, powered)
-            x2, v2 = x + h / 2 * v, v + h / 2 * a1
-            a2, g2 = rates(t + h / 2, x2, v2, f + h / 2 * g1, command, powered)
-            x3, v3 = x + h / 2 * v2, v + h / 2 * a2
-            a3, g3 = rates(t + h / 2, x3, v3, f + h / 2 * g2, command, powered)
-            x4, v4 = x + h * v3, v + h * a3
-            a4, g4 = rates(t + h, x4, v4, f + h * g3, command, powered)
-            x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
-            v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
-            f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
-            if hold and v < 0.0:
-                v, x_next = 0.0, max(x, x_next)
-            x = x_next
+            x, v, f = rk4_substep(start + i * h, x, v, f, h, command, powered, constants,
+                                  self.belt_resistance)
         self.acting, self.lag_state, self.powered = command, f, powered
         self.steps += 1
         s.time, s.position, s.speed = self.steps * self.period, x, v
-        s.force = self.achievable(f if self.lagged else command, v)
+        s.force = achievable(f if self.lagged else command, v, self.limited,
+                             constants[10])
         if not powered and s.force > 0.0:
             s.force = 0.0
         return s

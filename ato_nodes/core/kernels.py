@@ -1,0 +1,32 @@
+"""Compiling the hot numerical functions with numba, when it is installed (optional).
+
+`jitable` marks a plain function that compiled code may call: from Python it stays
+the very same function (the nodes and simulate() call it as they always did); a
+function compiled by `compiled` that calls it gets it compiled and inlined. So
+there is one source of each formula, and the compiled run (core/fast_loop.py)
+computes what the Python run does, operation for operation: numba keeps IEEE
+semantics (no fast-math, no fused multiply-add) and calls the same libm for sin,
+exp and pow, so the two agree bit for bit (tests/test_fast_loop.py checks it).
+Without numba nothing is compiled and every run takes the Python path.
+"""
+
+from __future__ import annotations
+
+try:
+    import numba
+    from numba.extending import register_jitable
+except ImportError:  # optional: runs are then Python only
+    numba = None
+
+AVAILABLE = numba is not None
+
+
+def jitable(function):
+    """`function` itself, callable from compiled code too when numba is installed."""
+    return register_jitable(function) if AVAILABLE else function
+
+
+def compiled(function):
+    """`function` compiled by numba (machine code cached on disk beside the source),
+    or None without numba."""
+    return numba.njit(cache=True, nogil=True)(function) if AVAILABLE else None
