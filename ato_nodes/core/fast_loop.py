@@ -82,7 +82,7 @@ def _loop_source(targets, preview, period, substeps, plant_steps, time, x, v, fo
                  gains, h, last, limits, kind, limit, value, last_t, last_w, rows, extras):
     """simulate()'s loop for the runs `covers` accepts; returns (steps done, running
     index state). Rows in loop.SERIES order."""
-    xi, a, b, c, amplitude, omega, phase, _, _, _, envelope = constants
+    _, a, b, c, amplitude, omega, phase, _, _, _, envelope = constants
     sub = period / substeps
     z1, z2, z3, v1, v2, u_applied = controller_state
     for k in range(len(targets)):
