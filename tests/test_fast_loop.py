@@ -13,6 +13,7 @@ pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not inst
 VARIANTS = [
     ("seed000", []),
     ("seed000-step", []),
+    ("seed000-realistic", []),  # lag, envelope, the noisy and quantised sensor
     ("seed000", ["controller.preview=3", "plant.substeps=3", "controller.max_rate=40",
                  "controller.mode_band=0.5", "controller.u_min=-60", "controller.u_max=60"]),
     ("seed000", ["plant.actuator_lag=0.6", "plant.envelope=true", "plant.mass=600",
@@ -60,7 +61,7 @@ def test_a_diverging_run_ends_at_the_same_step(monkeypatch):
 
 
 def test_runs_it_does_not_cover_take_the_python_loop():
-    for scenario in ("seed004-metro", "seed000-realistic", "seed000-ato", "hsr-neutral"):
+    for scenario in ("seed004-metro", "seed003-maglev", "seed000-ato", "hsr-neutral"):
         assert not fast_loop.covers(*stages(load_scenario(scenario)))
 
 

@@ -38,7 +38,7 @@ from .indices import RunningIndex
 from .errors import ScenarioError
 from .limiter import CommandLimiter
 from .line import Line, load_line
-from .plant import PointMassTrain, TrainParameters, TrainState
+from .plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
 from .schema import NodeValues, steps
 
 
@@ -141,11 +141,8 @@ class PlantStage:
 
     def measure(self, speed: float) -> float:
         """What the speed sensor reports: speed plus noise, to its resolution."""
-        if self.noise > 0.0:
-            speed += self.noise * self.rng.standard_normal()
-        if self.quantum > 0.0:
-            speed = self.quantum * round(speed / self.quantum)
-        return speed
+        draw = self.rng.standard_normal() if self.noise > 0.0 else 0.0
+        return sensor_reading(speed, draw, self.noise, self.quantum)
 
     def outputs(self) -> PlantOutputs:
         s, p, train = self.train.state, self.params, self.train

@@ -268,3 +268,14 @@ class PointMassTrain:
         if not powered and s.force > 0.0:
             s.force = 0.0
         return s
+
+
+@jitable
+def sensor_reading(speed: float, draw: float, noise: float, quantum: float) -> float:
+    """The speed sensor's reading: speed plus noise (`draw` a standard normal sample),
+    to its resolution (rounded half to even, as round() does)."""
+    if noise > 0.0:
+        speed += noise * draw
+    if quantum > 0.0:
+        speed = quantum * round(speed / quantum)
+    return speed
