@@ -295,3 +295,14 @@ def test_ros2_param_set_refuses_fixed_parameters_and_applies_live_gains_reproduc
                            text=True, timeout=120)
     assert score.returncode == 0 and "(1 live parameter change(s)): every recorded series " \
         "identical" in score.stdout, score.stdout + score.stderr
+
+def test_a_compiled_in_process_run_equals_the_nodes_run_bit_for_bit(tmp_path):
+    """seed000-realistic (lag, envelope, noisy quantised sensor) runs compiled in-process
+    (core/fast_loop.py) and as Python in the nodes: every series is the same."""
+    from ato_nodes.core import fast_loop
+    from ato_nodes.launch import run_checked
+    if not fast_loop.AVAILABLE:
+        pytest.skip("numba is not installed: in-process runs are Python too")
+    values = apply_overrides(load_scenario("seed000-realistic"), ["run.duration=60"])
+    _, identical = run_checked(values, tmp_path / "realistic")
+    assert identical
