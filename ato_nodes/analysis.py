@@ -23,7 +23,8 @@ from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
 from ato_nodes.core.schema import SPEC_BY_NAME
-from ato_nodes.core.scoring import observer_b0, run_line, score_series, total_disturbance
+from ato_nodes.core.scoring import (Requirement, observer_b0, run_line, score_series,
+                                    total_disturbance)
 
 INDEX_COLUMNS = [  # (key, heading, format)
     ("steps", "steps", "{:d}"),
@@ -304,13 +305,10 @@ def _checked_text(run: Run, name: str) -> str:
 
 
 def run_requirements(run: Run) -> dict:
-    """The run's report.require as tune.py's Requirements, by index name."""
-    from ato_nodes.tuning import Requirement  # here, not above: tuning imports this module
-    items = [item for item in _checked_text(run, "report.require").split(",") if item.strip()]
-    try:
-        return {r.name: r for r in map(Requirement.parse, items)}
-    except ScenarioError as exc:
-        raise ScenarioError(f"{label(run)}: report.require: {exc}") from None
+    """The run's report.require as Requirements (tune.py's), by index name."""
+    requirements = Requirement.parse_list(_checked_text(run, "report.require"),
+                                          f"{label(run)}: report.require")
+    return {r.name: r for r in requirements}
 
 
 def run_bands(run: Run) -> tuple[float, ...]:

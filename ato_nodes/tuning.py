@@ -13,7 +13,6 @@ values) against the log, running only what the log lacks.
 from __future__ import annotations
 
 import csv
-import difflib
 import fcntl
 import functools
 import hashlib
@@ -43,7 +42,7 @@ from ato_nodes.core.paths import config_dir
 from ato_nodes.core.scenario import (apply_overrides, load_scenario, resolve_scenario,
                                      ros_parameter_file)
 from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
-from ato_nodes.core.scoring import INDEX_NAMES, score_series
+from ato_nodes.core.scoring import Requirement, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
 FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
@@ -135,44 +134,6 @@ class Evaluation:
 INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
 PRUNE_MARGIN = 1e-9  # relative: a pruned run's value is above its bound by more than this
 BAR_WIDTH = 30  # characters of the progress bar on a terminal
-
-
-@dataclass(frozen=True)
-class Requirement:
-    """An operational requirement on an index, `name<=limit`: a candidate that breaks
-    it is infeasible, whatever its fitness (a controller that never leaves the
-    platform tracks a position-indexed target well: 0.3 m/s off, standing still)."""
-
-    name: str
-    limit: float
-
-    @classmethod
-    def parse(cls, text: str) -> Requirement:
-        name, sep, limit = text.partition("<=")
-        try:
-            requirement = cls(name.strip(), float(limit)) if sep else cls._bad(text)
-        except ValueError:
-            return cls._bad(text)
-        if not math.isfinite(requirement.limit):
-            raise ScenarioError(f"--require: the limit of {requirement.name} must be a finite "
-                                f"number, not {limit.strip()!r}")
-        if requirement.name not in INDEX_NAMES:
-            close = difflib.get_close_matches(requirement.name, INDEX_NAMES, n=1)
-            hint = f" (did you mean {close[0]}?)" if close else ""
-            raise ScenarioError(f"--require: unknown index {requirement.name!r}{hint}")
-        return requirement
-
-    @staticmethod
-    def _bad(text: str):
-        raise ScenarioError(f"--require expects INDEX<=VALUE (e.g. abs_stopping_error<=0.3), "
-                            f"got {text!r}")
-
-    def violation(self, indices: dict[str, Any]) -> float:
-        """0 when met; else how far it is broken, relative to max(|limit|, 1)."""
-        value = indices.get(self.name, math.nan)
-        if not isinstance(value, (int, float)) or not math.isfinite(value):
-            return 1e3
-        return max(0.0, value - self.limit) / max(abs(self.limit), 1.0)
 
 
 @dataclass(frozen=True)

@@ -113,8 +113,12 @@ def test_bad_report_parameters_are_one_line(metro):
     with pytest.raises(ScenarioError, match=r"report.error_bands must be numbers of km/h"):
         apply_overrides(metro.parameters, ["report.error_bands=wide"])
     with pytest.raises(ScenarioError, match=r"metro: report.require: .*did you mean "
-                                            r"max_abs_error_kmh"):
+                                            r"max_abs_error_kmh"):  # a bag is anyone's file
         judge(with_requirements(metro, "max_abs_eror_kmh<=1"))
+    # a scenario's is refused before anything starts
+    with pytest.raises(ScenarioError, match=r"^parameters: report.require: unknown index "
+                                            r"'swich_count' \(did you mean switch_count\?\)$"):
+        apply_overrides(load_scenario("seed004-metro"), ["report.require=swich_count<=3"])
 
 
 def test_every_shipped_scenario_names_indices_the_scorer_gives():

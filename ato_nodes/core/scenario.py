@@ -21,6 +21,7 @@ from .faults import parse_fault
 from .line import load_line
 from .loop import ControllerStage, ProfileStage
 from .paths import config_dir, resolve_file
+from .scoring import Requirement
 from .schema import (FILE_PARAMETERS, NODES, SPEC_BY_NAME, SPECS, NodeValues, defaults,
                      shared)
 
@@ -205,6 +206,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
         raise ScenarioError(f"{where}: run.duration must be at least one run.period")
     try:
         parse_fault(values["run.fault"])
+        Requirement.parse_list(values["report.require"], "report.require")
     except ScenarioError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
     line = load_line(values["line.file"]) if values["line.file"] else None

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import base64
+import difflib
 import hashlib
 import math
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -85,6 +88,50 @@ INDEX_NAMES = (
     "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "arrival_time",
     "running_time_error",
     "max_abs_error_outside_steps_kmh", "stepped_time")
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """An operational requirement on an index, `name<=limit`: a candidate that breaks
+    it is infeasible, whatever its fitness (a controller that never leaves the
+    platform tracks a position-indexed target well: 0.3 m/s off, standing still)."""
+
+    name: str
+    limit: float
+
+    @classmethod
+    def parse(cls, text: str, source: str = "--require") -> Requirement:
+        """`name<=limit`; anything else is one ScenarioError naming `source`."""
+        name, sep, limit = text.partition("<=")
+        try:
+            requirement = cls(name.strip(), float(limit)) if sep else cls._bad(text, source)
+        except ValueError:
+            return cls._bad(text, source)
+        if not math.isfinite(requirement.limit):
+            raise ScenarioError(f"{source}: the limit of {requirement.name} must be a finite "
+                                f"number, not {limit.strip()!r}")
+        if requirement.name not in INDEX_NAMES:
+            close = difflib.get_close_matches(requirement.name, INDEX_NAMES, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ScenarioError(f"{source}: unknown index {requirement.name!r}{hint}")
+        return requirement
+
+    @classmethod
+    def parse_list(cls, text: str, source: str) -> tuple[Requirement, ...]:
+        """A comma-separated list (a scenario's report.require)."""
+        return tuple(cls.parse(item, source) for item in text.split(",") if item.strip())
+
+    @staticmethod
+    def _bad(text: str, source: str):
+        raise ScenarioError(f"{source} expects INDEX<=VALUE (e.g. abs_stopping_error<=0.3), "
+                            f"got {text!r}")
+
+    def violation(self, indices: dict[str, Any]) -> float:
+        """0 when met; else how far it is broken, relative to max(|limit|, 1)."""
+        value = indices.get(self.name, math.nan)
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            return 1e3
+        return max(0.0, value - self.limit) / max(abs(self.limit), 1.0)
 
 LIMITED = 1e5  # N/kN: a controller limit below this is a real one (defaults are 1e6)
 
