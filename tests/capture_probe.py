@@ -8,9 +8,7 @@ end of a burst is only repaired at the writer's next heartbeat (Fast DDS: up to 
     ROS_DOMAIN_ID=N python tests/capture_probe.py TIMEOUT TOPIC:TYPE:COUNT [...]
 """
 
-import json
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -18,6 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import rclpy  # noqa: E402
 
 from ato_nodes.nodes.base import QOS, message_class  # noqa: E402
+from probes import spin_then_print  # noqa: E402
 
 
 def main() -> None:
@@ -37,12 +36,8 @@ def main() -> None:
         received[topic], expected[topic] = [], int(count)
         node.create_subscription(message_class(type_name), topic, keep(topic), QOS["data"],
                                  raw=True)
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and any(len(received[t]) < n for t, n in expected.items()):
-        rclpy.spin_once(node, timeout_sec=0.05)
-    print(json.dumps(received))
-    node.destroy_node()
-    rclpy.try_shutdown()
+    spin_then_print(node, timeout,
+                    lambda: all(len(received[t]) >= n for t, n in expected.items()), received)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,6 @@ log records of /rosout ({"name", "level", "msg"}).
     ROS_DOMAIN_ID=N python tests/topic_probe.py /rosout SECONDS QUIET
 """
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -20,6 +19,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 
 from ato_nodes.core.topics import topic_map  # noqa: E402
 from ato_nodes.nodes.base import QOS, message_class  # noqa: E402
+from probes import spin_then_print  # noqa: E402
 
 ROSOUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -44,12 +44,8 @@ def main() -> None:
 
     node.create_subscription(kind, name, arrived, qos)
     print("ready", flush=True)
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline and not (received and time.monotonic() - last[0] > quiet):
-        rclpy.spin_once(node, timeout_sec=0.05)
-    print(json.dumps(received))
-    node.destroy_node()
-    rclpy.try_shutdown()
+    spin_then_print(node, seconds, lambda: received and time.monotonic() - last[0] > quiet,
+                    received)
 
 
 if __name__ == "__main__":

@@ -61,14 +61,12 @@ def tracking_indices(t: np.ndarray, target: np.ndarray, speed: np.ndarray,
     return result
 
 
-RUNNING_KINDS = ("itae", "iae", "max_abs_error")  # RunningIndex.kind: the position here
-
-
 @jitable
 def running_add(kind: int, value: float, last_t: float, last_w: float, t: float,
                 error: float) -> tuple[float, float, float]:
     """RunningIndex.add on its state (value, last_t, last_w; last_t NaN before the
-    first sample): the state after adding (t, error)."""
+    first sample): the state after adding (t, error); `kind` the index's position in
+    RunningIndex.MONOTONE."""
     magnitude = abs(error)
     if kind == 2:
         return max(value, magnitude), last_t, last_w
@@ -84,13 +82,13 @@ class RunningIndex:
     value has passed a bound ends above it (a tuner's pruning). Summed step by step,
     it may differ from the whole run's numpy sum in the last digits."""
 
-    MONOTONE = RUNNING_KINDS
+    MONOTONE = ("itae", "iae", "max_abs_error")
 
     def __init__(self, name: str):
         if name not in self.MONOTONE:
             raise ValueError(f"{name} does not only grow along a run")
         self.name = name
-        self.kind = RUNNING_KINDS.index(name)
+        self.kind = self.MONOTONE.index(name)
         self.value = 0.0
         self.last_t, self.last_w = math.nan, 0.0
 

@@ -243,14 +243,13 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)
     if fast_loop.covers(profile, plant, controller, changes):
-        if deadline is not None and time.monotonic() > deadline:
-            raise TimeoutError("the simulation passed its deadline at step 0")
+        _check_deadline(deadline, 0)
         rows, extras, horizons = fast_loop.run(profile, plant, controller, len(SERIES), prune)
         return _series(rows, extras, horizons, controller.output_names)
     rows, extras, horizons = [], [], []
     for k in range(steps(values)):
-        if deadline is not None and not k & 1023 and time.monotonic() > deadline:
-            raise TimeoutError(f"the simulation passed its deadline at step {k}")
+        if not k & 1023:
+            _check_deadline(deadline, k)
         out = plant.outputs()
         controller.horizons.extend(profile.on_position(out.position))
         horizon = controller.horizons[0]
@@ -268,6 +267,11 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
                               and prune[0].add(k * period, horizon[0] - out.speed) > prune[1]):
             break
     return _series(rows, extras, horizons, controller.output_names)
+
+
+def _check_deadline(deadline: float | None, step: int) -> None:
+    if deadline is not None and time.monotonic() > deadline:
+        raise TimeoutError(f"the simulation passed its deadline at step {step}")
 
 
 def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndarray]:

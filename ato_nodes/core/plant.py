@@ -112,11 +112,17 @@ class TrainParameters:
         return (self.mass * self.gravity, self.max_traction_force, self.max_traction_power,
                 self.max_brake_force, self.max_brake_power)
 
-    def constants(self, limited: bool) -> tuple:
+    @property
+    def limited(self) -> bool:
+        """Whether the train has a traction or brake envelope (plant.envelope)."""
+        return math.isfinite(self.max_traction_force + self.max_traction_power
+                             + self.max_brake_force + self.max_brake_power)
+
+    def constants(self) -> tuple:
         """What rates() needs of the train, in its order."""
         return (self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
-                self.disturbance_frequency, self.disturbance_phase, limited, self.actuator_lag,
-                self.hold_at_standstill, self.envelope)
+                self.disturbance_frequency, self.disturbance_phase, self.limited,
+                self.actuator_lag, self.hold_at_standstill, self.envelope)
 
 
 @jitable
@@ -223,22 +229,19 @@ class PointMassTrain:
         self.state = state or TrainState()
         self.steps = round(self.state.time / period)
         self.lagged = params.actuator_lag > 0.0
-        self.limited = math.isfinite(params.max_traction_force + params.max_traction_power
-                                     + params.max_brake_force + params.max_brake_power)
+        self.limited = params.limited
         # Commands waiting out the dead time; the oldest acts next.
         self.delayed = deque([0.0] * round(params.dead_time / period))
         self.acting = 0.0  # the command that acted over the last period (after the delay)
         self.powered = True  # whether the last sub-step had traction power
         self.lag_state = self.state.force  # the lag's output before the envelope
-        self.constants = params.constants(self.limited)
+        self.constants = params.constants()
         self.belt_resistance = no_line if line is None else functools.partial(
             line.additional_resistance, train_length=params.length)
 
     def line_resistance(self) -> float:
         """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
-        if self.line is None:
-            return 0.0
-        return self.line.additional_resistance(self.state.position, self.p.length)
+        return self.belt_resistance(self.state.position)
 
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""

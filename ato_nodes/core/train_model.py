@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
+from .limiter import clamp
 from .line import Line
 from .plant import TrainParameters
 
@@ -35,8 +36,7 @@ class NominalTrain:
         lag = train.actuator_lag
         self.decay = math.exp(-period / lag) if lag > 0.0 else 0.0
         self.spread = lag * (1.0 - self.decay) / period if lag > 0.0 else 0.0  # step mean
-        self.limited = math.isfinite(train.max_traction_force + train.max_traction_power
-                                     + train.max_brake_force + train.max_brake_power)
+        self.limited = train.limited
         self.neutral = line is not None and bool(line.neutral_sections)
         self.lag_state = 0.0  # N/kN, the lag's output before the envelope
         self.position = position
@@ -51,10 +51,10 @@ class NominalTrain:
             powered = True
         if self.limited:
             low, high = self.train.force_limits(speed)
-            command = low if command < low else high if command > high else command
+            command = clamp(command, low, high)
         mean = command + (lag_state - command) * self.spread
         if self.limited:
-            mean = low if mean < low else high if mean > high else mean
+            mean = clamp(mean, low, high)
         if not powered and mean > 0.0:
             mean = 0.0
         return command + (lag_state - command) * self.decay, mean
