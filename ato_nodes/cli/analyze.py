@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from ato_nodes import cli
-from ato_nodes.analysis import run_indices, write_report
+from ato_nodes.analysis import write_report
 from ato_nodes.bagio import BagError, parse_mapping, read_run
 from ato_nodes.core.errors import ScenarioError
 
@@ -39,7 +39,6 @@ def main() -> None:
     except ScenarioError as exc:  # a bag's report.* parameters
         cli.fail(str(exc))
     for run in runs:
-        skipped = run_indices(run)["skipped"]
-        if skipped:
-            print(f"{run.path}: no {', '.join(skipped)} topic; indices needing them skipped")
+        if run.missing:  # the roles the bag lacks (analysis.run_indices: "skipped")
+            print(f"{run.path}: no {', '.join(run.missing)} topic; indices needing them skipped")
     print(f"report: {md_path} and {html_path}")
