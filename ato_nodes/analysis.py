@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ato_nodes import jsontext
 from ato_nodes.bagio import Run
 from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
@@ -444,7 +445,7 @@ def write_report(runs: list[Run], tunings: list[Path], out: Path) -> tuple[Path,
     figures = plot_runs(runs, out) if runs else []
     if tunings:
         figures.append(plot_convergence(tunings, out / "convergence.png"))
-    (out / "indices.json").write_text(json.dumps(
+    (out / "indices.json").write_text(jsontext.dumps(
         {report.label: report.indices for report in reports}, indent=2))
     md_path = out / "report.md"
     md_path.write_text(markdown_report(reports, rows, figures))

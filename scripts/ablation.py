@@ -23,12 +23,12 @@ ablation.json in --out.
 from __future__ import annotations
 
 import argparse
-import json
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import _cli
 
+from ato_nodes import jsontext
 from ato_nodes.analysis import markdown_table
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import simulate
@@ -98,7 +98,7 @@ def main() -> None:
                        markdown_table({label: results[label] for label in order})])
     args.out.mkdir()
     (args.out / "ablation.md").write_text(table + "\n")
-    (args.out / "ablation.json").write_text(json.dumps(
+    (args.out / "ablation.json").write_text(jsontext.dumps(
         {"scenario": args.scenario, "untuned": args.untuned, "reference": args.reference,
          "set": args.set,
          "runs": {label: results[label] for label in order}}, indent=2))

@@ -15,11 +15,11 @@ in-process run agree.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import _cli
 
+from ato_nodes import jsontext
 from ato_nodes.analysis import markdown_table
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, load_scenario
@@ -54,7 +54,7 @@ def main() -> None:
     markdown = markdown_table(results, extra={"stack = in-process": {
         name: "yes" if r["bit_identical"] else "NO" for name, r in results.items()}})
     (args.out / "comparison.md").write_text(markdown + "\n")
-    (args.out / "comparison.json").write_text(json.dumps(results, indent=2))
+    (args.out / "comparison.json").write_text(jsontext.dumps(results, indent=2))
     print(markdown)
 
 

@@ -17,12 +17,12 @@ switches, max jerk over 1 s, traction energy and stopping error.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import _cli
 import numpy as np
 
+from ato_nodes import jsontext
 from ato_nodes.bagio import read_run
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import run_checked
@@ -90,7 +90,7 @@ def main() -> None:
                   f"({bag})", flush=True)
         report[condition] = results
         markdown += [f"## {condition}", "", *table(results), ""]
-    (args.out / "comparison.json").write_text(json.dumps(report, indent=2))
+    (args.out / "comparison.json").write_text(jsontext.dumps(report, indent=2))
     (args.out / "comparison.md").write_text("\n".join(markdown))
     print("\n".join(markdown))
 

@@ -16,13 +16,13 @@ Writes comparison.md and comparison.json in --out; swarm runs in --workers proce
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import _cli
 
+from ato_nodes import jsontext
 from ato_nodes.core import strategy
 from ato_nodes.core.line import load_line
 from ato_nodes.core.paths import resolve_file
@@ -70,7 +70,7 @@ def main() -> None:
     with ProcessPoolExecutor(args.workers) as pool:
         results = list(pool.map(evaluate, jobs))
     args.out.mkdir()
-    (args.out / "comparison.json").write_text(json.dumps(results, indent=2))
+    (args.out / "comparison.json").write_text(jsontext.dumps(results, indent=2))
     markdown = report(results, args)
     (args.out / "comparison.md").write_text("\n".join(markdown) + "\n")
     plot(results, args.out / "convergence.png")

@@ -20,7 +20,6 @@ figure printed) and MODEL.png (predicted against measured, free run, search).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import time
 from pathlib import Path
@@ -28,6 +27,7 @@ from pathlib import Path
 import _cli
 import numpy as np
 
+from ato_nodes import jsontext
 from ato_nodes.bagio import BagError, read_run
 from ato_nodes.core import identification as ident
 from ato_nodes.core import lssvm
@@ -200,7 +200,7 @@ def main() -> None:
                                           parameters)
     lssvm.ModelFile(model, period, train_values, centres, float(width), arx).save(args.out)
     report["model"] = {"file": str(args.out), "sha256": lssvm.file_digest(args.out)}
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=2))
+    args.out.with_suffix(".json").write_text(jsontext.dumps(report, indent=2))
     figure(args.out.with_suffix(".png"), model, x, t, test_rows, search, report)
     print_report(report)
 

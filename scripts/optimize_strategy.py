@@ -25,12 +25,12 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 from pathlib import Path
 
 import _cli
 import numpy as np
 
+from ato_nodes import jsontext
 from ato_nodes.core import strategy
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.line import load_line
@@ -96,7 +96,7 @@ def main() -> None:
         summary["convergence"] = {"evaluations": history.trace("evaluations").tolist(),
                                   "best_G": history.trace("best_f").tolist()}
         plot_convergence(args.out / "convergence.png", history, args.algorithm)
-    (args.out / "indices.json").write_text(json.dumps(summary, indent=2, default=float))
+    (args.out / "indices.json").write_text(jsontext.dumps(summary, indent=2, default=float))
     plot_strategy(args.out / "speed_distance.png", line, problem.track, result,
                   args.algorithm)
     print(f"{args.algorithm}: energy {values['energy_kwh']:.1f} kWh "

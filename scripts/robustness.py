@@ -15,7 +15,6 @@ abs(stopping error), max jerk over 1 s and ITAE.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -23,6 +22,7 @@ from pathlib import Path
 import _cli
 import numpy as np
 
+from ato_nodes import jsontext
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
@@ -101,7 +101,7 @@ def main() -> None:
             summary[key] = {"median": float(np.median(column)), "worst": float(max(column))}
             print(f"{heading:24s} median {summary[key]['median']:.4g}  worst "
                   f"{summary[key]['worst']:.4g}")
-    (args.out / "robustness.json").write_text(json.dumps(
+    (args.out / "robustness.json").write_text(jsontext.dumps(
         {"scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
          "summary": summary, "samples": results}, indent=2))
     plot(results, args.out / "robustness.png", args.scenario)

@@ -8,12 +8,12 @@ recorded to a rosbag2 MCAP bag, scored at the end.
 from __future__ import annotations
 
 import argparse
-import json
 import signal
 import sys
 import time
 from pathlib import Path
 
+from ato_nodes import jsontext
 from ato_nodes import cli
 from ato_nodes.bagio import BagError, message_counts, read_run
 from ato_nodes.core.errors import ScenarioError
@@ -95,7 +95,7 @@ def run_stack() -> None:
             summary["message"] += f"; bag not scored: {exc}"
         try:
             (bag / "params.yaml").write_text(stack.params_yaml)
-            (bag / "summary.json").write_text(json.dumps(summary, indent=2))
+            (bag / "summary.json").write_text(jsontext.dumps(summary, indent=2))
         except OSError as exc:
             summary["message"] += f"; summary not written: {exc.strerror or exc}"
     if pressed:

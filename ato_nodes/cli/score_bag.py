@@ -8,9 +8,9 @@ BAG is a rosbag2 directory or a lone .mcap file.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
+from ato_nodes import jsontext
 from ato_nodes import cli
 from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring import format_indices, score_series
@@ -35,7 +35,7 @@ def main() -> None:
     indices = score_series(run.series, run.parameters)
     if args.resimulate:
         indices["resimulated_identical"] = not differ
-    print(json.dumps(indices, indent=2) if args.json else format_indices(indices))
+    print(jsontext.dumps(indices, indent=2) if args.json else format_indices(indices))
     if args.resimulate and not args.json:
         changes = sum(len(c) for c in run.parameter_changes.values())
         print(f"re-simulated in-process from the bag ({changes} live parameter change(s)): "

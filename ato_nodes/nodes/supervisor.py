@@ -21,6 +21,7 @@ from rclpy.duration import Duration
 
 from std_msgs.msg import Float64
 
+from ato_nodes import jsontext
 from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.schema import steps
 from ato_nodes.nodes.base import AtoNode, run_node
@@ -195,7 +196,7 @@ class SupervisorNode(AtoNode):
             report.update(fitness=self.running.value, fitness_steps=self.paired, pruned=pruned)
         path = self.values["supervisor.report"]
         if path:
-            Path(path).write_text(json.dumps(report, indent=2))
+            Path(path).write_text(jsontext.dumps(report, indent=2))
 
 
 def main() -> None:
