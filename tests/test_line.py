@@ -110,3 +110,11 @@ def test_a_bad_line_stops_run_stack_with_one_line_and_exit_2(tmp_path):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and str(line) in lines[0] and "line 11" in lines[0]
     assert "limit must be positive" in lines[0] and not (tmp_path / "bag").exists()
+
+
+def test_a_negative_station_dwell_is_refused_with_file_and_line(tmp_path):
+    path = write(tmp_path, GOOD + "stations:\n  - {name: A, position: 0, dwell: 30}\n"
+                 "  - {name: B, position: 1000, dwell: -30}\n")
+    with pytest.raises(ScenarioError) as failure:
+        load_line(path)
+    assert str(failure.value) == f"{path} line 14: stations: dwell -30 s is negative"

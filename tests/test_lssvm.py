@@ -1,6 +1,8 @@
 """Seed 001's LSSVM: the bordered system, the online factor update, the model file."""
 
+import io
 import math
+import struct
 import zipfile
 
 import numpy as np
@@ -196,3 +198,92 @@ def test_the_excitation_covers_the_speed_range_in_both_directions():
     assert rows[:, 1].max() > 0.7 * 80.0 and rows[:, 1].max() <= 80.0 + 5 / 3.6
     changes = np.diff(rows[:, 1])
     assert (changes > 1.0).sum() >= 5 and (changes < -1.0).sum() >= 5
+
+
+def members(path) -> dict[str, bytes]:
+    """A model file's members, as stored (each an .npy file)."""
+    with zipfile.ZipFile(path) as archive:
+        return {info.filename: archive.read(info) for info in archive.infolist()}
+
+
+def write_members(path, stored: dict[str, bytes]):
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in stored.items():
+            archive.writestr(name, data)
+    return path
+
+
+def npy(array) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, array, allow_pickle=False)
+    return buffer.getvalue()
+
+
+@pytest.fixture
+def model_file(tmp_path):
+    x, t = train_like_samples(60)
+    return save(tmp_path, lssvm.fit(LAYOUT, x, t, mu=300.0, delta=0.6))
+
+
+def test_a_member_that_expands_beyond_the_bound_is_refused_from_the_zip_directory(
+        tmp_path, model_file):
+    """The directory's uncompressed size (a deflate bomb's 8 GB, declared here for 1 GiB
+    without writing it) is read before anything is decompressed."""
+    data = bytearray(model_file.read_bytes())
+    entry = data.rindex(b"regressors.npy") - 46  # its central-directory record
+    assert data[entry:entry + 4] == b"PK\x01\x02"
+    struct.pack_into("<I", data, entry + 24, 1 << 30)
+    (tmp_path / "bomb.npz").write_bytes(data)
+    one_line_error(tmp_path / "bomb.npz", "its arrays expand to 1024 MiB, more than 64 MiB")
+
+
+def test_an_array_header_claiming_more_data_than_its_member_holds_is_refused(
+        tmp_path, model_file):
+    stored = members(model_file)
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False,
+                                                  "shape": (10 ** 12,)})  # 8 TB
+    stored["targets.npy"] = header.getvalue() + bytes(64)
+    write_members(tmp_path / "claims.npz", stored)
+    one_line_error(tmp_path / "claims.npz", "targets claims more data than it holds")
+
+
+@pytest.mark.parametrize("name, array, message", [
+    ("arx_width", np.array(np.nan), "arx_width holds non-finite numbers"),
+    ("arx_coefficients", np.full((2, 1 + LAYOUT.size), np.nan),
+     "arx_coefficients holds non-finite numbers"),
+    ("bias", np.array(np.inf), "bias holds non-finite numbers"),
+    ("arx_width", np.array(0.0), "arx_width and period must be positive"),
+    ("offset", np.zeros(LAYOUT.size, np.float32),
+     "offset is a 1-dimensional float32 array, not a 1-dimensional float64 one"),
+    ("regressors", np.zeros(10), "regressors is a 1-dimensional float64 array, not a "
+     "2-dimensional float64 one"),
+    ("layout", np.array([2.0, 1.0, 1.0]), "layout is a 1-dimensional float64 array, not a "
+     "1-dimensional integer one"),
+    ("train", np.array('["crh380al"]'), "train must be a JSON object"),
+    ("arx_centres", np.zeros(0), "the multi-model's arrays do not match its layout"),
+])
+def test_every_member_is_checked_for_dtype_shape_and_finiteness(
+        tmp_path, model_file, name, array, message):
+    stored = members(model_file)
+    stored[f"{name}.npy"] = npy(array)
+    one_line_error(write_members(tmp_path / "edited.npz", stored), message)
+
+
+def test_only_the_members_the_format_names_are_read(tmp_path, model_file):
+    stored = members(model_file)
+    stored["unread.npy"] = b"not an array"
+    assert lssvm.load_model(write_members(tmp_path / "extra.npz", stored)).lssvm.size == 60
+
+
+def test_a_window_that_would_make_the_factor_too_large_is_one_line(model_file):
+    """gpc.window 100000 would ask for a (60 + 100000)^2 factor: 75 GiB."""
+    for window in (100000, lssvm.MAX_DICTIONARY - 59):
+        with pytest.raises(ScenarioError, match=f"its 60 samples and gpc.window {window} "
+                                                "exceed the 8192 samples a model may hold"):
+            lssvm.load_model(model_file, window)
+
+
+def test_a_model_file_that_is_not_a_regular_file_is_one_line(tmp_path):
+    one_line_error(tmp_path, "is a directory")
+    one_line_error("/dev/zero", "is not a regular file")

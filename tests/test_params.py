@@ -28,6 +28,14 @@ def test_unknown_scenario_names_the_known_ones():
         load_scenario("nope")
 
 
+def test_a_scenario_that_is_a_directory_or_missing_says_which(tmp_path):
+    with pytest.raises(ScenarioError, match=f"^scenario {tmp_path} is a directory, not a "
+                                            "scenario file$"):
+        load_scenario(str(tmp_path))
+    with pytest.raises(ScenarioError, match="scenario file .*absent.yaml does not exist"):
+        load_scenario(str(tmp_path / "absent.yaml"))
+
+
 def test_malformed_yaml_names_file_and_line(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("plant:\n  ros__parameters:\n    plant.mass: [1, 2\n")

@@ -166,3 +166,43 @@ def test_a_strategy_file_for_another_line_or_train_is_one_line(tmp_path, change,
     with pytest.raises(ScenarioError, match=message) as caught:
         strategy_run(line_path, path)
     assert "\n" not in str(caught.value)
+
+
+def edit_row(path, row: int, column: int, text: str) -> int:
+    """Replace one number of the strategy file's `row`-th data row; its line number."""
+    lines = path.read_text().splitlines()
+    first = lines.index(strategy.COLUMNS) + 1
+    cells = lines[first + row].split(",")
+    cells[column] = text
+    lines[first + row] = ",".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+    return first + row + 1
+
+
+@pytest.mark.parametrize("row, column, text, message", [
+    (10, 1, "1e300", "speed 1e+300 m/s is outside 0-300 m/s"),
+    (10, 1, "-0.5", "speed -0.5 m/s is outside 0-300 m/s"),
+    (10, 3, "nan", "every number must be finite"),
+    (10, 3, "1e6", "force 1e+06 N/kN is beyond +-1000 N/kN"),
+    (10, 2, "2", "mode 2 is not 1 (traction), 0 (cruise or coast) or -1 (brake)"),
+    (10, 0, "0.0", "position 0 m does not increase (after 900 m)"),
+    (0, 0, "-5", "position -5 m is off any line (0-2e+06 m)"),
+    (10, 0, "1,2", "four numbers expected (position,speed,mode,force)"),
+])
+def test_a_strategy_row_out_of_its_physical_range_is_one_line_naming_it(
+        tmp_path, row, column, text, message):
+    line_path, path, _ = shipped_like_strategy(tmp_path)
+    number = edit_row(path, row, column, text)
+    with pytest.raises(ScenarioError) as caught:
+        strategy_run(line_path, path)
+    assert str(caught.value).endswith(f"{path} line {number}: {message}")
+
+
+def test_a_huge_strategy_file_is_refused_by_its_size_before_it_is_read(tmp_path):
+    line_path, path, _ = shipped_like_strategy(tmp_path)
+    with open(path, "r+b") as handle:  # sparse: 58 MB on paper, nothing on disk
+        handle.truncate(58 << 20)
+    with pytest.raises(ScenarioError, match=f"strategy file {path} is larger than 8 MiB"):
+        strategy_run(line_path, path)
+    with pytest.raises(ScenarioError, match=f"strategy file {tmp_path} is a directory"):
+        strategy_run(line_path, tmp_path)

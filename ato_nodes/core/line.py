@@ -239,6 +239,8 @@ def _stations(path: Path, node: yaml.Node | None, length: float) -> tuple[Statio
         if not 0 <= position <= length:
             raise _error(path, item, f"stations: {position:g} m is off the line")
         dwell = _number(path, entry["dwell"], "dwell") if "dwell" in entry else 0.0
+        if dwell < 0:
+            raise _error(path, entry["dwell"], f"stations: dwell {dwell:g} s is negative")
         name = str(yaml.safe_load(yaml.serialize(entry["name"]))) if "name" in entry else ""
         if stations and position <= stations[-1].position:
             raise _error(path, item, "stations must be in increasing position order")

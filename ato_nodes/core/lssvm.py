@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from scipy.linalg import cho_solve, solve_triangular
 
+from . import yamlfile
 from .errors import ScenarioError
 
 GUARD = 1e-10  # relative Schur complement below which a new sample is rejected
@@ -295,53 +296,108 @@ def file_digest(path) -> str:
         return hashlib.sha256(handle.read()).hexdigest()
 
 
+# What a model file may hold. The file and what its members expand to are bounded before
+# anything is decompressed (a deflated member of zeros expands a thousandfold), and the
+# dictionary (identification samples + the correction window) before the kernel matrix and
+# its factor, (samples + window)^2 floats each, are allocated: 8192 is 0.5 GiB apiece,
+# several times the shipped model's 900 + 500.
+MAX_FILE_BYTES = 64 << 20
+MAX_EXPANDED_BYTES = 64 << 20
+MAX_DICTIONARY = 8192
+# The members FORMAT names, with their dtype kind (f: float64, i: integer, U: text) and
+# number of dimensions; nothing else in the archive is read.
+MEMBERS = {"format": ("U", 0), "layout": ("i", 1), "mu": ("f", 0), "delta": ("f", 0),
+           "offset": ("f", 1), "scale": ("f", 1), "regressors": ("f", 2), "targets": ("f", 1),
+           "alpha": ("f", 1), "bias": ("f", 0), "period": ("f", 0), "train": ("U", 0),
+           "arx_centres": ("f", 1), "arx_width": ("f", 0), "arx_coefficients": ("f", 2)}
+KINDS = {"f": "float64", "i": "integer", "U": "text"}
+
+
+def _read_members(path, data: bytes) -> dict[str, np.ndarray]:
+    """The members MEMBERS names, each checked for its dtype, its dimensions and (floats)
+    finiteness, their sizes bounded from the zip directory and each array's header
+    before any data is read."""
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+        infos = {}
+        for name in MEMBERS:
+            try:
+                infos[name] = archive.getinfo(f"{name}.npy")
+            except KeyError:
+                raise ScenarioError(f"model file {path} lacks the field {name}") from None
+        expanded = sum(info.file_size for info in infos.values())
+        if expanded > MAX_EXPANDED_BYTES:
+            raise ScenarioError(f"model file {path}: its arrays expand to {expanded / 2**20:.0f}"
+                                f" MiB, more than {MAX_EXPANDED_BYTES >> 20} MiB")
+        fields = {}
+        for name, (kind, dimensions) in MEMBERS.items():
+            with archive.open(infos[name]) as member:
+                version = np.lib.format.read_magic(member)
+                shape, _, dtype = (np.lib.format.read_array_header_1_0(member)
+                                   if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0(member))
+            if dtype.kind != kind or (kind == "f" and dtype != np.float64) \
+                    or len(shape) != dimensions:
+                raise ScenarioError(f"model file {path}: {name} is a {len(shape)}-dimensional "
+                                    f"{dtype} array, not a {dimensions}-dimensional "
+                                    f"{KINDS[kind]} one")
+            if math.prod(shape) * dtype.itemsize > infos[name].file_size:
+                raise ScenarioError(f"model file {path}: {name} claims more data than it holds")
+            with archive.open(infos[name]) as member:
+                fields[name] = np.lib.format.read_array(member, allow_pickle=False)
+            if kind == "f" and not np.all(np.isfinite(fields[name])):
+                raise ScenarioError(f"model file {path}: {name} holds non-finite numbers")
+    except ScenarioError:
+        raise
+    except (OSError, ValueError, EOFError, RuntimeError, NotImplementedError,
+            zipfile.BadZipFile) as exc:  # RuntimeError: an encrypted member
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ScenarioError(f"model file {path} is not a readable .npz archive ({reason})"
+                            ) from None
+    return fields
+
+
 def load_model(path, window: int = 0) -> ModelFile:
     """Read and check a model file: one-line ScenarioError for a missing, corrupt,
-    truncated or inconsistent one."""
+    truncated, oversized or inconsistent one (see MEMBERS, MAX_*)."""
+    fields = _read_members(path, yamlfile.read_bytes(path, "model file", MAX_FILE_BYTES))
+    if str(fields["format"]) != FORMAT:
+        raise ScenarioError(f"model file {path}: format {str(fields['format'])!r}, "
+                            f"expected {FORMAT!r}")
+    if fields["layout"].shape != (3,):
+        raise ScenarioError(f"model file {path}: layout must be [na, nb, nk]")
     try:
-        with open(path, "rb") as handle:
-            data = handle.read(64 * 1024 * 1024 + 1)
-    except OSError as exc:
-        raise ScenarioError(f"cannot read model file {path}: {exc.strerror}") from None
-    if len(data) > 64 * 1024 * 1024:
-        raise ScenarioError(f"model file {path} is larger than 64 MiB")
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            fields = {name: archive[name] for name in archive.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise ScenarioError(f"model file {path} is not a readable .npz archive ({exc})") from None
-    try:
-        if str(fields["format"]) != FORMAT:
-            raise ScenarioError(f"model file {path}: format {str(fields['format'])!r}, "
-                                f"expected {FORMAT!r}")
         layout = Layout(*(int(v) for v in fields["layout"]))
-        regressors = np.asarray(fields["regressors"], float)
-        targets = np.asarray(fields["targets"], float)
-        arrays = (regressors, targets, fields["offset"], fields["scale"], fields["alpha"])
-        if (regressors.ndim != 2 or regressors.shape[1] != layout.size
-                or targets.shape != (len(regressors),) or len(targets) < 2
-                or fields["alpha"].shape != targets.shape
-                or fields["offset"].shape != (layout.size,)
-                or fields["scale"].shape != (layout.size,)):
-            raise ScenarioError(f"model file {path}: arrays of inconsistent shapes")
-        if not all(np.all(np.isfinite(np.asarray(a, float))) for a in arrays) \
-                or not np.all(fields["scale"] > 0):
-            raise ScenarioError(f"model file {path}: non-finite numbers or a zero scale")
-        model = LSSVM(layout, float(fields["mu"]), float(fields["delta"]), fields["offset"],
-                      fields["scale"], regressors, targets, window)
-        if not np.allclose(model.alpha, fields["alpha"], rtol=1e-6,
-                           atol=1e-9 * max(1.0, float(np.abs(fields["alpha"]).max()))):
-            raise ScenarioError(f"model file {path}: its coefficients do not solve its samples "
-                                f"(a changed or corrupt file)")
-        train = json.loads(str(fields["train"]))
-        period = float(fields["period"])
-        centres = np.asarray(fields["arx_centres"], float)
-        coefficients = np.asarray(fields["arx_coefficients"], float)
-        if coefficients.shape != (len(centres), 1 + layout.size):
-            raise ScenarioError(f"model file {path}: the multi-model's arrays do not match its "
-                                f"layout")
-    except KeyError as exc:
-        raise ScenarioError(f"model file {path} lacks the field {exc.args[0]}") from None
     except ValueError as exc:
         raise ScenarioError(f"model file {path}: {exc}") from None
-    return ModelFile(model, period, train, centres, float(fields["arx_width"]), coefficients)
+    regressors, targets = fields["regressors"], fields["targets"]
+    centres, coefficients = fields["arx_centres"], fields["arx_coefficients"]
+    if (regressors.shape[1] != layout.size or targets.shape != (len(regressors),)
+            or len(targets) < 2 or fields["alpha"].shape != targets.shape
+            or fields["offset"].shape != (layout.size,)
+            or fields["scale"].shape != (layout.size,)):
+        raise ScenarioError(f"model file {path}: arrays of inconsistent shapes")
+    if not np.all(fields["scale"] > 0):
+        raise ScenarioError(f"model file {path}: a zero or negative scale")
+    if len(targets) + window > MAX_DICTIONARY:
+        raise ScenarioError(f"model file {path}: its {len(targets)} samples and gpc.window "
+                            f"{window} exceed the {MAX_DICTIONARY} samples a model may hold")
+    if len(centres) < 1 or coefficients.shape != (len(centres), 1 + layout.size):
+        raise ScenarioError(f"model file {path}: the multi-model's arrays do not match its "
+                            f"layout")
+    if not (fields["arx_width"] > 0 and fields["period"] > 0):
+        raise ScenarioError(f"model file {path}: arx_width and period must be positive")
+    try:
+        model = LSSVM(layout, float(fields["mu"]), float(fields["delta"]), fields["offset"],
+                      fields["scale"], regressors, targets, window)
+        train = json.loads(str(fields["train"]))
+    except ValueError as exc:
+        raise ScenarioError(f"model file {path}: {exc}") from None
+    if not isinstance(train, dict):
+        raise ScenarioError(f"model file {path}: train must be a JSON object")
+    if not np.allclose(model.alpha, fields["alpha"], rtol=1e-6,
+                       atol=1e-9 * max(1.0, float(np.abs(fields["alpha"]).max()))):
+        raise ScenarioError(f"model file {path}: its coefficients do not solve its samples "
+                            f"(a changed or corrupt file)")
+    return ModelFile(model, float(fields["period"]), train, centres,
+                     float(fields["arx_width"]), coefficients)

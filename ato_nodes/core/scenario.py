@@ -38,10 +38,12 @@ def scenario_names() -> list[str]:
 
 def resolve_scenario(name_or_file: str) -> Path:
     path = Path(name_or_file)
+    if path.is_dir():
+        raise ScenarioError(f"scenario {name_or_file} is a directory, not a scenario file")
     if path.suffix in (".yaml", ".yml") or path.exists():
-        if not path.is_file():
+        if not path.exists():
             raise ScenarioError(f"scenario file {name_or_file} does not exist")
-        return path
+        return path  # read as yamlfile reads it: a regular file, bounded
     candidate = config_dir() / "scenarios" / f"{name_or_file}.yaml"
     if candidate.is_file():
         return candidate

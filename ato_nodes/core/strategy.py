@@ -34,7 +34,8 @@ from typing import Callable
 
 import numpy as np
 
-from .line import Line
+from . import yamlfile
+from .line import MAX_LENGTH, Line
 from .optimizers import optimize
 from .plant import TrainParameters
 
@@ -446,6 +447,13 @@ def objective(values: dict, reference: dict) -> float:
 
 # The strategy file ------------------------------------------------------------------
 FORMAT = "ato-strategy-1"
+# What a strategy file may hold: a 2,000 km line (line.MAX_LENGTH) in optimize_strategy.py's
+# shortest stages (10 m) is 200,001 rows of at most ~35 bytes; speeds and forces beyond any
+# train's (1,080 km/h, 1 g of specific force) are a broken or hostile file, not a plan.
+MAX_FILE_BYTES = 8 << 20
+MAX_SPEED = 300.0   # m/s
+MAX_FORCE = 1000.0  # N/kN
+COLUMNS = "position,speed,mode,force"
 
 
 def write_strategy(path, header: dict, result: Strategy) -> None:
@@ -453,7 +461,7 @@ def write_strategy(path, header: dict, result: Strategy) -> None:
     train, planned time, algorithm, ...), then `position,speed,mode,force` rows (m, m/s,
     1 traction / 0 cruise or coast / -1 brake, N/kN) at every stage start and the end."""
     lines = [f"# {key}: {value}" for key, value in {"format": FORMAT, **header}.items()]
-    lines.append("position,speed,mode,force")
+    lines.append(COLUMNS)
     forces = np.append(result.forces, 0.0)
     modes = np.append(result.modes, 0)
     lines += [f"{s:.1f},{v:.5f},{int(m)},{f:.5f}"
@@ -471,30 +479,59 @@ class StrategyFile:
 
 
 def read_strategy(path) -> StrategyFile:
-    """A strategy file, checked: ValueError (one line) if it is not one."""
-    try:
-        text = Path(path).read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"cannot read strategy file {path}: {getattr(exc, 'strerror', exc)}") \
-            from None
+    """A strategy file, checked (its size before it is read, then every row): ValueError
+    (one line, naming the file and the line) if it is not one."""
+    text = yamlfile.read_text(path, "strategy file", MAX_FILE_BYTES)
     header, rows = {}, []
     for number, line in enumerate(text.splitlines(), 1):
         if line.startswith("#"):
             key, _, value = line[1:].partition(":")
             header[key.strip()] = value.strip()
-        elif line.strip() and line.strip() != "position,speed,mode,force":
-            try:
-                rows.append([float(v) for v in line.split(",")])
-            except ValueError:
-                raise ValueError(f"{path} line {number}: four numbers expected") from None
-    if header.get("format") != FORMAT:
-        raise ValueError(f"{path}: not a strategy file (format {header.get('format')!r})")
+            continue
+        if not line.strip():
+            continue
+        if header.get("format") != FORMAT:  # the header comes first
+            raise _not_a_strategy(path, header)
+        if line.strip() == COLUMNS:
+            continue
+        try:
+            row = [float(v) for v in line.split(",")]
+        except ValueError:
+            row = []
+        problem = _row_problem(row, rows[-1][0] if rows else None)
+        if problem:
+            raise ValueError(f"{path} line {number}: {problem}")
+        rows.append(row)
+    if header.get("format") != FORMAT:  # comments only
+        raise _not_a_strategy(path, header)
+    if len(rows) < 2:
+        raise ValueError(f"{path}: a strategy needs at least two rows ({COLUMNS})")
     data = np.array(rows, dtype=float)
-    if data.ndim != 2 or data.shape[1] != 4 or len(data) < 2 or not np.all(np.isfinite(data)) \
-            or np.any(np.diff(data[:, 0]) <= 0) or np.any(data[:, 1] < 0):
-        raise ValueError(f"{path}: rows must be increasing positions with finite, "
-                         f"non-negative speeds")
     return StrategyFile(header, data[:, 0], data[:, 1], data[:, 2].astype(int), data[:, 3])
+
+
+def _not_a_strategy(path, header: dict) -> ValueError:
+    return ValueError(f"{path}: not a strategy file (format {header.get('format')!r})")
+
+
+def _row_problem(row: list[float], previous_position: float | None) -> str:
+    """What is wrong with one row of a strategy file ('' if nothing)."""
+    if len(row) != 4:
+        return f"four numbers expected ({COLUMNS})"
+    position, speed, mode, force = row
+    if not all(math.isfinite(value) for value in row):
+        return "every number must be finite"
+    if not 0.0 <= position <= MAX_LENGTH:
+        return f"position {position:g} m is off any line (0-{MAX_LENGTH:g} m)"
+    if previous_position is not None and position <= previous_position:
+        return f"position {position:g} m does not increase (after {previous_position:g} m)"
+    if not 0.0 <= speed <= MAX_SPEED:
+        return f"speed {speed:g} m/s is outside 0-{MAX_SPEED:g} m/s"
+    if mode not in (-1.0, 0.0, 1.0):
+        return f"mode {mode:g} is not 1 (traction), 0 (cruise or coast) or -1 (brake)"
+    if abs(force) > MAX_FORCE:
+        return f"force {force:g} N/kN is beyond +-{MAX_FORCE:g} N/kN"
+    return ""
 
 
 # Planning by algorithm ----------------------------------------------------------------

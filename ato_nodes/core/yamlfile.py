@@ -1,7 +1,8 @@
-"""Reading the YAML files a user gives (scenarios, train presets, lines) without
-letting one exhaust memory or time: a size limit, regular files only, UTF-8 text,
-no anchors or aliases (an alias bomb expands a few lines into gigabytes), no
-duplicate keys (PyYAML keeps the last one silently), bounded nesting."""
+"""Reading the files a user gives (scenarios, train presets, lines; strategy and model
+files through read_bytes) without letting one exhaust memory or time: a size limit
+checked before reading, regular files only, UTF-8 text, no anchors or aliases (an
+alias bomb expands a few lines into gigabytes), no duplicate keys (PyYAML keeps the
+last one silently), bounded nesting."""
 
 from __future__ import annotations
 
@@ -16,21 +17,30 @@ MAX_BYTES = 1 << 20   # 1 MiB: the largest shipped file is a few kB
 MAX_DEPTH = 32
 
 
-def read_text(path: str | Path, what: str) -> str:
-    """The text of a user's file, checked; one ScenarioError line otherwise."""
+def read_bytes(path: str | Path, what: str, limit: int = MAX_BYTES) -> bytes:
+    """The content of a user's regular file of at most `limit` bytes (its size checked
+    before it is read, and the read bounded: a file may grow meanwhile); one
+    ScenarioError line otherwise."""
     path = Path(path)
     try:
         info = path.stat()
         if not stat.S_ISREG(info.st_mode):
-            raise ScenarioError(f"{what} {path} is not a regular file")
-        with path.open("rb") as handle:
-            data = handle.read(MAX_BYTES + 1)
+            kind = "a directory" if stat.S_ISDIR(info.st_mode) else "not a regular file"
+            raise ScenarioError(f"{what} {path} is {kind}")
+        if info.st_size <= limit:
+            with path.open("rb") as handle:
+                data = handle.read(limit + 1)
     except OSError as exc:
         raise ScenarioError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
-    if len(data) > MAX_BYTES:
-        raise ScenarioError(f"{what} {path} is larger than {MAX_BYTES >> 20} MiB")
+    if info.st_size > limit or len(data) > limit:
+        raise ScenarioError(f"{what} {path} is larger than {limit / (1 << 20):g} MiB")
+    return data
+
+
+def read_text(path: str | Path, what: str, limit: int = MAX_BYTES) -> str:
+    """The UTF-8 text of a user's file, checked as read_bytes checks it."""
     try:
-        return data.decode("utf-8")
+        return read_bytes(path, what, limit).decode("utf-8")
     except UnicodeDecodeError:
         raise ScenarioError(f"{what} {path} is not UTF-8 text") from None
 
