@@ -2,9 +2,14 @@
 
 One scorer (core.scoring.score_series) gives the indices, so a report and
 score_bag.py always agree. Each index stands beside the run's requirement
-(report.require, kept in the bag with the run's other parameters) and passes or
-fails. The report is Markdown with PNG figures (matplotlib, Agg) and an interactive,
-self-contained HTML page (ato_nodes.report_html, Plotly).
+(report.require, kept in the bag with the run's other parameters) and passes, fails
+or is not judged, with the reason: the run ended before its stop (stopping and
+running-time errors), the bag is partial (a requirement met so far may still be
+broken later), the run does not give the index. Live parameter changes the bag
+records are listed, marked on the time plots and shown in the gains. The report is
+Markdown with PNG figures (matplotlib, Agg) and an interactive, self-contained HTML
+page (ato_nodes.report_html, Plotly). Names taken from a bag (runs, scenarios,
+trains, lines, stations) are escaped in both: a bag is anyone's file.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import csv
 import itertools
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,14 +30,21 @@ from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
 from ato_nodes.core.schema import SPEC_BY_NAME
-from ato_nodes.core.scoring import (Requirement, observer_b0, run_line, score_series,
+from ato_nodes.core.scoring import (GROWING_INDICES, STOP_INDICES, Requirement, observer_b0,
+                                    run_line, score_series, stop_not_reached,
                                     total_disturbance)
+
+# One colour per run, in the PNG figures and the page alike: none red, which is the
+# speed limit's (drawn dash-dotted as well), nor grey, the reference bands'.
+RUN_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#bcbd22",
+               "#17becf")
+LIMIT_COLOUR = "#d62728"
 
 INDEX_COLUMNS = [  # (key, heading, format)
     ("steps", "steps", "{:d}"),
-    ("itae", "ITAE", "{:.6g}"),
-    ("iae", "IAE", "{:.6g}"),
-    ("ise", "ISE", "{:.6g}"),
+    ("itae", "ITAE (m/s) s^2", "{:.6g}"),
+    ("iae", "IAE m", "{:.6g}"),
+    ("ise", "ISE m^2/s", "{:.6g}"),
     ("max_abs_error_kmh", "max abs(e) km/h", "{:.4f}"),
     ("median_abs_error_kmh", "median abs(e) km/h", "{:.4f}"),
     ("p95_abs_error_kmh", "p95 abs(e) km/h", "{:.4f}"),
@@ -39,7 +52,7 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("j_seed004", "J (seed 004)", "{:.6g}"),
     ("eso_speed_max_dev", "max abs(z1-v) m/s", "{:.3g}"),
     ("eso_acceleration_max_dev", "max abs(z2-a) m/s^2", "{:.3g}"),
-    ("eso_disturbance_max_dev", "max abs(z3-f)", "{:.3g}"),
+    ("eso_disturbance_max_dev", "max abs(z3-f) m/s^3", "{:.3g}"),
     ("overshoot_percent", "overshoot %", "{:.3f}"),
     ("traction_energy_kwh", "traction kWh", "{:.2f}"),
     ("regenerated_energy_kwh", "regenerated kWh", "{:.2f}"),
@@ -94,10 +107,95 @@ def format_index(key: str, value) -> str:
     return form.format(int(value) if form == "{:d}" else value)
 
 
+class ReportError(ValueError):
+    """An input the report cannot use (one-line message)."""
+
+
+def md_text(text) -> str:
+    """Text as Markdown shows it literally, on one line: what could open an HTML tag or
+    an entity is escaped, and Markdown's marks (tables' | included) backslash-escaped."""
+    text = " ".join(str(text).split())
+    text = re.sub(r"&(?=#?\w+;)", "&amp;", text)
+    text = re.sub(r"<(?=[A-Za-z/!?])", "&lt;", text)
+    return re.sub(r"([\\`*_\[\]|~])", r"\\\1", text)
+
+
 @dataclass
 class Figure:
     title: str
     path: Path
+
+
+@dataclass(frozen=True)
+class LiveChange:
+    """A controller parameter set on the live run: from step `step` (time t, s) on."""
+
+    step: int
+    t: float
+    name: str
+    old: object
+    new: object
+
+    @property
+    def text(self) -> str:
+        return f"{self.name} {_value(self.old)} -> {_value(self.new)}"
+
+
+def live_changes(run: Run) -> list[LiveChange]:
+    """The run's live parameter changes in step order, each with the value it replaced."""
+    current = dict(run.parameters or {})
+    period = current.get("run.period", math.nan)
+    changes = []
+    for step in sorted(run.parameter_changes):
+        for name, value in sorted(run.parameter_changes[step].items()):
+            changes.append(LiveChange(step, step * period, name, current.get(name, "?"), value))
+            current[name] = value
+    return changes
+
+
+@dataclass
+class Tuning:
+    """A tuning directory's convergence (tune.py's history.csv) and its fitness."""
+
+    path: Path
+    evaluations: list[int]
+    best: list[float]
+    fitness: str  # the index key (itae, j_seed004, ...), "" when tuning.json does not say
+
+    @property
+    def name(self) -> str:
+        return self.path.name or str(self.path)
+
+    @property
+    def axis_title(self) -> str:
+        return f"best fitness: {heading(self.fitness)}" if self.fitness else "best fitness"
+
+
+def read_tuning(directory: Path) -> Tuning:
+    """A tuning directory's history.csv (and the fitness its tuning.json names); a file
+    that is not tune.py's is a ReportError naming it and its line."""
+    from ato_nodes.tuning import FITNESS  # here: ato_nodes.tuning imports this module
+    history = directory / "history.csv"
+    evaluations, best = [], []
+    try:
+        with history.open(newline="") as handle:
+            for number, row in enumerate(csv.DictReader(handle), start=2):
+                try:
+                    evaluations.append(int(row["evaluations"]))
+                    best.append(float(row["best_fitness"]))
+                except (KeyError, TypeError, ValueError):
+                    raise ReportError(f"{history} line {number} is not a tuning's history "
+                                      "row (iteration, evaluations, best_fitness, ...)") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise ReportError(f"{history}: cannot read it ({getattr(exc, 'strerror', None) or exc})"
+                          ) from None
+    if not evaluations:
+        raise ReportError(f"{history} holds no history rows")
+    try:
+        fitness = FITNESS.get(json.loads((directory / "tuning.json").read_text())["fitness"], "")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        fitness = ""
+    return Tuning(directory, evaluations, best, fitness)
 
 
 def run_indices(run: Run) -> dict:
@@ -125,18 +223,31 @@ def _save(figure, path: Path) -> Path:
     return path
 
 
+def _mark_changes(axes, run: Run, colour: str, named: bool = True) -> None:
+    """A dotted vertical line at each live parameter change of the run (in the legend
+    if `named`)."""
+    for change in live_changes(run):
+        axes.axvline(change.t, color=colour, ls=":", lw=1.2,
+                     label=f"{label(run)}: {change.text} at {change.t:g} s" if named else None)
+
+
 def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
-             target=None, bands: tuple[float, ...] = (), limit=None) -> Path:
+             target=None, bands: tuple[float, ...] = (), limit=None,
+             against_time: bool = True) -> Path:
     """One line per run of y(series) against x(series); optionally the first run's
-    target as a dashed line, its speed limit, and reference bands +-band."""
+    target as a dashed line, its speed limit, and reference bands +-band; against
+    time, each run's live parameter changes marked."""
     plt = _pyplot()
     figure, axes = plt.subplots(figsize=(9, 4.5))
     if target is not None:
         axes.plot(x(runs[0].series), target(runs[0].series), "k--", lw=1, label="target")
     if limit is not None and np.any(np.isfinite(runs[0].series.get("speed_limit", [np.inf]))):
-        axes.plot(x(runs[0].series), limit(runs[0].series), "r-", lw=1, label="speed limit")
-    for run in runs:
-        axes.plot(x(run.series), y(run.series), lw=0.9, label=label(run))
+        axes.plot(x(runs[0].series), limit(runs[0].series), color=LIMIT_COLOUR, ls="-.",
+                  lw=1.2, label="speed limit")
+    for run, colour in zip(runs, itertools.cycle(RUN_COLOURS)):
+        axes.plot(x(run.series), y(run.series), color=colour, lw=0.9, label=label(run))
+        if against_time:
+            _mark_changes(axes, run, colour)
     for band, style in zip(bands, itertools.cycle((":", "-.", "--"))):
         for sign in (1, -1):
             axes.axhline(sign * band, color="grey", ls=style, lw=1,
@@ -169,7 +280,7 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
         figures.append(Figure("Speed against distance", _overlay(
             with_position, lambda s: s["position"] / 1000, speed,
             ("distance (km)", "speed (km/h)", "Speed against distance"),
-            out / "speed_distance.png", target=target, limit=limit)))
+            out / "speed_distance.png", target=target, limit=limit, against_time=False)))
     figures.append(Figure("Tracking error", _overlay(
         runs, time, lambda s: (s["target"] - s["speed"]) * MS_TO_KMH,
         ("time (s)", "target - speed (km/h)", "Tracking error"), out / "error.png",
@@ -179,15 +290,15 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
         figures.append(Figure("Control force", _overlay(
             with_command, time, lambda s: s["command"],
             ("time (s)", "u (N/kN)", "Control force (specific)"), out / "command.png")))
-    for index, run in enumerate(runs):
+    for index, (run, colour) in enumerate(zip(runs, itertools.cycle(RUN_COLOURS))):
         for plot, name in ((plot_observer, "observer"), (plot_outputs, "outputs")):
-            figure = plot(run, out / f"{name}_{index + 1}.png")
+            figure = plot(run, out / f"{name}_{index + 1}.png", colour)
             if figure:
                 figures.append(figure)
     return figures
 
 
-def plot_outputs(run: Run, path: Path) -> Figure | None:
+def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:
     """Every named output the run's controller kind declares (with its unit), against
     time; kinds with an extended state observer have plot_observer instead."""
     try:
@@ -201,16 +312,19 @@ def plot_outputs(run: Run, path: Path) -> Figure | None:
     figure, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs) + 0.8),
                                 sharex=True, squeeze=False)
     for axis, output in zip(axes[:, 0], outputs):
-        axis.plot(run.series["t"], run.series[output.name], lw=0.8)
+        axis.plot(run.series["t"], run.series[output.name], color=colour, lw=0.8)
+        _mark_changes(axis, run, "black", named=axis is axes[0, 0])
         axis.set_ylabel(f"{output.name}\n({output.unit})")
         axis.set_title(output.description, fontsize=9, loc="left")
         axis.grid(alpha=0.3)
+    if live_changes(run):
+        axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time (s)")
     figure.suptitle(f"Controller outputs ({component.kind}): {label(run)}")
     return Figure(f"Controller outputs: {label(run)}", _save(figure, path))
 
 
-def plot_observer(run: Run, path: Path) -> Figure | None:
+def plot_observer(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:
     """Seed 000 figures 10-12: z1, z2, z3 against speed, acceleration, total disturbance."""
     s = run.series
     if not {"z1", "z2", "z3", "speed", "acceleration"} <= s.keys():
@@ -229,29 +343,35 @@ def plot_observer(run: Run, path: Path) -> Figure | None:
     axes[2].plot(s["t"], s["z3"], "r--", lw=0.8, label="z3")
     axes[2].set(xlabel="time (s)", ylabel="m/s^3")
     for axis in axes:
+        _mark_changes(axis, run, colour, named=axis is axes[0])
         axis.grid(alpha=0.3)
         axis.legend(loc="upper right")
     axes[0].set_title(f"Extended state observer: {label(run)}")
     return Figure(f"Observer: {label(run)}", _save(figure, path))
 
 
-def plot_convergence(tunings: list[Path], path: Path) -> Figure:
+def convergence_axis(tunings: list[Tuning]) -> str:
+    """The fitness axis' title: the tunings' fitness and unit when they share one."""
+    titles = {tuning.axis_title for tuning in tunings}
+    return titles.pop() if len(titles) == 1 else "best fitness (each tuning's own)"
+
+
+def plot_convergence(tunings: list[Path | Tuning], path: Path) -> Figure:
     """Seed 000 figure 9: best fitness against evaluations, one line per tuning."""
+    tunings = [t if isinstance(t, Tuning) else read_tuning(t) for t in tunings]
     plt = _pyplot()
     figure, axes = plt.subplots(figsize=(9, 4.5))
-    for directory in tunings:
-        with (directory / "history.csv").open() as handle:
-            rows = list(csv.DictReader(handle))
-        axes.step([int(r["evaluations"]) for r in rows], [float(r["best_fitness"]) for r in rows],
-                  where="post", marker="o", markersize=3, label=directory.name)
-    axes.set(xlabel="fitness evaluations", ylabel="best fitness", yscale="log",
-             title="Tuning convergence")
+    for tuning in tunings:
+        axes.step(tuning.evaluations, tuning.best, where="post", marker="o", markersize=3,
+                  label=tuning.name)
+    axes.set(xlabel="fitness evaluations", ylabel=convergence_axis(tunings), yscale="log",
+             title="Tuning convergence (infeasible candidates score above 1e9)")
     axes.grid(alpha=0.3, which="both")
     axes.legend()
     return Figure("Tuning convergence", _save(figure, path))
 
 
-PASS, FAIL, UNMEASURED = "pass", "fail", "not measured"
+PASS, FAIL, UNMEASURED = "pass", "fail", "not judged"
 
 
 @dataclass
@@ -267,15 +387,32 @@ class RunReport:
     bands: tuple[float, ...]
     identity: dict[str, str]
 
-    def status(self, key: str) -> str:
-        """PASS, FAIL or UNMEASURED for a required index, "" for one without requirement."""
+    def __post_init__(self):
+        self.partial = self.run.partial
+        self.stop_not_reached = stop_not_reached(self.run.series, self.run.parameters)
+
+    def judged(self, key: str) -> tuple[str, str]:
+        """(PASS, FAIL or UNMEASURED, why it is not judged) for a required index;
+        ("", "") for one without requirement."""
         requirement = self.requirements.get(key)
         if requirement is None:
-            return ""
+            return "", ""
+        if key in STOP_INDICES and self.stop_not_reached:
+            return UNMEASURED, self.stop_not_reached
         value = self.indices.get(key)
+        if key not in self.indices:
+            return UNMEASURED, "this run does not give it"
         if not isinstance(value, (int, float)) or not math.isfinite(value):
-            return UNMEASURED
-        return PASS if requirement.violation(self.indices) == 0.0 else FAIL
+            return UNMEASURED, "not measured in this run"
+        met = requirement.violation(self.indices) == 0.0
+        if self.partial and (met or key not in GROWING_INDICES):
+            return UNMEASURED, ("met" if met else "broken") + " over the steps recorded, " \
+                "but the run is partial"
+        return (PASS if met else FAIL), ""
+
+    def status(self, key: str) -> str:
+        """PASS, FAIL or UNMEASURED for a required index, "" for one without requirement."""
+        return self.judged(key)[0]
 
     def requirement_text(self, key: str) -> str:
         return f"{heading(key)} <= {self.requirements[key].limit:g}"
@@ -283,18 +420,28 @@ class RunReport:
     @property
     def summary(self) -> tuple[str, str]:
         """(overall status, one line): FAIL if any requirement is broken, else
-        UNMEASURED if any cannot be judged from the bag, else PASS ("" without any)."""
-        statuses = {key: self.status(key) for key in self.requirements}
+        UNMEASURED if any cannot be judged from the bag, else PASS ("" without any);
+        the line says why each not judged is not."""
+        judged = {key: self.judged(key) for key in self.requirements}
         broken = [f"{heading(k)} {format_index(k, self.indices[k])} > "
-                  f"{self.requirements[k].limit:g}" for k, v in statuses.items() if v == FAIL]
-        unmeasured = [heading(k) for k, v in statuses.items() if v == UNMEASURED]
-        if not statuses:
-            return "", f"{self.label}: no requirements (the scenario sets no report.require)"
-        text = f"{self.label}: {len(statuses) - len(broken) - len(unmeasured)} of " \
-               f"{len(statuses)} requirements met"
-        text += "".join(f"; {what}: {', '.join(items)}" for what, items in
-                        (("broken", broken), (UNMEASURED, unmeasured)) if items)
-        overall = FAIL if broken else UNMEASURED if unmeasured else PASS
+                  f"{self.requirements[k].limit:g}" for k, (v, _) in judged.items() if v == FAIL]
+        reasons: dict[str, list[str]] = {}
+        for key, (status, reason) in judged.items():
+            if status == UNMEASURED:
+                reasons.setdefault(reason, []).append(heading(key))
+        partial = f" (partial: {self.partial})" if self.partial else ""
+        if not judged:
+            return "", f"{self.label}{partial}: no requirements (the scenario sets no " \
+                       "report.require)"
+        unjudged = sum(len(keys) for keys in reasons.values())
+        text = f"{self.label}{partial}: {len(judged) - len(broken) - unjudged} of " \
+               f"{len(judged)} requirements met"
+        if broken:
+            text += f"; broken: {', '.join(broken)}"
+        if reasons:
+            text += f"; {UNMEASURED}: " + "; ".join(f"{', '.join(keys)} ({reason})"
+                                                    for reason, keys in reasons.items())
+        overall = FAIL if broken else UNMEASURED if reasons else PASS
         return overall, text
 
 
@@ -331,6 +478,12 @@ def _value(value) -> str:
         if isinstance(value, str) and "/" in value else str(value)
 
 
+def _gain(run: Run, name: str, changes: list[LiveChange]) -> str:
+    """A gain's value, then each live change of it: "b1 40 -> 100 at 59.2 s"."""
+    text = f"{name.split('.', 1)[1]} {_value(run.parameters[name])}"
+    return text + "".join(f" -> {_value(c.new)} at {c.t:g} s" for c in changes if c.name == name)
+
+
 def identity(run: Run) -> dict[str, str]:
     """What the run was: scenario, train, target, controller and its gains, line."""
     p = run.parameters
@@ -349,7 +502,8 @@ def identity(run: Run) -> dict[str, str]:
             continue
         described[registry.role] = f"{kind}: {component.description}"
         if registry is CONTROLLERS:
-            described["gains"] = ", ".join(f"{spec.name.split('.', 1)[1]} {_value(p[spec.name])}"
+            changes = live_changes(run)
+            described["gains"] = ", ".join(_gain(run, spec.name, changes)
                                            for spec in component.parameters
                                            if spec.name in p) or "-"
     described["limits"] = (f"u in [{p.get('controller.u_min', math.nan):g}, "
@@ -357,11 +511,17 @@ def identity(run: Run) -> dict[str, str]:
                            f"{p.get('controller.max_rate', math.nan):g} N/kN/s, preview "
                            f"{p.get('controller.preview', 0)} steps")
     line = run_line(p)
-    described["line"] = "open track (no line file)" if line is None else (
-        f"{line.name}: {line.length / 1000:g} km, stop at {line.stop_position:g} m"
-        + (f", planned run time {line.planned_run_time:g} s" if line.planned_run_time else ""))
+    if line is None:
+        described["line"] = "open track (no line file)"
+    else:
+        stations = ", ".join(f"{s.name} ({s.position:g} m)" for s in line.stations)
+        described["line"] = (
+            f"{line.name}: {line.length / 1000:g} km, stop at {line.stop_position:g} m"
+            + (f", planned run time {line.planned_run_time:g} s" if line.planned_run_time
+               else "") + (f"; stations {stations}" if stations else ""))
     described["run"] = (f"{p.get('run.duration', math.nan):g} s in steps of "
-                        f"{p.get('run.period', math.nan):g} s")
+                        f"{p.get('run.period', math.nan):g} s"
+                        + (f"; partial: {run.partial}" if run.partial else ""))
     return described
 
 
@@ -400,12 +560,36 @@ def verdict_rows(reports: list[RunReport]) -> list[VerdictRow]:
     return rows
 
 
-MARK = {PASS: "pass", FAIL: "**FAIL**", UNMEASURED: "not measured", "": ""}
+MARK = {PASS: "pass", FAIL: "**FAIL**", UNMEASURED: "not judged", "": ""}
+CHANGES_HEADER = ["run", "step", "t (s)", "parameter", "old -> new"]
+
+
+def change_rows(reports: list[RunReport]) -> list[list[str]]:
+    """One row per live parameter change of every run (CHANGES_HEADER)."""
+    return [[r.label, str(c.step), f"{c.t:g}", c.name, f"{_value(c.old)} -> {_value(c.new)}"]
+            for r in reports for c in live_changes(r.run)]
+
+
+def report_notes(reports: list[RunReport]) -> list[str]:
+    """What the report leaves out or qualifies, run by run."""
+    notes = [f"{r.label}: partial, {r.partial}: the indices cover the steps recorded"
+             for r in reports if r.partial]
+    notes += [f"{r.label}: no {', '.join(r.indices['skipped'])} topic; indices needing them "
+              f"skipped" for r in reports if r.indices["skipped"]]
+    return notes + [f"{r.label}: {note}" for r in reports for note in r.run.notes]
 
 
 def _markdown_rows(header: list[str], rows: list[list[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + \
-        ["| " + " | ".join(row) + " |" for row in rows]
+    """A Markdown table of plain text cells (escaped here); a cell already in Markdown
+    is a Markup."""
+    def cell(text) -> str:
+        return text if isinstance(text, Markup) else md_text(text)
+    return ["| " + " | ".join(map(cell, header)) + " |", "|" + "---|" * len(header)] + \
+        ["| " + " | ".join(map(cell, row)) + " |" for row in rows]
+
+
+class Markup(str):
+    """Markdown text, written as it is."""
 
 
 def markdown_report(reports: list[RunReport], rows: list[VerdictRow],
@@ -414,42 +598,48 @@ def markdown_report(reports: list[RunReport], rows: list[VerdictRow],
     lines = ["# ATO run report", ""]
     for report in reports:
         overall, text = report.summary
-        lines.append(f"- **{overall.upper() or 'NO VERDICT'}** {text}")
+        lines.append(f"- **{overall.upper() or 'NO VERDICT'}** {md_text(text)}")
     if reports:
         keys = list(dict.fromkeys(k for r in reports for k in r.identity))
         lines += ["", "## The run" + ("s" if len(reports) > 1 else ""), ""]
         lines += _markdown_rows([""] + labels, [[key] + [r.identity.get(key, "-") for r in reports]
                                                 for key in keys])
+        changes = change_rows(reports)
+        if changes:
+            lines += ["", "## Live parameter changes", "", "Set on the running controller "
+                      "(`ros2 param set`), recorded in the bag; from that step on.", ""]
+            lines += _markdown_rows(CHANGES_HEADER, changes)
         lines += ["", "## Verdict", "", "Indices from the bags alone (e = target - true speed, "
                   "trapezoidal integrals from t = 0), against each run's requirements "
                   "(`report.require` of its scenario).", ""]
         lines += _markdown_rows(["index", "requirement"] + labels, [
-            [row.heading, row.requirement] + [" ".join(filter(None, (text, MARK[status])))
-                                              for text, status in row.cells] for row in rows])
-    notes = [f"{r.label}: no {', '.join(r.indices['skipped'])} topic; indices needing them "
-             f"skipped" for r in reports if r.indices["skipped"]]
-    notes += [f"{r.label}: {note}" for r in reports for note in r.run.notes]
-    lines += [""] + [f"- {note}" for note in notes]
+            [row.heading, row.requirement] + [Markup(" ".join(filter(None, (
+                md_text(text), MARK[status])))) for text, status in row.cells] for row in rows])
+    lines += [""] + [f"- {md_text(note)}" for note in report_notes(reports)]
     for figure in figures:
-        lines += ["", f"## {figure.title}", "", f"![{figure.title}]({figure.path.name})"]
+        title = md_text(figure.title)
+        lines += ["", f"## {title}", "", f"![{title}]({figure.path.name})"]
     return "\n".join(lines) + "\n"
 
 
 def write_report(runs: list[Run], tunings: list[Path], out: Path) -> tuple[Path, Path]:
     """report.md with the PNG figures, report.html (interactive) and indices.json in
-    `out`. Every run is judged before anything is written: a bad report.* parameter
-    in a bag is a ScenarioError (one line)."""
+    `out`. Every run is judged and every tuning read before anything is written: a
+    bad report.* parameter in a bag is a ScenarioError, a tuning directory that is not
+    tune.py's a ReportError (one line each)."""
     reports = [judge(run) for run in runs]
     rows = verdict_rows(reports)
+    histories = [read_tuning(directory) for directory in tunings]
     out.mkdir(parents=True, exist_ok=True)
     figures = plot_runs(runs, out) if runs else []
-    if tunings:
-        figures.append(plot_convergence(tunings, out / "convergence.png"))
+    if histories:
+        figures.append(plot_convergence(histories, out / "convergence.png"))
     (out / "indices.json").write_text(jsontext.dumps(
-        {report.label: report.indices for report in reports}, indent=2))
+        {report.label: {**report.indices, **({"partial": report.partial} if report.partial
+                                             else {})} for report in reports}, indent=2))
     md_path = out / "report.md"
     md_path.write_text(markdown_report(reports, rows, figures))
     html_path = out / "report.html"
     from ato_nodes import report_html  # here, not above: it imports this module
-    report_html.write_html(reports, rows, tunings, html_path)
+    report_html.write_html(reports, rows, histories, html_path)
     return md_path, html_path

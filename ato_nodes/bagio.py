@@ -10,6 +10,12 @@ stack's own bags: one stamp per step on every topic) only the steps every
 topic has are read, and the run says how many it left out: a gap is never
 filled. A topic of someone else's bag with stamps of its own is sampled at
 the latest message at or before each stamp.
+
+A run's bag says whether it is whole: its parameters give the steps the run
+planned (core.schema.steps), its summary.json (when the launcher or the
+supervisor wrote one) the run's status; Run.partial compares them with the steps
+recorded. The parameters kept in a bag are checked against the schema when read:
+a bag is anyone's file.
 """
 
 from __future__ import annotations
@@ -27,10 +33,14 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.schema import SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
 from ato_nodes.core.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
+SUMMARY = "summary.json"  # the run's outcome, beside the bag's files: {"status": ..., ...}
+# A run's status (summary.json) as the reason it ended before its planned steps.
+ENDED = {"timeout": "timed out", "completed": "interrupted"}
 
 LABELLED = "labelled"  # a Float64MultiArray whose layout.dim[0].label names its entries
 MATRIX = "matrix"      # a Float64MultiArray kept whole: one row per step
@@ -68,6 +78,34 @@ class Run:
     # live controller parameters changed during the run: {step: {name: value}}, as
     # core.loop.simulate(changes=...) takes them
     parameter_changes: dict[int, dict[str, float]] = field(default_factory=dict)
+    status: str | None = None  # the run's status from its summary.json, if it has one
+
+    @property
+    def planned_steps(self) -> int | None:
+        """The steps the run was to make (None: a bag without the stack's parameters)."""
+        try:
+            return steps(self.parameters)
+        except (KeyError, TypeError):
+            return None
+
+    @property
+    def recorded_steps(self) -> int:
+        """Steps up to the last one every topic has: its stamp is t_k = k run.period."""
+        t = self.series["t"]
+        period = (self.parameters or {}).get("run.period")
+        if not len(t) or not period:
+            return len(t)
+        return round(t[-1] / period) + 1
+
+    @property
+    def partial(self) -> str | None:
+        """How the run ended before its planned steps, e.g. "interrupted at step 99 of
+        2000"; None for a whole run (or a bag that does not say what was planned)."""
+        planned = self.planned_steps
+        if planned is None or self.recorded_steps >= planned:
+            return None
+        ended = ENDED.get(self.status or "completed", self.status)
+        return f"{ended} at step {self.recorded_steps} of {planned}"
 
 
 def parse_mapping(items: list[str]) -> dict[str, str]:
@@ -167,7 +205,9 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
         raws: dict[str, list[bytes]] = {role: [] for role in found}
         changes_topic = names["parameter_changes"]
         changes: dict[int, dict[str, float]] = {}
+        count = 0
         for topic, stamp, raw in messages:
+            count += 1
             role = role_of.get(topic)
             if role is not None:
                 stamps[role].append(stamp)
@@ -179,9 +219,24 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
         raise
     except Exception as exc:  # rosbags and mcap raise many unrelated types for bad files
         raise _unreadable(path, exc) from None
+    status = run_status(path)
+    if count == 0:
+        ended = f" ({status} before its first step)" if status else ""
+        raise BagError(f"{path}: 0 messages recorded{ended}; nothing to score")
     run = _assemble(path, found, stamps, raws, types)
     run.parameter_changes = changes
+    run.status = status
     return run
+
+
+def run_status(path: Path) -> str | None:
+    """The status in the run's summary.json ("completed", "interrupted", ...), None
+    without one (a bag of someone else's, or one its writer left no summary in)."""
+    try:
+        status = json.loads((path / SUMMARY).read_text()).get("status")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return status if isinstance(status, str) and status else None
 
 
 def _assemble(path, found, stamps, raws, types) -> Run:
@@ -301,25 +356,57 @@ def read_series(bag: str | Path, mapping: dict[str, str] | None = None) -> dict[
 
 
 def read_parameters(bag: str | Path) -> dict | None:
-    """The run parameters the recorder stored in the bag's metadata, if any."""
+    """The run parameters the recorder stored in the bag's metadata, if any (None:
+    someone else's bag, or one without metadata). Kept ones that are not a JSON object
+    of valid values are a BagError: each parameter the schema knows is checked by it,
+    and the files the bag keeps are text."""
     try:
         metadata = yaml.safe_load((Path(bag) / "metadata.yaml").read_text())
         text = (metadata["rosbag2_bagfile_information"].get("custom_data") or {})[PARAMETERS_KEY]
-        return json.loads(text)
-    except (OSError, yaml.YAMLError, KeyError, TypeError, json.JSONDecodeError):
-        return None  # someone else's bag, or one without metadata: no parameters
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return None
+    where = f"{bag}: the run's parameters kept in metadata.yaml"
+    try:
+        parameters = json.loads(text)
+    except (TypeError, ValueError) as exc:
+        raise BagError(f"{where} are not JSON ({exc})") from None
+    if not isinstance(parameters, dict):
+        raise BagError(f"{where} are a JSON {type(parameters).__name__}, not an object")
+    try:
+        return {name: _checked_value(name, value, where) for name, value in parameters.items()}
+    except ScenarioError as exc:
+        raise BagError(str(exc)) from None
+
+
+KEPT_TEXT = {LINE_BASE64, *(f"{name}.{part}" for name in KEPT_FILES
+                            for part in ("base64", "sha256"))}
+
+
+def _checked_value(name: str, value, where: str):
+    spec = SPEC_BY_NAME.get(name)
+    if spec is not None and not (spec.choices and isinstance(value, str)):
+        return spec.check(value, where)  # a kind another version knows is said so later
+    if (spec is not None or name in KEPT_TEXT) and not isinstance(value, str):
+        raise ScenarioError(f"{where}: {name} must be a string, not {value!r}")
+    return value
 
 
 def run_columns(run: Run) -> dict[str, np.ndarray]:
     """The run's series as flat columns, one value per step, in simulate()'s order, then
-    the controller's outputs; the horizon becomes preview_0 .. preview_N (r_k .. r_k+N). Units as in the topic map (SI: s, m, m/s,
-    m/s^2, N/kN); t is the step's simulated time, s from the run's start."""
+    the controller's outputs; the horizon becomes preview_0 .. preview_N (r_k .. r_k+N).
+    Units as in the topic map (SI: s, m, m/s, m/s^2, N/kN); t is the step's simulated
+    time, s from the run's start. speed_limit is NaN where no limit applies, and left
+    out for a run without any (the open track)."""
     from ato_nodes.core.loop import SERIES
     first = [name for name in SERIES if name in run.series]  # the simulation's order
     columns = {}
     others = [name for name in run.series if name not in first]  # outputs in their order
     for name in first + sorted(others, key=lambda name: name == "preview"):  # horizon last
         values = run.series[name]
+        if name == "speed_limit":  # no limit (inf, the open track's) is a missing value
+            if not np.isfinite(values).any():
+                continue
+            values = np.where(np.isfinite(values), values, np.nan)
         if values.ndim == 2:
             columns.update({f"{name}_{i}": values[:, i] for i in range(values.shape[1])})
         else:

@@ -7,7 +7,9 @@ before the kill. `repair()` reads the file record by record up to the first
 incomplete one, writes a complete bag from what it holds (same topics, types,
 stamps and bytes; the run's parameters from parameters.json), checks that the
 new bag reads back with every message, and only then replaces the old file.
-The like of `ros2 bag reindex`, for the MCAP layout this project records.
+The like of `ros2 bag reindex`, for the MCAP layout this project records. A
+directory that holds no .mcap file is not taken for a complete bag: repair() says
+what it holds instead.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import yaml
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
@@ -40,16 +43,41 @@ class RepairReport:
 
     def describe(self) -> str:
         if not self.repaired:
-            return f"{self.bag}: complete, nothing to repair"
+            return f"{self.bag}: complete (metadata.yaml and a finished MCAP file), nothing " \
+                   "to repair"
         counts = ", ".join(f"{topic} {count}" for topic, count in sorted(self.messages.items()))
         return f"{self.bag}: repaired, {sum(self.messages.values())} messages kept ({counts})"
 
 
 def _mcap_file(bag: Path) -> Path:
-    files = sorted(bag.glob("*.mcap"))
-    if len(files) != 1:
+    try:
+        files = sorted(path for path in bag.glob("*.mcap") if path.is_file())
+    except OSError as exc:
+        raise RepairError(f"{bag}: cannot list it: {exc.strerror or exc}") from None
+    if not files:
+        raise RepairError(f"{bag}: not a bag: {_holdings(bag)}")
+    if len(files) > 1:
         raise RepairError(f"{bag}: expected one .mcap file, found {len(files)}")
     return files[0]
+
+
+def _holdings(bag: Path) -> str:
+    """What a directory without a .mcap file holds, in a few words."""
+    metadata = bag / "metadata.yaml"
+    if metadata.is_file():
+        try:
+            information = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"]
+            storage = information["storage_identifier"]
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError):
+            return "no .mcap file, and its metadata.yaml is not rosbag2 metadata"
+        return (f"no .mcap file; its metadata.yaml is of a rosbag2 bag in {storage} "
+                "storage, and only MCAP bags are repaired here")
+    try:
+        entries = sum(1 for _ in bag.iterdir())
+    except OSError as exc:
+        return f"no .mcap file ({exc.strerror or exc})"
+    return f"no .mcap file and no metadata.yaml ({entries} other entries)" if entries else \
+        "an empty directory"
 
 
 def needs_repair(bag: str | Path) -> bool:
@@ -87,10 +115,14 @@ def _readable_records(path: Path):
 
 
 def repair(bag: str | Path) -> RepairReport:
+    """The bag made complete, or said complete; RepairError for a directory that is not
+    a bag or a file that cannot be repaired."""
     bag = Path(bag)
+    if not bag.is_dir():
+        raise RepairError(f"{bag} is not a bag directory")
+    broken = _mcap_file(bag)
     if not needs_repair(bag):
         return RepairReport(bag, False)
-    broken = _mcap_file(bag)
     schemas, channels, messages = _readable_records(broken)
     if not channels:
         raise RepairError(f"{bag}: {broken.name} holds no readable channel; nothing to keep")

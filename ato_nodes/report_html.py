@@ -2,7 +2,9 @@
 opens with no network), the verdict and the runs' identity first, then figures to zoom
 and hover: every time subplot shares one time axis (zoom one, all follow), the
 distance subplots one distance axis over the line's gradient profile and its neutral
-sections. Series stay SI inside; speeds are shown in km/h.
+sections, each live parameter change a dotted line across the time subplots. Series
+stay SI inside; speeds are shown in km/h. Text from a bag is escaped (html.escape),
+in the tables and in Plotly's names and titles alike.
 
 The page counts the figures Plotly has drawn in `data-plots-rendered` on its body,
 so a headless browser can tell a rendered page from a blank one
@@ -11,14 +13,15 @@ so a headless browser can tell a rendered page from a blank one
 
 from __future__ import annotations
 
-import csv
 import html
 import itertools
 from pathlib import Path
 
 import numpy as np
 
-from ato_nodes.analysis import FAIL, PASS, UNMEASURED, RunReport, VerdictRow
+from ato_nodes.analysis import (CHANGES_HEADER, FAIL, LIMIT_COLOUR, PASS, RUN_COLOURS,
+                                UNMEASURED, RunReport, Tuning, VerdictRow, change_rows,
+                                convergence_axis, live_changes, report_notes)
 from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
@@ -32,6 +35,7 @@ MODES = ((1, "traction", "#2ca02c"), (0, "coast", "#bbbbbb"), (-1, "brake", "#d6
 STATUS_COLOURS = {PASS: "#d8f3dc", FAIL: "#ffccd5", UNMEASURED: "#fff3bf", "": "#eeeeee"}
 ERROR_INDICES = ("max_abs_error_kmh", "max_abs_error_outside_steps_kmh", "p95_abs_error_kmh")
 ROW_HEIGHT = 190  # px of one time or distance subplot
+TITLE_ROOM = 30   # px between the legend (above the subplots) and the first subplot: its title
 RENDERED_ATTRIBUTE = "data-plots-rendered"
 # report.html#t=START:END opens with the time axes on that stretch (seconds).
 # Every x axis is set: a relayout of one does not move the axes that match it.
@@ -50,8 +54,12 @@ font-weight:bold}"""
 
 
 def _colours():
-    import plotly.colors
-    return itertools.cycle(plotly.colors.qualitative.Plotly)
+    return itertools.cycle(RUN_COLOURS)
+
+
+def _text(text: str) -> str:
+    """A bag's text for Plotly, which reads tags (<b>, <a href=...>) in names and titles."""
+    return html.escape(str(text))
 
 
 def _f32(values) -> np.ndarray:
@@ -87,7 +95,8 @@ class Panels:
         if traces:
             self.panels.append((title, height, traces, shapes or []))
 
-    def figure(self, x_title: str):
+    def figure(self, x_title: str, every_row: tuple = ()):
+        """The subplots; each of `every_row` (shapes) drawn on all of them."""
         from plotly.subplots import make_subplots
         count = len(self.panels)
         heights = [height for _, height, _, _ in self.panels]
@@ -97,14 +106,16 @@ class Panels:
         for row, (_, _, traces, shapes) in enumerate(self.panels, start=1):
             for trace in traces:
                 figure.add_trace(trace, row=row, col=1)
-            for shape in shapes:
+            for shape in (*shapes, *every_row):
                 shape(figure, row)
         figure.update_xaxes(title_text=x_title, row=count, col=1)
         figure.update_xaxes(showspikes=True, spikemode="across", spikethickness=1,
                             showticklabels=True)  # each subplot's times, when zoomed
-        figure.update_layout(height=int(ROW_HEIGHT * sum(heights) + 120), hovermode="x",
-                             margin=dict(l=70, r=20, t=40, b=50),
-                             legend=dict(orientation="h", y=1.0, yanchor="bottom"))
+        height = int(ROW_HEIGHT * sum(heights) + 120)
+        margin = dict(l=70, r=20, t=40, b=50)
+        figure.update_layout(height=height, hovermode="x", margin=margin, legend=dict(
+            orientation="h", yanchor="bottom",  # above the first subplot's title
+            y=1.0 + TITLE_ROOM / (height - margin["t"] - margin["b"])))
         return figure
 
 
@@ -119,11 +130,27 @@ def _bands(values: dict[float, str], colour: str, dash: str):
     return draw
 
 
+def _change_lines(reports: list[RunReport]):
+    """Each run's live parameter changes: a dotted line in its colour, named on top."""
+    marks = [(change, colour) for report, colour in zip(reports, _colours())
+             for change in live_changes(report.run)]
+
+    def draw(figure, row):
+        for change, colour in marks:
+            label = dict(annotation_text=_text(f"{change.text} at {change.t:g} s"),
+                         annotation_position="top right", annotation_font_color=colour,
+                         annotation_bgcolor="rgba(255, 255, 255, 0.8)") \
+                if row == 1 else {}
+            figure.add_vline(x=change.t, line=dict(color=colour, dash="dot", width=1.5),
+                             row=row, col=1, **label)
+    return (draw,) if marks else ()
+
+
 def time_figure(reports: list[RunReport]):
     import plotly.graph_objects as go
 
     def line(x, y, name, colour, group, first, **style):
-        return go.Scatter(x=_f32(x), y=_f32(y), name=name, legendgroup=group,
+        return go.Scatter(x=_f32(x), y=_f32(y), name=_text(name), legendgroup=group,
                           showlegend=first, mode="lines",
                           line=dict(color=colour, width=style.pop("width", 1.2), **style))
 
@@ -137,7 +164,7 @@ def time_figure(reports: list[RunReport]):
                                 "target", True, dash="dash"))
     if np.any(np.isfinite(s.get("speed_limit", [np.inf]))):
         panels["speed"].append(line(s["t"], s["speed_limit"] * MS_TO_KMH, "speed limit",
-                                    "red", "limit", True))
+                                    LIMIT_COLOUR, "limit", True, dash="dashdot"))
     for report, colour in zip(reports, _colours()):
         s, name = report.run.series, report.label
         t = s["t"]
@@ -204,9 +231,10 @@ def time_figure(reports: list[RunReport]):
     figure.add("observer: z3 and total disturbance (m/s³)", panels["z3"])
     for title, traces in outputs.items():
         figure.add(title, traces, height=0.7)
-    figure.add(f"speed difference to {reports[0].label} (km/h)", panels["speed_diff"])
-    figure.add(f"command difference to {reports[0].label} (N/kN)", panels["command_diff"])
-    return figure.figure("time (s)")
+    figure.add(_text(f"speed difference to {reports[0].label} (km/h)"), panels["speed_diff"])
+    figure.add(_text(f"command difference to {reports[0].label} (N/kN)"),
+               panels["command_diff"])
+    return figure.figure("time (s)", _change_lines(reports))
 
 
 def _outputs(report: RunReport):
@@ -228,9 +256,10 @@ def _mode_traces(modes: list[tuple[str, np.ndarray, np.ndarray]]) -> list:
         for mode, word, colour in MODES:
             xs = mode_segments(t, mode_of_step, mode)
             traces.append(go.Scatter(
-                x=xs, y=[None if x is None else name for x in xs], mode="lines",
+                x=xs, y=[None if x is None else _text(name) for x in xs], mode="lines",
                 name=word, legendgroup=word, showlegend=number == 0,
-                line=dict(color=colour, width=14), hovertemplate=f"{word}<extra>{name}</extra>"))
+                line=dict(color=colour, width=14),
+                hovertemplate=f"{word}<extra>{_text(name)}</extra>"))
     return traces
 
 
@@ -244,7 +273,7 @@ def _line_shapes(line: Line, top_row: int):
                              fillcolor="orange", opacity=0.3, line_width=0, row=row, col=1,
                              **label)
         for station in line.stations:
-            label = dict(annotation_text=station.name) if row == top_row else {}
+            label = dict(annotation_text=_text(station.name)) if row == top_row else {}
             figure.add_vline(x=station.position / 1000, line=dict(color="purple", width=1),
                              row=row, col=1, **label)
     return draw
@@ -266,15 +295,16 @@ def distance_figure(reports: list[RunReport]):
                             line=dict(color="black", dash="dash", width=1.2)))
     if np.any(np.isfinite(first.get("speed_limit", [np.inf]))):
         speed.append(go.Scatter(x=_f32(km), y=_f32(first["speed_limit"] * MS_TO_KMH),
-                                name="speed limit", line=dict(color="red", width=1.2)))
+                                name="speed limit",
+                                line=dict(color=LIMIT_COLOUR, dash="dashdot", width=1.2)))
     for report, colour in with_position:
         s = report.run.series
         x = _f32(s["position"] / 1000)
         speed.append(go.Scatter(x=x, y=_f32(s["speed"] * MS_TO_KMH),
-                                name=f"{report.label} speed", legendgroup=report.label,
+                                name=_text(f"{report.label} speed"), legendgroup=report.label,
                                 line=dict(color=colour, width=1.2)))
         error.append(go.Scatter(x=x, y=_f32((s["target"] - s["speed"]) * MS_TO_KMH),
-                                name=f"{report.label} error", legendgroup=report.label,
+                                name=_text(f"{report.label} error"), legendgroup=report.label,
                                 showlegend=False, line=dict(color=colour, width=1.2)))
     panels = Panels()
     shapes = [_line_shapes(line, 1)] if line else []
@@ -289,25 +319,24 @@ def distance_figure(reports: list[RunReport]):
     return panels.figure("distance (km)")
 
 
-def convergence_figure(tunings: list[Path]):
+def convergence_figure(tunings: list[Tuning]):
     import plotly.graph_objects as go
     figure = go.Figure()
-    for directory in tunings:
-        with (directory / "history.csv").open() as handle:
-            rows = list(csv.DictReader(handle))
-        figure.add_trace(go.Scatter(x=[int(r["evaluations"]) for r in rows],
-                                    y=[float(r["best_fitness"]) for r in rows],
-                                    name=directory.name, mode="lines+markers", line_shape="hv"))
-    figure.update_layout(xaxis_title="fitness evaluations", yaxis_title="best fitness",
-                         yaxis_type="log", height=420)
+    for tuning in tunings:
+        figure.add_trace(go.Scatter(x=tuning.evaluations, y=tuning.best, name=_text(tuning.name),
+                                    mode="lines+markers", line_shape="hv"))
+    figure.update_layout(xaxis_title="fitness evaluations",
+                         yaxis_title=_text(convergence_axis(tunings)), yaxis_type="log",
+                         height=420, title="infeasible candidates score above 1e9")
     return figure
 
 
-def _table(header: list[str], rows: list[list[tuple[str, str]]], css: str = "") -> str:
-    """Cells are (text, status); a status colours its cell."""
-    def cell(tag, text, status=""):
+def _table(header: list[str], rows: list[list[tuple[str, ...]]], css: str = "") -> str:
+    """Cells are (text, status[, why]): a status colours its cell, why is its tooltip."""
+    def cell(tag, text, status="", why=""):
         style = f" style='background:{STATUS_COLOURS[status]}'" if status else ""
-        return f"<{tag}{style}>{html.escape(text)}</{tag}>"
+        tip = f" title='{html.escape(why)}'" if why else ""
+        return f"<{tag}{style}{tip}>{html.escape(text)}</{tag}>"
     return (f"<table class='{css}'><tr>" + "".join(cell("th", h) for h in header) + "</tr>"
             + "".join("<tr>" + "".join(cell("td", *c) for c in row) + "</tr>" for row in rows)
             + "</table>")
@@ -326,21 +355,27 @@ def page_sections(reports: list[RunReport], rows: list[VerdictRow]) -> list[str]
     parts.append(_table([""] + labels, [[(key, "")] + [(r.identity.get(key, "-"), "")
                                                          for r in reports] for key in keys],
                         "identity"))
+    changes = change_rows(reports)
+    if changes:
+        parts.append("<h2>Live parameter changes</h2><p>Set on the running controller "
+                     "(<code>ros2 param set</code>), recorded in the bag; from that step on "
+                     "(dotted lines on the time plots).</p>")
+        parts.append(_table(CHANGES_HEADER, [[(cell, "") for cell in row] for row in changes]))
     parts.append("<h2>Verdict</h2><p>Each index from the bag (e = target - true speed) "
                  "against the run's requirement (<code>report.require</code> of its "
-                 "scenario): green met, red broken, yellow not measured.</p>")
+                 "scenario): green met, red broken, yellow not judged (the line above says "
+                 "why; so does the cell's tooltip).</p>")
+    whys = [{key: report.judged(key)[1] for key in report.requirements} for report in reports]
     parts.append(_table(["index", "requirement"] + labels, [
         [(row.heading, ""), (row.requirement, "")]
-        + [(text + (f" {status}" if status else ""), status) for text, status in row.cells]
+        + [(text + (f" {status}" if status else ""), status, why.get(row.key, ""))
+           for (text, status), why in zip(row.cells, whys)]
         for row in rows]))
-    notes = [f"{r.label}: no {', '.join(r.indices['skipped'])} topic; indices needing them "
-             f"skipped" for r in reports if r.indices["skipped"]]
-    notes += [f"{r.label}: {note}" for r in reports for note in r.run.notes]
-    parts += [f"<p>{html.escape(note)}</p>" for note in notes]
+    parts += [f"<p>{html.escape(note)}</p>" for note in report_notes(reports)]
     return parts
 
 
-def write_html(reports: list[RunReport], rows: list[VerdictRow], tunings: list[Path],
+def write_html(reports: list[RunReport], rows: list[VerdictRow], tunings: list[Tuning],
                path: Path) -> Path:
     figures = []  # (title, figure, scripts once drawn)
     if reports:

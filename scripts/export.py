@@ -22,9 +22,9 @@ from ato_nodes.bagio import BagError, parse_mapping, read_frame, read_run, run_c
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+                                     epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("bag", help="rosbag2 directory or a lone .mcap file")
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("--csv", type=Path, metavar="FILE")

@@ -5,7 +5,8 @@
 
 Keeps every message up to the first incomplete record (a killed recorder loses at
 most the last second of simulated time) and writes metadata.yaml; a complete bag
-is left as it is. The launcher does this by itself after every run.
+is left as it is. The launcher does this by itself after every run. A directory
+that is not an MCAP bag (no .mcap file in it) is said so, exit 2.
 """
 
 from __future__ import annotations
@@ -19,7 +20,9 @@ from ato_nodes.bagrepair import RepairError, repair
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("bags", nargs="+", type=Path, help="rosbag2 directories")
     args = parser.parse_args()
     for bag in args.bags:

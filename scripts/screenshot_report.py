@@ -72,9 +72,9 @@ def inked_share(png: Path) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+                                     epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("page", type=Path, help="report.html of analyze.py")
     parser.add_argument("--out", type=Path, required=True, help="screenshot to write (PNG)")
     parser.add_argument("--size", default="1400x2600", help="window WIDTHxHEIGHT in pixels")

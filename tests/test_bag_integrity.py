@@ -1,10 +1,12 @@
-"""What a bag says it holds: gaps are never filled, a killed writer's file is repaired
+"""What a bag says it holds: gaps are never filled, a partial run says where it stopped,
+a killed writer's file is repaired and a directory that is not a bag is named so
 (ROS-free: bags written here with rosbags)."""
 
 import json
 import struct
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -14,8 +16,11 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.bagio import PARAMETERS_KEY, read_parameters, read_run
-from ato_nodes.bagrepair import needs_repair, repair
+from ato_nodes.bagio import PARAMETERS_KEY, read_frame, read_parameters, read_run
+from ato_nodes.bagrepair import RepairError, needs_repair, repair
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.scenario import apply_overrides, load_scenario
+from bagfile import write_run_bag
 
 ROOT = Path(__file__).resolve().parents[1]
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -113,3 +118,84 @@ def test_a_bag_whose_kept_line_is_broken_is_one_line_and_exit_2(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert "line kept in the bag is unreadable" in result.stderr
+
+
+def score_bag(bag: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / "scripts" / "score_bag.py"), str(bag),
+                           *args], capture_output=True, text=True, timeout=120)
+
+
+@pytest.fixture(scope="module")
+def metro_run():
+    values = load_scenario("seed004-metro")
+    return simulate(values), values
+
+
+def test_an_interrupted_run_is_scored_as_partial_and_says_where_it_stopped(metro_run,
+                                                                             tmp_path):
+    series, values = metro_run
+    launched = write_run_bag(tmp_path / "launched", series, values, steps=99)  # no summary
+    run = read_run(launched)
+    assert (run.recorded_steps, run.planned_steps) == (99, 2000)
+    assert run.partial == "interrupted at step 99 of 2000"
+    result = score_bag(launched)
+    assert result.returncode == 0, result.stderr
+    first = result.stdout.splitlines()[0]
+    assert first == "partial: interrupted at step 99 of 2000; the indices cover the steps recorded"
+    assert json.loads(score_bag(launched, "--json").stdout)["partial"] == \
+        "interrupted at step 99 of 2000"
+    stopped = write_run_bag(tmp_path / "stopped", series, values, steps=99, status="diverged")
+    assert read_run(stopped).partial == "diverged at step 99 of 2000"
+    whole = write_run_bag(tmp_path / "whole", series, values, status="completed")
+    assert read_run(whole).partial is None
+    assert "partial" not in score_bag(whole).stdout
+
+
+def test_a_bag_with_no_message_says_so(metro_run, tmp_path):
+    series, values = metro_run
+    bag = write_run_bag(tmp_path / "empty", series, values, steps=0, status="interrupted")
+    result = score_bag(bag)
+    assert result.returncode == 2
+    assert result.stderr == f"error: {bag}: 0 messages recorded (interrupted before its first " \
+                            "step); nothing to score\n"
+
+
+def test_an_open_track_run_reads_into_a_frame_without_an_infinite_column(tmp_path):
+    values = apply_overrides(load_scenario("seed000-step"), ["run.duration=2"])
+    series = simulate(values)
+    assert np.all(np.isinf(series["speed_limit"]))  # no line: no limit anywhere
+    frame = read_frame(write_run_bag(tmp_path / "step", series, values))
+    assert "speed_limit" not in frame.columns and "target" in frame.columns
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # describe() warned twice on the infinite column
+        frame.describe()
+
+
+def test_a_line_run_keeps_its_speed_limit_column(metro_run, tmp_path):
+    series, values = metro_run
+    frame = read_frame(write_run_bag(tmp_path / "metro", series, values, steps=20))
+    np.testing.assert_array_equal(frame["speed_limit"], series["speed_limit"][:20])
+
+
+@pytest.mark.parametrize("holds, words", [
+    ("nothing", ["not a bag: an empty directory"]),
+    ("metadata", ["not a bag: no .mcap file, and its metadata.yaml is not rosbag2 metadata"]),
+    ("/proc", ["/proc: not a bag: no .mcap file and no metadata.yaml"]),
+])
+def test_repair_says_what_a_directory_that_is_not_a_bag_holds(tmp_path, holds, words):
+    directory = Path(holds) if holds.startswith("/") else tmp_path
+    if holds == "metadata":
+        (tmp_path / "metadata.yaml").write_text("hello: [1, 2]\n")
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "repair_bag.py"),
+                             str(directory)], capture_output=True, text=True)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert "nothing to repair" not in result.stdout + result.stderr
+    for word in words:
+        assert word in result.stderr, result.stderr
+
+
+def test_repair_names_a_sqlite_bag_it_does_not_repair(tmp_path):
+    (tmp_path / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: sqlite3\n")
+    with pytest.raises(RepairError, match=r"rosbag2 bag in sqlite3 storage, and only MCAP "):
+        repair(tmp_path)

@@ -173,3 +173,103 @@ def test_optimize_strategy_refuses_a_line_without_a_stop(tmp_path):
     one_line_exit_2(script("optimize_strategy.py", "--line", tmp_path / "nostop.yaml",
                            "--train", "crh5", "--algorithm", "dp", "--out", tmp_path / "o"),
                     "no stop")
+
+
+# Bags, tuning directories and report outputs that are not what the offline tools expect
+# (bags written in-process, tests/bagfile.py).
+
+def metro_bag(tmp_path: Path, name: str = "bag", overrides=(), **kept) -> Path:
+    """A 5 s metro run's bag (with --set-like `overrides`); `kept` replaces parameters in
+    its metadata as given ("whole": all of them)."""
+    from ato_nodes.core.loop import simulate
+    from ato_nodes.core.scenario import apply_overrides, load_scenario
+    from bagfile import write_run_bag
+    values = apply_overrides(load_scenario("seed004-metro"), ["run.duration=5", *overrides])
+    bag = write_run_bag(tmp_path / name, simulate(values), values)
+    if kept:
+        import yaml
+        from ato_nodes.bagio import PARAMETERS_KEY
+        metadata = yaml.safe_load((bag / "metadata.yaml").read_text())
+        custom = metadata["rosbag2_bagfile_information"]["custom_data"]
+        parameters = json.loads(custom[PARAMETERS_KEY])
+        custom[PARAMETERS_KEY] = json.dumps(kept.get("whole", {**parameters, **kept}))
+        (bag / "metadata.yaml").write_text(yaml.safe_dump(metadata))
+    return bag
+
+
+@pytest.mark.parametrize("kept, words", [
+    ({"whole": [["run.period", 0.1]]}, ["parameters kept in metadata.yaml are a JSON list, "
+                                        "not an object"]),
+    ({"plant.mass": None}, ["plant.mass must be a number, not None"]),
+    ({"run.period": "fast"}, ["run.period must be a number, not 'fast'"]),
+])
+def test_offline_tools_refuse_a_bags_malformed_parameters_in_one_line(tmp_path, kept, words):
+    bag = metro_bag(tmp_path, **kept)
+    for name, args in (("score_bag.py", []), ("analyze.py", ["--out", tmp_path / "report"]),
+                       ("export.py", ["--csv", tmp_path / "run.csv"])):
+        one_line_exit_2(script(name, bag, *args), str(bag), *words)
+    assert not (tmp_path / "report").exists() and not (tmp_path / "run.csv").exists()
+
+
+@pytest.mark.parametrize("history, words", [
+    ("iteration,evaluations,best_fitness\n0,four,1.0\n", ["history.csv line 2 is not"]),
+    ("evaluations\n4\n", ["history.csv line 2 is not"]),
+    ("", ["holds no history rows"]),
+    (b"\xff\xfe\x00binary", ["history.csv: cannot read it"]),
+])
+def test_analyze_refuses_a_malformed_tuning_history_in_one_line(tmp_path, history, words):
+    tuning = tmp_path / "tune"
+    tuning.mkdir()
+    history_file = tuning / "history.csv"
+    (history_file.write_bytes if isinstance(history, bytes) else history_file.write_text)(history)
+    one_line_exit_2(script("analyze.py", tuning, "--out", tmp_path / "report"), *words)
+    assert not (tmp_path / "report").exists()
+
+
+def test_analyze_refuses_an_out_that_is_a_file_in_one_line(tmp_path):
+    taken = tmp_path / "taken"
+    taken.write_text("mine\n")
+    one_line_exit_2(script("analyze.py", metro_bag(tmp_path), "--out", taken),
+                    f"--out {taken} exists and is not a directory")
+    assert taken.read_text() == "mine\n"
+
+
+def test_report_markdown_shows_names_from_a_bag_as_text(tmp_path):
+    """A bag's directory, scenario, train, line and station names are anyone's text: in
+    report.md they stay text (no live HTML, no broken table) as in report.html."""
+    import re
+
+    from ato_nodes.analysis import write_report
+    from ato_nodes.bagio import read_run
+    hostile = "<svg onload=alert(1)>|x"
+    line = (ROOT / "msg_config" / "lines" / "metro-interstation.yaml").read_text()
+    line = line.replace("name: synthetic metro interstation (Yizhuang-like)",
+                        f"name: '{hostile} line'").replace("Xiaocun (synthetic)",
+                                                           "'<img src=x onerror=alert(2)>|B'")
+    (tmp_path / "line.yaml").write_text(line)
+    bag = metro_bag(tmp_path, hostile, [f"line.file={tmp_path / 'line.yaml'}"],
+                    **{"plant.train": "<b>train</b>|t"})
+    (bag / "summary.json").write_text(json.dumps({"scenario": f"{hostile} scenario"}))
+    markdown, page = write_report([read_run(bag)], [], tmp_path / "report")
+    text = markdown.read_text()
+    for name in ("x line:", "x scenario |", "\\|B (2600 m)", "&lt;b>train&lt;/b>\\|t ("):
+        assert name in text, name
+    assert not re.search(r"<(svg|img|b)\b", text)
+    assert text.count("&lt;svg onload=alert(1)>\\|x") >= 4  # title, table, verdict, figure
+    for table in re.findall(r"(?:^\|.*\n)+", text, flags=re.M):  # a name adds no column
+        cells = {len(re.findall(r"(?<!\\)\|", row)) for row in table.splitlines()}
+        assert cells in ({3}, {4}), table
+    assert "<svg onload" not in page.read_text() and "<img src=x" not in page.read_text()
+
+
+@pytest.mark.parametrize("name", ["score_bag.py", "analyze.py", "export.py", "repair_bag.py",
+                                  "screenshot_report.py"])
+def test_offline_commands_help_gives_their_whole_description(name):
+    from ato_nodes.cli import analyze, score_bag
+    modules = {"score_bag.py": score_bag, "analyze.py": analyze}
+    doc = modules[name].__doc__ if name in modules else \
+        (SCRIPTS / name).read_text().split('"""')[1]
+    first = " ".join(doc.split("\n\n")[0].split())
+    result = script(name, "--help")
+    assert result.returncode == 0, result.stderr
+    assert first.endswith(".") and first in " ".join(result.stdout.split()), result.stdout

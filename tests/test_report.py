@@ -8,13 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.analysis import FAIL, PASS, UNMEASURED, judge, verdict_rows, write_report
+from ato_nodes.analysis import (FAIL, INDEX_COLUMNS, LIMIT_COLOUR, PASS, RUN_COLOURS, UNMEASURED,
+                                LiveChange, _mark_changes, heading, judge, live_changes,
+                                read_tuning, verdict_rows, write_report)
 from ato_nodes.bagio import Run
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario, scenario_names
 from ato_nodes.core.operation import drive_modes, windowed_jerk
-from ato_nodes.report_html import mode_segments
+from ato_nodes.report_html import mode_segments, time_figure
 
 
 def make_run(tmp_path: Path, name: str, overrides=()) -> Run:
@@ -126,3 +128,127 @@ def test_every_shipped_scenario_names_indices_the_scorer_gives():
         parameters = load_scenario(name)
         judge(Run(Path(name), {"t": np.zeros(2), "target": np.zeros(2),
                                "speed": np.zeros(2)}, parameters, {}))  # raises if misnamed
+
+
+def metro_values(*overrides):
+    return apply_overrides(load_scenario("seed004-metro"), list(overrides))
+
+
+def test_a_live_change_shows_in_the_gains_a_table_and_the_time_plots(tmp_path):
+    values = metro_values()
+    changes = {592: {"dadrc.b1": 100.0}}  # `ros2 param set /controller dadrc.b1 100.0`
+    path = tmp_path / "live"
+    path.mkdir()
+    run = Run(path, simulate(values, changes=changes), values, {}, parameter_changes=changes)
+    assert live_changes(run) == [LiveChange(592, pytest.approx(59.2), "dadrc.b1", 40.0, 100.0)]
+    assert "b1 40 -> 100 at 59.2 s" in judge(run).identity["gains"]
+    markdown, page = write_report([run], [], tmp_path / "report")
+    text = markdown.read_text()
+    assert "## Live parameter changes" in text
+    assert "| live | 592 | 59.2 | dadrc.b1 | 40 -> 100 |" in text
+    assert "b1 40 -> 100 at 59.2 s" in text
+    html_text = page.read_text()
+    assert "<td>dadrc.b1</td><td>40 -&gt; 100</td>" in html_text
+    figure = time_figure([judge(run)])
+    marks = [shape for shape in figure.layout.shapes if shape.x0 == shape.x1 == 59.2]
+    assert len(marks) == len({shape.yref for shape in marks}) > 5  # on every time subplot
+    assert any("dadrc.b1 40 -&gt; 100 at 59.2 s" == a.text for a in figure.layout.annotations)
+
+
+def test_the_png_time_plots_mark_a_live_change():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    run = Run(Path("live"), {}, {"run.period": 0.1, "dadrc.b1": 40.0}, {},
+              parameter_changes={592: {"dadrc.b1": 100.0}})
+    figure, axes = plt.subplots()
+    _mark_changes(axes, run, "blue")
+    (line,) = axes.get_lines()
+    assert list(line.get_xdata()) == [pytest.approx(59.2)] * 2
+    assert line.get_label() == "live: dadrc.b1 40 -> 100 at 59.2 s"
+    plt.close(figure)
+
+
+@pytest.fixture(scope="module")
+def metro_start(tmp_path_factory):
+    """The metro run cut by --duration 30: it ends 2.4 km before its stop, moving."""
+    return make_run(tmp_path_factory.mktemp("start"), "metro-start", ["run.duration=30"])
+
+
+def test_a_run_that_ends_before_its_stop_has_its_stop_not_judged_and_says_why(metro_start):
+    report = judge(metro_start)
+    assert report.indices["abs_stopping_error"] > 2000
+    for key in ("abs_stopping_error", "running_time_error"):
+        status, why = report.judged(key)
+        assert status == UNMEASURED
+        assert why == "the run ended at t = 29.9 s, 2414 m before its stop, still moving at " \
+                      "53 km/h"
+    overall, text = report.summary
+    assert overall == FAIL  # max abs(e) 1.77 > 1 km/h: broken whatever follows
+    assert "broken: max abs(e) km/h 1.7672 > 1; not judged: abs(stopping error) m, " \
+           "run-time error s (the run ended at t = 29.9 s, 2414 m before its stop" in text
+    assert "2414" not in text.split("not judged")[0]
+
+
+def test_a_train_standing_short_of_its_stop_is_judged(metro):
+    series = {**metro.series, "position": metro.series["position"] - 100.0}
+    report = judge(Run(metro.path, series, metro.parameters, {}))
+    assert report.status("abs_stopping_error") == FAIL
+    assert "abs(stopping error) m 99.737 > 0.3" in report.summary[1]  # +0.263 m, less 100
+
+
+def test_a_partial_run_fails_only_what_it_cannot_mend_and_says_where_it_stopped(tmp_path):
+    values = metro_values()
+    series = simulate(values)
+    cut = {name: column[:990] for name, column in series.items()}  # 99 s of 200
+    report = judge(Run(tmp_path, cut, values, {}, status="timeout"))
+    assert report.partial == "timed out at step 990 of 2000"
+    assert report.status("max_abs_error_kmh") == FAIL  # a maximum only grows
+    assert report.judged("switch_count") == (UNMEASURED, "met over the steps recorded, but "
+                                                         "the run is partial")
+    assert report.summary[1].startswith(f"{tmp_path.name} (partial: timed out at step 990 of "
+                                        "2000): ")
+    assert "partial: timed out at step 990 of 2000" in report.identity["run"]
+    assert Run(tmp_path, cut, values, {}).partial == "interrupted at step 990 of 2000"
+    assert Run(tmp_path, series, values, {}, status="interrupted").partial is None
+
+
+def test_every_index_heading_names_its_unit():
+    unitless = {"steps", "j_seed004", "switch_count"}  # counts; J adds unlike terms
+    for key, title, _ in INDEX_COLUMNS:
+        if key not in unitless:
+            assert re.search(r"(km/h|m/s\^3|m/s\^2|m/s|kWh|\bs\b|\bm\b|%|s\^2|m\^2/s)$",
+                             title), title
+    assert heading("eso_disturbance_max_dev") == "max abs(z3-f) m/s^3"
+
+
+def test_the_convergence_plot_names_its_fitness_and_unit(tmp_path):
+    tuning = tmp_path / "tune"
+    tuning.mkdir()
+    (tuning / "history.csv").write_text("iteration,evaluations,best_fitness,mean_fitness,x\n"
+                                        "0,4,120.5,130.0,1.0\n1,8,99.25,110.0,2.0\n")
+    (tuning / "tuning.json").write_text(json.dumps({"fitness": "itae"}))
+    read = read_tuning(tuning)
+    assert (read.evaluations, read.best) == ([4, 8], [120.5, 99.25])
+    assert read.axis_title == "best fitness: ITAE (m/s) s^2"
+    (tuning / "tuning.json").write_text(json.dumps({"fitness": "j"}))
+    assert read_tuning(tuning).axis_title == "best fitness: J (seed 004)"
+    _, page = write_report([], [tuning], tmp_path / "report")
+    assert (tmp_path / "report" / "convergence.png").stat().st_size > 0
+    assert "best fitness: J (seed 004)" in page.read_text()
+
+
+def test_the_speed_limit_is_drawn_unlike_any_run_and_the_legend_clears_the_titles(
+        metro, tmp_path):
+    runs = [metro, make_run(tmp_path, "tuned", ["dadrc.b1=60"])]
+    figure = time_figure([judge(run) for run in runs])
+    lines = {trace.name: trace.line for trace in figure.data if trace.name}
+    limit = lines["speed limit"]
+    assert limit.dash == "dashdot"
+    assert all(lines[f"{run.path.name} speed"].color != limit.color for run in runs)
+    assert LIMIT_COLOUR not in RUN_COLOURS
+    first_title = figure.layout.annotations[0]
+    assert first_title.text.startswith("speed (km/h)") and first_title.y == pytest.approx(1.0)
+    plot_height = figure.layout.height - figure.layout.margin.t - figure.layout.margin.b
+    assert figure.layout.legend.yanchor == "bottom"
+    assert (figure.layout.legend.y - first_title.y) * plot_height >= 25  # px: the title's room

@@ -1,8 +1,13 @@
-"""Score a recorded run from its bag alone: ITAE, IAE, ISE, max |e|, seed 004's J.
+"""Score a recorded run from its bag alone: ITAE, IAE, ISE, max |e|, seed 004's J, and
+the operation indices of a line (energy, jerk, switches, overspeed, stop, run time).
 
     python scripts/score_bag.py BAG [--json] [--map role=/topic] [--resimulate]
 
-BAG is a rosbag2 directory or a lone .mcap file.
+BAG is a rosbag2 directory or a lone .mcap file. A partial bag (a run interrupted,
+timed out or diverged before its planned steps) is scored over the steps it holds and
+said so ("partial: interrupted at step 99 of 2000"; in --json, "partial"); a run that
+ended short of its stop, still moving, is said so too: its stopping and running-time
+errors judge nothing. A bag with no message is one line, exit 2.
 """
 
 from __future__ import annotations
@@ -13,11 +18,13 @@ import sys
 from ato_nodes import jsontext
 from ato_nodes import cli
 from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
-from ato_nodes.core.scoring import format_indices, score_series
+from ato_nodes.core.scoring import format_indices, score_series, stop_not_reached
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n\n", 1)[1])
     parser.add_argument("bag", help="rosbag2 directory (metadata.yaml + .mcap)")
     parser.add_argument("--json", action="store_true", help="print the indices as JSON")
     parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC",
@@ -33,9 +40,19 @@ def main() -> None:
     except BagError as exc:
         cli.fail(str(exc))
     indices = score_series(run.series, run.parameters)
+    if run.partial:
+        indices["partial"] = run.partial
     if args.resimulate:
         indices["resimulated_identical"] = not differ
-    print(jsontext.dumps(indices, indent=2) if args.json else format_indices(indices))
+    if args.json:
+        print(jsontext.dumps(indices, indent=2))
+    else:
+        if run.partial:
+            print(f"partial: {run.partial}; the indices cover the steps recorded")
+        print(format_indices(indices))
+        short = stop_not_reached(run.series, run.parameters)
+        if short:
+            print(f"not at the stop: {short}; its stopping and running-time errors are not judged")
     if args.resimulate and not args.json:
         changes = sum(len(c) for c in run.parameter_changes.values())
         print(f"re-simulated in-process from the bag ({changes} live parameter change(s)): "

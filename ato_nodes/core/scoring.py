@@ -17,7 +17,7 @@ from .context import RunContext
 from .errors import ScenarioError
 from .indices import MS_TO_KMH, tracking_indices
 from .line import Line, load_line, parse_line
-from .operation import format_operation, operation_indices
+from .operation import STANDSTILL, format_operation, operation_indices
 from .schema import defaults
 
 # Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
@@ -88,6 +88,15 @@ INDEX_NAMES = (
     "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "arrival_time",
     "running_time_error",
     "max_abs_error_outside_steps_kmh", "stepped_time")
+# Those that only grow along a run (integrals of non-negative terms, maxima, counts):
+# a partial run that breaks a requirement on one of them has broken it for good.
+GROWING_INDICES = (
+    "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh", "j_seed004",
+    "traction_energy_kwh", "regenerated_energy_kwh", "max_jerk", "max_jerk_sampled",
+    "switch_count", "overspeed_time", "max_overspeed_kmh", "max_abs_error_outside_steps_kmh",
+    "stepped_time")
+# Those that judge the run's stop: they say nothing of a run that ended short of it.
+STOP_INDICES = ("stopping_error", "abs_stopping_error", "arrival_time", "running_time_error")
 
 
 @dataclass(frozen=True)
@@ -155,6 +164,21 @@ def run_line(parameters: dict) -> Line | None:
     if parameters.get("line.file") and Path(parameters["line.file"]).is_file():
         return load_line(parameters["line.file"])
     return None
+
+
+def stop_not_reached(series: dict[str, np.ndarray], parameters: dict | None) -> str | None:
+    """Why the run's STOP_INDICES judge nothing (None when they do): it ended with the
+    train still moving short of its stop, a run cut shorter than its trip (--duration,
+    an interrupt). A train standing short of the stop at the end is judged."""
+    line = run_line(parameters) if parameters else None
+    if line is None or line.stop_position <= 0.0 or "position" not in series:
+        return None
+    short = line.stop_position - float(series["position"][-1])
+    speed = float(series["speed"][-1])
+    if short <= 0.0 or speed <= STANDSTILL:
+        return None
+    return (f"the run ended at t = {float(series['t'][-1]):.1f} s, {short:.0f} m before its "
+            f"stop, still moving at {speed * MS_TO_KMH:.0f} km/h")
 
 
 def is_step(target: np.ndarray) -> bool:
