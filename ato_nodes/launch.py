@@ -18,7 +18,6 @@ import shutil
 import signal
 import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -32,7 +31,8 @@ import yaml
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.scenario import ros_parameter_file
 from ato_nodes.core.schema import NODES
-from ato_nodes.nodefork import NODE_NAME_PREFIX, ForkedNode, NodeStartError, fork_server
+from ato_nodes.nodefork import (NODE_NAME_PREFIX, STOP_GRACE, ForkedNode, NodeStartError,
+                                fork_server)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
@@ -40,13 +40,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 # old base 47300 made a fault test fail in a fresh-clone CI run)
 DOMAIN_LOCK_PORT = 30300
 DOMAIN_IDS = range(1, 102)  # 0 is left for the user's own ROS graph
-STOP_GRACE = 5.0           # s for nodes to exit after SIGINT before SIGTERM / SIGKILL
 POLL = 0.05                # s between checks of the children (an exit is seen at once)
 STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
-
-
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
 
 
 def node_processes(launcher: int) -> dict[str, int]:
@@ -100,9 +95,9 @@ class DomainLock:
         self._socket.close()
 
 
-# If the launcher dies (even by SIGKILL) its fork server ends, and the nodes go too:
-# SIGKILL for those with nothing to save, SIGTERM for the recorder, which then drains
-# and closes its bag.
+# If the launcher dies (even by SIGKILL), its fork server gives the nodes these signals
+# (as the kernel does if the server dies too): SIGKILL for those with nothing to save,
+# SIGTERM for the recorder, which then drains and closes its bag.
 DEATH_SIGNAL = {role: signal.SIGTERM if role == "recorder" else signal.SIGKILL
                 for role in NODES}
 WORKDIR_PREFIX = "ato-run-"
@@ -116,18 +111,38 @@ def _remove_stale_workdirs() -> None:
             shutil.rmtree(path, ignore_errors=True)
 
 
-# What could carry a run's traffic off this host: static peers, a discovery server, a
-# DDS profile file of the user's (which may define other transports and peers).
-OFF_HOST = ("ROS_STATIC_PEERS", "ROS_DISCOVERY_SERVER", "ROS_LOCALHOST_ONLY",
-            "FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+# Variables of the user's shell that would change where a run's traffic goes or how
+# its middleware is configured, removed from every node's environment (the run then
+# behaves the same whatever the shell has), with the reason for each.
+IGNORED_ENVIRONMENT = {
+    "ROS_STATIC_PEERS": "adds discovery peers off this host",
+    "ROS_DISCOVERY_SERVER": "replaces simple discovery with a server, maybe on another host",
+    "ROS_SUPER_CLIENT": "goes with ROS_DISCOVERY_SERVER",
+    "ROS_LOCALHOST_ONLY": "deprecated; ROS_AUTOMATIC_DISCOVERY_RANGE is set instead",
+    "FASTDDS_ENVIRONMENT_FILE": "a JSON file of these same variables, read by Fast DDS",
+    "FASTRTPS_DEFAULT_PROFILES_FILE": "an XML profile: transports, peers, QoS",
+    "FASTDDS_DEFAULT_PROFILES_FILE": "the same under its Fast DDS 3 name",
+    "RMW_FASTRTPS_USE_QOS_FROM_XML": "QoS from the XML profile instead of the topic map's",
+    "RMW_FASTRTPS_PUBLICATION_MODE": "synchronous/asynchronous writers: changes the timing",
+    "FASTDDS_BUILTIN_TRANSPORTS": "replaces the default transports (shared memory, UDP)",
+    "RMW_IMPLEMENTATION": "the wheels ship Fast DDS only",
+    "ROS_SECURITY_ENABLE": "SROS 2 enclaves the run's nodes have no keys for",
+    "ROS_SECURITY_STRATEGY": "goes with ROS_SECURITY_ENABLE",
+    "ROS_SECURITY_KEYSTORE": "goes with ROS_SECURITY_ENABLE",
+    "ROS_SECURITY_ENCLAVE_OVERRIDE": "goes with ROS_SECURITY_ENABLE",
+}
+# Set for every node: discovery on this host only, and no DEFAULT_FASTRTPS_PROFILES.xml
+# picked up from the working directory.
+FORCED_ENVIRONMENT = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "SKIP_DEFAULT_XML_FILE": "1"}
 
 
 def isolate_to_this_host(env: dict[str, str]) -> None:
-    """Runs stay on this host, whatever the environment says: discovery on localhost
-    only, and none of the settings that add peers or transports."""
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    for name in OFF_HOST:
+    """Runs stay on this host with the middleware's defaults, whatever the environment
+    says: discovery on localhost only, none of the settings that add peers, transports
+    or profiles."""
+    for name in IGNORED_ENVIRONMENT:
         env.pop(name, None)
+    env.update(FORCED_ENVIRONMENT)
 
 
 def node_environment(domain_id: int) -> dict[str, str]:
@@ -167,6 +182,7 @@ class Stack:
         self.lock = DomainLock(domain_id)
         self.processes: dict[str, ForkedNode] = {}
         self.node_ended = threading.Event()  # set whenever one of them ends
+        self.signalled = False  # SIGINT or SIGTERM while the run goes on: stop it
         _remove_stale_workdirs()
         self.workdir = Path(tempfile.mkdtemp(prefix=f"{WORKDIR_PREFIX}{os.getpid()}-"))
         self.report_path = self.workdir / "report.json"
@@ -174,6 +190,9 @@ class Stack:
         self.values["recorder.output"] = str(self.bag.resolve())
         self.values["supervisor.report"] = str(self.report_path)
         self.params_yaml = yaml.safe_dump(ros_parameter_file(self.values), sort_keys=False)
+
+    def _on_signal(self, signum, frame) -> None:
+        self.signalled = True
 
     def _start(self) -> None:
         self.params_path.write_text(self.params_yaml)
@@ -186,9 +205,9 @@ class Stack:
                 # the nodes log to /rosout; the console keeps the launcher's concise lines
                 argv = [f"ato_nodes.nodes.{role}", "--ros-args", "--params-file",
                         str(self.params_path), "--disable-stdout-logs"]
-                self.processes[role] = server.fork(role, argv, env, REPO_ROOT,
-                                                   DEATH_SIGNAL[role], output,
-                                                   self.lock.fileno(), self.node_ended)
+                self.processes[role] = server.fork(
+                    role, argv, env, REPO_ROOT, DEATH_SIGNAL[role], output, self.lock.fileno(),
+                    self.node_ended, bag=self.bag.resolve() if role == "recorder" else None)
         finally:
             if console:
                 console.close()
@@ -241,6 +260,8 @@ class Stack:
                 return RunOutcome("timeout", f"run did not finish within {self.timeout:g} s")
             if self.cancel is not None and self.cancel.is_set():
                 return RunOutcome("interrupted", "stopped by its tuning")
+            if self.signalled:
+                return RunOutcome("interrupted", "interrupted by the user")
             self.node_ended.wait(POLL)
 
     def _stall(self) -> str:
@@ -294,14 +315,14 @@ class Stack:
         complete (repaired if its writer died)."""
         started = time.monotonic()
         main = threading.current_thread() is threading.main_thread()
-        previous = {number: signal.signal(number, _interrupt) for number in STOP_SIGNALS} \
+        # A signal only sets a flag that the watch loop reads (within POLL): raised as an
+        # exception it could land anywhere, a second one inside the handling of the first.
+        previous = {number: signal.signal(number, self._on_signal) for number in STOP_SIGNALS} \
             if main else {}
         try:
             try:
                 self._start()
                 outcome = self._watch()
-            except KeyboardInterrupt:
-                outcome = RunOutcome("interrupted", "interrupted by the user")
             except NodeStartError as exc:
                 outcome = RunOutcome("failed", str(exc))
             finally:

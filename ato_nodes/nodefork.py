@@ -10,12 +10,14 @@ session, environment, arguments, working directory, console), then runs the
 node's main(), which initialises its own context in its own domain.
 
 Protocol, over a Unix SOCK_SEQPACKET socket pair: the launcher sends a JSON
-request {role, argv, env, cwd, death_signal} with the node's stdout, stderr and
-lock file descriptors attached; the server answers {"pid": PID} and, once the
+request {role, argv, env, cwd, death_signal, bag} with the node's stdout, stderr
+and lock file descriptors attached; the server answers {"pid": PID} and, once the
 node has ended and been reaped, {"exited": PID, "status": CODE} (CODE as
-subprocess's returncode: negative for a signal). The server ends when the
-launcher does (end of file on the socket); its nodes then get their death
-signals.
+subprocess's returncode: negative for a signal). When the launcher ends (end of
+file on the socket) with nodes still running, the server gives them their death
+signals, kills those still there after STOP_GRACE and repairs the recorder's bag
+if it had to kill the recorder; then it ends. A server killed outright leaves
+the nodes their death signals (PR_SET_PDEATHSIG).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 import traceback
 from pathlib import Path
 
@@ -41,6 +44,7 @@ PR_SET_NAME = 15
 NODE_NAME_PREFIX = "ato-"  # a forked node's process name (/proc/PID/comm): ato-ROLE
 MESSAGE_SIZE = 1 << 20     # bytes: a request carries the node's whole environment
 STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+STOP_GRACE = 5.0           # s a node has to exit once told to, before it is killed
 
 
 # Server side ---------------------------------------------------------------
@@ -86,6 +90,50 @@ def _become_node(connection: socket.socket, request: dict, fds: list[int]) -> No
         os._exit(status)
 
 
+def _reap(children: dict[int, dict]) -> list[tuple[int, dict, int]]:
+    """The children that have ended, removed from `children`: (pid, request, status)."""
+    ended = []
+    for pid in list(children):
+        done, wait_status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            ended.append((pid, children.pop(pid), _exit_status(wait_status)))
+    return ended
+
+
+def _outlive_launcher(children: dict[int, dict], wake_read: int) -> None:
+    """The launcher died without stopping its nodes (SIGKILL, a crash): stop them as it
+    would have, SIGKILL any that did not go within STOP_GRACE (a hung node is deaf
+    to its death signal), and repair a bag whose recorder had to be killed, so that no
+    node outlives the launcher by more than that and the bag opens."""
+    for pid, request in children.items():
+        os.kill(pid, request["death_signal"])
+    deadline = time.monotonic() + STOP_GRACE
+    killed = False
+    unclosed = []
+    while True:
+        for _pid, request, status in _reap(children):
+            if request.get("bag") and status != 0:
+                unclosed.append(request["bag"])
+        if not children:
+            break
+        left = deadline - time.monotonic()
+        if left <= 0 and not killed:
+            for pid in children:
+                os.kill(pid, signal.SIGKILL)
+            killed = True
+        if select.select([wake_read], [], [], None if killed else max(left, 0.0))[0]:
+            os.read(wake_read, 4096)  # a SIGCHLD
+    for bag in unclosed:
+        from ato_nodes.bagrepair import RepairError, needs_repair, repair
+        try:
+            if needs_repair(Path(bag)):
+                print(f"launcher gone, recorder stopped: {repair(Path(bag)).describe()}",
+                      file=sys.stderr)
+        except (RepairError, OSError) as exc:
+            print(f"launcher gone, recorder stopped; bag {bag} not repaired: {exc}",
+                  file=sys.stderr)
+
+
 def serve(connection: socket.socket) -> None:
     """Fork a node per request until the launcher closes its end; report each node's
     end as soon as SIGCHLD tells of it."""
@@ -94,32 +142,33 @@ def serve(connection: socket.socket) -> None:
     os.set_blocking(wake_write, False)
     signal.signal(signal.SIGCHLD, lambda signum, frame: None)  # the wakeup fd does the work
     signal.set_wakeup_fd(wake_write)
-    children: set[int] = set()
-    while True:
-        readable, _, _ = select.select([connection, wake_read], [], [])
-        if wake_read in readable:
-            os.read(wake_read, 4096)
-        if connection in readable:
-            message, fds, _, _ = socket.recv_fds(connection, MESSAGE_SIZE, 3)
-            if not message:
-                return  # the launcher is gone; PDEATHSIG takes the nodes
-            pid = os.fork()
-            if pid == 0:
-                signal.set_wakeup_fd(-1)
-                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
-                os.close(wake_read)
-                os.close(wake_write)
-                _become_node(connection, json.loads(message), fds)
-            for fd in fds:
-                os.close(fd)
-            children.add(pid)
-            connection.send(json.dumps({"pid": pid}).encode())
-        for pid in list(children):
-            ended, wait_status = os.waitpid(pid, os.WNOHANG)
-            if ended:
-                children.discard(pid)
-                connection.send(json.dumps({"exited": pid,
-                                            "status": _exit_status(wait_status)}).encode())
+    children: dict[int, dict] = {}  # pid: its request
+    try:
+        while True:
+            readable, _, _ = select.select([connection, wake_read], [], [])
+            if wake_read in readable:
+                os.read(wake_read, 4096)
+            if connection in readable:
+                message, fds, _, _ = socket.recv_fds(connection, MESSAGE_SIZE, 3)
+                if not message:
+                    break
+                request = json.loads(message)
+                pid = os.fork()
+                if pid == 0:
+                    signal.set_wakeup_fd(-1)
+                    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                    os.close(wake_read)
+                    os.close(wake_write)
+                    _become_node(connection, request, fds)
+                for fd in fds:
+                    os.close(fd)
+                children[pid] = request
+                connection.send(json.dumps({"pid": pid}).encode())
+            for pid, _request, status in _reap(children):
+                connection.send(json.dumps({"exited": pid, "status": status}).encode())
+    except OSError:  # reset or broken: the launcher died with messages in flight
+        pass
+    _outlive_launcher(children, wake_read)
 
 
 # Interfaces every node's rclpy.Node uses besides the topic map's: its parameter
@@ -237,9 +286,12 @@ class ForkServer:
 
     def fork(self, role: str, argv: list[str], env: dict[str, str], cwd: Path,
              death_signal: int, output: tuple[int, int], lock_fd: int,
-             notify: threading.Event) -> ForkedNode:
+             notify: threading.Event, bag: Path | None = None) -> ForkedNode:
+        """Start a node; `bag` is the recorder's, repaired by the server if it has to
+        kill the recorder after the launcher died."""
         request = json.dumps({"role": role, "argv": argv, "env": env, "cwd": str(cwd),
-                              "death_signal": int(death_signal)}).encode()
+                              "death_signal": int(death_signal),
+                              "bag": str(bag) if bag else None}).encode()
         with self.requests:
             try:
                 socket.send_fds(self.connection, [request], [*output, lock_fd])

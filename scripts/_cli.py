@@ -5,7 +5,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ato_nodes.cli import (fail, handle_signals_while_starting, interrupted_quietly,  # noqa: E402,F401
+from ato_nodes.cli import (argument_parser, fail, handle_signals_while_starting,  # noqa: E402,F401
+                           interrupted_quietly,
                            new_directory, seconds, start)
 
 handle_signals_while_starting()  # before the script's own (slower) imports

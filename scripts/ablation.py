@@ -22,7 +22,6 @@ ablation.json in --out.
 
 from __future__ import annotations
 
-import argparse
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -52,9 +51,7 @@ def run(job: tuple[str, dict]) -> tuple[str, dict]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenario")
     parser.add_argument("--untuned", action="append", default=[], metavar="NAME=VALUE",
                         help="a gain before tuning (repeatable); without, no tuned-gains row")

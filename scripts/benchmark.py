@@ -12,7 +12,6 @@ stack, and the in-process simulation of the same run.
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import statistics
@@ -48,7 +47,7 @@ def ping_pong(round_trips: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--scenario", default="seed000")
     parser.add_argument("--duration", type=float, default=2400.0, help="simulated seconds")
     parser.add_argument("--round-trips", type=int, default=10000)

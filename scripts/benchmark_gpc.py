@@ -15,7 +15,6 @@
 
 from __future__ import annotations
 
-import argparse
 import tempfile
 import time
 from pathlib import Path
@@ -103,7 +102,7 @@ def stack_rate(values, bag: Path) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--duration", type=float, default=600.0,
                         help="simulated seconds of each run (default 600)")
     parser.add_argument("--no-stack", action="store_true", help="skip the stack runs")

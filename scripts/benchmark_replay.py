@@ -10,7 +10,6 @@ and reports both wall times (the second should be about half the first).
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import tempfile
@@ -40,7 +39,7 @@ def replay(bag: Path, *args: str) -> tuple[float, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--bag", type=Path, help="a full seed-000 bag (default: record one)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:

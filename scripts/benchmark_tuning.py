@@ -22,7 +22,6 @@ against the same tuning run without pruning, made beforehand by
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import statistics
@@ -106,7 +105,7 @@ def best_so_far(tuning: Path) -> list[list[str]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--candidates", type=int, default=4, help="stack candidates per setting")
     parser.add_argument("--baspso", action="store_true", help="also time a 30 x 30 BAS-PSO run")
     parser.add_argument("--baspso-reference", type=Path, metavar="DIR",

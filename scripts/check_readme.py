@@ -16,7 +16,6 @@ installs the package editable, into the copy's own .venv, which it then builds.
 
 from __future__ import annotations
 
-import argparse
 import re
 import subprocess
 import sys
@@ -114,9 +113,7 @@ def run(command: Command, where: Path) -> tuple[bool, str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--readme", type=Path, default=ROOT / "README.md")
     parser.add_argument("--quick", action="store_true", help="skip the slow blocks")
     parser.add_argument("--only", metavar="TEXT",

@@ -14,7 +14,6 @@ in-process run agree.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import _cli
@@ -26,9 +25,7 @@ from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import run_checked
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenarios", nargs="+", metavar="SCENARIO[:NAME=VALUE...]")
     parser.add_argument("--out", type=Path, required=True, help="directory to create")
     args = parser.parse_args()

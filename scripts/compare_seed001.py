@@ -16,7 +16,6 @@ switches, max jerk over 1 s, traction energy and stopping error.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import _cli
@@ -71,7 +70,7 @@ def table(results: dict) -> list[str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--out", type=Path, required=True, help="directory to create")
     parser.add_argument("--duration", type=float, help="simulated seconds (default: the "
                         "scenario's whole run)")

@@ -15,7 +15,6 @@ Writes comparison.md and comparison.json in --out; swarm runs in --workers proce
 
 from __future__ import annotations
 
-import argparse
 import statistics
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -48,9 +47,7 @@ def evaluate(job: dict) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--line", default="lines/lanxin-67km.yaml")
     parser.add_argument("--train", default="crh5")
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])

@@ -42,9 +42,7 @@ PAPER_MAX_ERROR = {  # seed 000's reported tracking errors, km/h
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--algorithms", nargs="+", default=["bas-pso", "pso", "wso"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4, 5])
     budget = parser.add_mutually_exclusive_group(required=True)

@@ -18,7 +18,6 @@ Then `scripts/identify.py OUT/identification --validation OUT/validation
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 from pathlib import Path
@@ -36,7 +35,7 @@ RUNS = (  # name, staircase seed, duration s, extra overrides
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--out", type=Path, required=True, help="directory to create")
     args = parser.parse_args()
     _cli.new_directory(args.out)

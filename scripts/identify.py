@@ -41,7 +41,7 @@ PAPER = {"train": (-1.2627, 1.0568), "test": (-1.9182, 1.8369), "mu": 6599.8,
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("bags", nargs="+", type=Path, help="identification bags")
     parser.add_argument("--out", type=Path, required=True, help="model file to write (.npz)")
     parser.add_argument("--validation", type=Path, help="a bag for the free-run check")

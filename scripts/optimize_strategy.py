@@ -40,9 +40,7 @@ from ato_nodes.core.scenario import complete, train_preset
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("--line", required=True, help="line file (relative: msg_config/)")
     parser.add_argument("--train", required=True, help="train preset (msg_config/trains)")
     parser.add_argument("--algorithm", required=True, choices=strategy.ALGORITHMS)

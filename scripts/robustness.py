@@ -14,7 +14,6 @@ abs(stopping error), max jerk over 1 s and ITAE.
 
 from __future__ import annotations
 
-import argparse
 import math
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -59,9 +58,7 @@ def run_sample(job: tuple[dict, dict]) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenario")
     parser.add_argument("--samples", type=int, default=50)
     parser.add_argument("--mass", default="0.85:1.3", help="mass range, share of the nominal "

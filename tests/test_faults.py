@@ -16,12 +16,16 @@ from rosbags.highlevel import AnyReader
 
 from ato_nodes.bagio import read_run
 from ato_nodes.core.topics import step_topics
-from ato_nodes.launch import DOMAIN_LOCK_PORT
+from ato_nodes.launch import DOMAIN_LOCK_PORT, IGNORED_ENVIRONMENT
 from test_stack import (ROOT, alive, children, message_counts, run_stack, start_stack,
                         wait_for_children, wait_for_stepping)
 
 pytestmark = pytest.mark.integration
 TUNE = [sys.executable, str(ROOT / "scripts" / "tune.py")]
+
+
+def parent(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
 
 
 def opens_everywhere(bag: Path) -> dict[str, int]:
@@ -125,6 +129,45 @@ def test_an_interrupted_run_records_every_step_the_loop_made(tmp_path):
     counts = opens_everywhere(bag)
     assert max(counts.values()) - min(counts.values()) <= 3
     holds_what_its_summary_says(bag)
+
+
+@pytest.mark.parametrize("spacing", [0.05, 0.3, 1.0])
+def test_a_second_ctrl_c_keeps_the_summary_and_the_parameter_file(tmp_path, spacing):
+    """The second signal lands while the first is being handled (the nodes stopping, the
+    bag closing, the summary being written): it changes nothing."""
+    bag = tmp_path / "twice"
+    process = start_stack("--duration", "2400", "--out", str(bag))
+    wait_for_stepping(process)
+    process.send_signal(signal.SIGINT)
+    time.sleep(spacing)  # the stimulus: two presses this far apart
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in stderr, stderr
+    assert (bag / "params.yaml").exists()
+    holds_what_its_summary_says(bag)
+    assert json.loads((bag / "summary.json").read_text())["status"] == "interrupted"
+
+
+def test_a_hung_recorder_goes_with_a_killed_launcher_and_its_bag_opens(tmp_path):
+    """The recorder is deaf to its death signal (run.fault hang): the fork server kills
+    it after the grace period and repairs the bag it left open."""
+    bag = tmp_path / "hung"
+    process = start_stack("--duration", "600", "--out", str(bag), "--set",
+                          "run.fault=recorder:hang:100")
+    nodes = wait_for_children(process, roles=("profile", "plant", "controller", "supervisor",
+                                               "recorder"))
+    server = parent(nodes["recorder"])  # the fork server: it repairs the bag, then ends
+    wait_for_stepping(process)
+    wait_for_chunks(bag, size=1)  # the recorder has the bag open
+    process.send_signal(signal.SIGKILL)
+    process.wait(timeout=10)
+    deadline = time.monotonic() + 60
+    while any(alive(pid) for pid in [*nodes.values(), server]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [role for role, pid in nodes.items() if alive(pid)] and not alive(server)
+    counts = opens_everywhere(bag)
+    assert set(counts) == {topic.name for topic in step_topics()}
+    assert 80 <= min(counts.values()) <= max(counts.values()) <= 100 + 20 + 2
 
 
 def test_a_deaf_node_dies_with_a_killed_launcher_and_keeps_its_domain_till_then(tmp_path):
@@ -249,9 +292,23 @@ def test_replay_into_a_running_runs_domain_is_refused(tmp_path):
     assert replay.returncode == 2 and f"ROS domain {domain} is in use by a run" in replay.stderr
 
 
+def test_a_fast_dds_environment_file_of_the_users_changes_nothing(tmp_path):
+    """A discovery server named in FASTDDS_ENVIRONMENT_FILE (none runs) would keep the
+    nodes from ever matching; the launcher removes it, so the run completes."""
+    environment_file = tmp_path / "fastdds.json"
+    environment_file.write_text(json.dumps({"environment": [
+        {"name": "ROS_DISCOVERY_SERVER", "value": "127.0.0.1:11888"}]}))
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
+                             "--scenario", "seed000-step", "--duration", "2", "--out",
+                             str(tmp_path / "run"), "--timeout", "60"],
+                            env={**os.environ, "FASTDDS_ENVIRONMENT_FILE": str(environment_file)},
+                            capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert result.returncode == 0, result.stderr
+
+
 def test_runs_stay_on_this_host_whatever_the_environment(tmp_path):
-    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET",
-           "ROS_STATIC_PEERS": "127.0.0.2", "ROS_LOCALHOST_ONLY": "0"}
+    env = {**os.environ, **{name: "127.0.0.2" for name in IGNORED_ENVIRONMENT},
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_LOCALHOST_ONLY": "0"}
     process = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
                                 "--duration", "600", "--real-time", "--out",
                                 str(tmp_path / "run")], env=env, stdout=subprocess.PIPE,
@@ -262,7 +319,8 @@ def test_runs_stay_on_this_host_whatever_the_environment(tmp_path):
             environ = dict(entry.split("=", 1) for entry in Path(f"/proc/{pid}/environ")
                            .read_bytes().decode().split("\0") if "=" in entry)
             assert environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
-            assert "ROS_STATIC_PEERS" not in environ and "ROS_LOCALHOST_ONLY" not in environ
+            assert environ["SKIP_DEFAULT_XML_FILE"] == "1"
+            assert not set(IGNORED_ENVIRONMENT) & set(environ)
     finally:
         process.send_signal(signal.SIGINT)
         process.communicate(timeout=60)

@@ -8,11 +8,13 @@ Importing this package changes nothing; start() takes over the process's signals
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import math
 import os
 import signal
 import sys
+import textwrap
 from pathlib import Path
 
 
@@ -36,24 +38,46 @@ def _interrupted_while_starting(signum, frame) -> None:
     os._exit(130)
 
 
+def argument_parser(doc: str) -> argparse.ArgumentParser:
+    """A command's parser from its module docstring: the first paragraph, whole, as the
+    description; the rest (usage examples) as the epilog, as written."""
+    description, _, rest = doc.strip().partition("\n\n")
+    return argparse.ArgumentParser(description=textwrap.fill(" ".join(description.split()), 79),
+                                   epilog=rest,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
 def fail(message: str, status: int = 2) -> None:
     print(f"error: {message}", file=sys.stderr)
     sys.exit(status)
 
 
 def new_directory(path: Path, what: str = "--out") -> None:
-    """Fail (one line, exit 2) unless `path` can be created as a new directory: checked
-    before anything starts, not when the first file is written."""
+    """Fail (one line, exit 2) unless `path` can be created as a new directory and
+    written in: checked before anything starts, by making it (with a file in it) and
+    removing it again, not when the first file is written."""
     if any(len(part.encode()) > 255 for part in path.parts):
         fail(f"{what} {path}: a name in it is longer than 255 bytes")
-    if path.exists() or path.is_symlink():
-        fail(f"{what} {path} exists already; choose another")
+    if len(os.fsencode(path.absolute())) >= os.pathconf("/", "PC_PATH_MAX"):
+        fail(f"{what}: the path is longer than the system allows")
     try:
+        if path.exists() or path.is_symlink():
+            fail(f"{what} {path} exists already; choose another")
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         fail(f"{what} {path}: cannot create {path.parent}: {exc.strerror or exc}")
     if not path.parent.is_dir() or not os.access(path.parent, os.W_OK | os.X_OK):
         fail(f"{what} {path}: {path.parent} is not a writable directory")
+    probe = path / ".write-test"
+    try:
+        path.mkdir()
+        try:
+            probe.write_bytes(b"")
+            probe.unlink()
+        finally:
+            path.rmdir()
+    except OSError as exc:
+        fail(f"{what} {path}: cannot be written: {exc.strerror or exc}")
 
 
 def seconds(value: float | None, what: str) -> None:

@@ -29,9 +29,7 @@ TEARDOWN_LIMIT = 10.0  # s the ROS teardown may take before the process just exi
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = cli.argument_parser(__doc__)
     parser.add_argument("bag", type=Path)
     parser.add_argument("--rate", type=float, default=1.0, help="speed factor; 0 = no pacing")
     parser.add_argument("--topics", nargs="+", help="only these topics")

@@ -24,20 +24,27 @@ from __future__ import annotations
 
 import json
 import signal
-import sys
 from pathlib import Path
 
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String, UInt64
 
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.interfaces import Qos
 from rosbags.typesys import Stores, get_typestore
 
+from ato_nodes.bagio import PARAMETERS_KEY
+from ato_nodes.bagwrite import close_writer, open_writer, qos
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.schema import recording_steps
-from ato_nodes.core.topics import step_topics
-from ato_nodes.bagio import PARAMETERS_KEY
-from ato_nodes.nodes.base import AtoNode, LockstepInputs, run_node
+from ato_nodes.core.topics import Topic, step_topics
+from ato_nodes.nodes.base import QOS, AtoNode, LockstepInputs, run_node
+
+
+def offered_qos(topic: Topic) -> list[Qos]:
+    """The QoS the topic's publishers offer (the topic map's), as the bag keeps it."""
+    profile = QOS[topic.qos]
+    return [qos(profile.history.name, profile.depth, profile.reliability.name,
+                profile.durability.name)]
 
 
 RUN_NODES = ("profile", "plant", "controller")  # whose parameters describe the run
@@ -62,13 +69,13 @@ class RecorderNode(AtoNode):
         self.flushed_msg = UInt64()
         self.output = Path(output)
         self.expected = None
-        self.writer = Writer(output, version=9, storage_plugin=StoragePlugin.MCAP)
-        self.writer.open()
+        self.writer = open_writer(self.output)
         self.run_parameters: dict[str, dict] = {}  # node -> the values it announced
         typestore = get_typestore(Stores.ROS2_JAZZY)
         self.counts: dict[str, int] = {}
         for topic in step_topics():
-            connection = self.writer.add_connection(topic.name, topic.type, typestore=typestore)
+            connection = self.writer.add_connection(topic.name, topic.type, typestore=typestore,
+                                                    offered_qos_profiles=offered_qos(topic))
             self.counts[topic.name] = 0
             self.subscription(topic.key, self._make_callback(topic.name, connection), raw=True)
         self.typestore = typestore
@@ -108,7 +115,8 @@ class RecorderNode(AtoNode):
             if self.changes_connection is None:
                 topic = self.topics["parameter_changes"]
                 self.changes_connection = self.writer.add_connection(
-                    topic.name, topic.type, typestore=self.typestore)
+                    topic.name, topic.type, typestore=self.typestore,
+                    offered_qos_profiles=offered_qos(topic))
             self.writer.write(self.changes_connection, round(step * self.period_ns), data)
         except OSError as exc:
             self.write_failed(exc)
@@ -177,7 +185,7 @@ class RecorderNode(AtoNode):
         try:
             if self.run_parameters:  # what the loop's nodes ran with: the bag explains itself
                 self.writer.set_custom_data(PARAMETERS_KEY, json.dumps(self.merged_parameters()))
-            self.writer.close()
+            close_writer(self.writer, self.output)
             self.writer = None
         except OSError as exc:
             self.write_failed(exc)
