@@ -296,8 +296,7 @@ def test_a_fast_dds_environment_file_of_the_users_changes_nothing(tmp_path):
     """A discovery server named in FASTDDS_ENVIRONMENT_FILE (none runs) would keep the
     nodes from ever matching; the launcher removes it, so the run completes."""
     environment_file = tmp_path / "fastdds.json"
-    environment_file.write_text(json.dumps({"environment": [
-        {"name": "ROS_DISCOVERY_SERVER", "value": "127.0.0.1:11888"}]}))
+    environment_file.write_text(json.dumps({"ROS_DISCOVERY_SERVER": "127.0.0.1:11888"}))
     result = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
                              "--scenario", "seed000-step", "--duration", "2", "--out",
                              str(tmp_path / "run"), "--timeout", "60"],
