@@ -12,7 +12,6 @@ speed_limit, position, command, the controller's outputs) and preview_0 .. previ
 
 from __future__ import annotations
 
-import argparse
 import csv
 from pathlib import Path
 
@@ -22,9 +21,7 @@ from ato_nodes.bagio import BagError, parse_mapping, read_frame, read_run, run_c
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("bag", help="rosbag2 directory or a lone .mcap file")
     target = parser.add_mutually_exclusive_group(required=True)
     target.add_argument("--csv", type=Path, metavar="FILE")

@@ -11,7 +11,6 @@ that is not an MCAP bag (no .mcap file in it) is said so, exit 2.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import _cli
@@ -20,9 +19,7 @@ from ato_nodes.bagrepair import RepairError, repair
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("bags", nargs="+", type=Path, help="rosbag2 directories")
     args = parser.parse_args()
     for bag in args.bags:

@@ -13,7 +13,6 @@ not blank. Prints what it checked; exit 1 if the page did not render, 2 on bad i
 
 from __future__ import annotations
 
-import argparse
 import re
 import shutil
 import subprocess
@@ -72,9 +71,7 @@ def inked_share(png: Path) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = _cli.argument_parser(__doc__)
     parser.add_argument("page", type=Path, help="report.html of analyze.py")
     parser.add_argument("--out", type=Path, required=True, help="screenshot to write (PNG)")
     parser.add_argument("--size", default="1400x2600", help="window WIDTHxHEIGHT in pixels")

@@ -14,7 +14,6 @@ existing directory whose report files are replaced.
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from ato_nodes import cli
@@ -24,9 +23,7 @@ from ato_nodes.core.errors import ScenarioError
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = cli.argument_parser(__doc__)
     parser.add_argument("inputs", nargs="+", type=Path, help="bags and tuning directories")
     parser.add_argument("--out", type=Path, required=True, help="report directory")
     parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC")

@@ -12,7 +12,6 @@ errors judge nothing. A bag with no message is one line, exit 2.
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from ato_nodes import jsontext
@@ -22,9 +21,7 @@ from ato_nodes.core.scoring import format_indices, score_series, stop_not_reache
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog=__doc__.split("\n\n", 1)[1])
+    parser = cli.argument_parser(__doc__)
     parser.add_argument("bag", help="rosbag2 directory (metadata.yaml + .mcap)")
     parser.add_argument("--json", action="store_true", help="print the indices as JSON")
     parser.add_argument("--map", action="append", default=[], metavar="ROLE=/TOPIC",
