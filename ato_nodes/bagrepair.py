@@ -23,8 +23,10 @@ import yaml
 from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from ato_nodes.bagwrite import close_writer, open_writer
 
 PARAMETERS_KEY = "ato_nodes.parameters"
 SIDECAR = "parameters.json"
@@ -131,8 +133,7 @@ def repair(bag: str | Path) -> RepairReport:
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir()
     try:
-        writer = Writer(staging / bag.name, version=9, storage_plugin=StoragePlugin.MCAP)
-        writer.open()
+        writer = open_writer(staging / bag.name)
         sidecar = bag / SIDECAR
         if sidecar.exists():
             writer.set_custom_data(PARAMETERS_KEY, sidecar.read_text())
@@ -143,15 +144,17 @@ def repair(bag: str | Path) -> RepairReport:
                 continue
             if schema.name not in typestore.fielddefs:  # a type of someone else's: its text
                 typestore.register(get_types_from_msg(schema.data.decode(), schema.name))
-            connections[channel_id] = writer.add_connection(channel.topic, schema.name,
-                                                            typestore=typestore)
+            offered = channel.metadata.get("offered_qos_profiles")
+            connections[channel_id] = writer.add_connection(
+                channel.topic, schema.name, typestore=typestore,
+                offered_qos_profiles=parse_qos(offered) if offered else ())
         kept: dict[str, int] = {connection.topic: 0 for connection in connections.values()}
         for message in messages:
             connection = connections.get(message.channel_id)
             if connection is not None:
                 writer.write(connection, message.log_time, message.data)
                 kept[connection.topic] += 1
-        writer.close()
+        close_writer(writer, staging / bag.name)
         written = staging / bag.name
         check = sum(1 for _ in _readable_records(_mcap_file(written))[2])
         if check != sum(kept.values()):

@@ -72,6 +72,8 @@ def test_a_sigkilled_recorder_loses_at_most_a_second_and_its_bag_is_repaired(tmp
     # so the counts lie within the plant's lead on either side of the step.
     assert set(counts) == {topic.name for topic in step_topics()}
     assert max(0, step - 20) <= min(counts.values()) <= max(counts.values()) <= step + 20 + 2
+    metadata = (bag / "metadata.yaml").read_text()  # as the recorder would have written it
+    assert "ros_distro: jazzy" in metadata and metadata.count("reliability: reliable") == 9
     if step:
         holds_what_its_summary_says(bag)
 
