@@ -12,11 +12,13 @@ values) against the log, running only what the log lacks.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import fcntl
 import functools
 import hashlib
 import json
+import logging
 import math
 import os
 import shutil
@@ -24,7 +26,8 @@ import sys
 import tempfile
 import threading
 import time
-from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from concurrent.futures import (CancelledError, Executor, ProcessPoolExecutor,
+                                ThreadPoolExecutor, as_completed)
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -32,7 +35,9 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
+from ato_nodes import jsontext
 from ato_nodes.analysis import plot_convergence
+from ato_nodes.core import fast_loop, kernels
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.components import CONTROLLERS, PROFILES
@@ -45,6 +50,7 @@ from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import Requirement, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
+COMPILING = "compiling the simulation kernels (once per checkout)"
 FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
            "p95_abs_error_kmh": "p95_abs_error_kmh"}
 
@@ -277,8 +283,9 @@ def open_cluster(spec: str):
         count = spec.partition(":")[2]
         if not count.isdigit() or int(count) < 1:
             raise ScenarioError(f"--cluster local:N needs a positive worker count, got {spec!r}")
+        # silence_logs: its workers' notes on tasks they lose (Ctrl-C) are no errors
         cluster = LocalCluster(n_workers=int(count), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, silence_logs=logging.ERROR)
         return Client(cluster), cluster
     if spec.startswith("tcp://"):
         try:
@@ -304,13 +311,20 @@ def conditions(values: dict[str, Any], settings: TuningSettings) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+class TuningLost(RuntimeError):
+    """A tuning that cannot go on through no fault of its input (its Dask scheduler
+    stopped answering); its log keeps every finished evaluation for --resume."""
+
+
 class EvaluationLog:
     """evaluations.jsonl: one line per finished evaluation, flushed at once. On resume
     every line must have been evaluated under the same conditions; a last line cut
-    short (the process was killed while writing it) is dropped and evaluated again."""
+    short (the process was killed while writing it) is dropped and evaluated again.
+    Reading checks and changes nothing; start() writes."""
 
     def __init__(self, path: Path, resume: bool, expected_conditions: str):
         self.path = path
+        self.resume = resume
         self.done: dict[int, Evaluation] = {}
         if resume and path.exists():
             lines = path.read_text().splitlines()
@@ -319,6 +333,8 @@ class EvaluationLog:
                     continue
                 try:
                     record = Evaluation(**json.loads(line))
+                    if not isinstance(record.fitness, (int, float)):
+                        raise TypeError("no fitness")
                 except (json.JSONDecodeError, TypeError) as exc:
                     if number == len(lines):  # cut short: evaluate it again
                         print(f"warning: {path} line {number} is incomplete; it is evaluated "
@@ -333,16 +349,21 @@ class EvaluationLog:
                         "scenario, its line or table file, --set, the fitness, requirements or "
                         "search space changed); tune into a new --out")
                 self.done[record.index] = record
-            self._rewrite()  # without a cut-short last line
-        elif path.exists():
-            path.unlink()
         self.lock = threading.Lock()
 
-    def _rewrite(self) -> None:
-        temporary = self.path.with_suffix(".jsonl.tmp")
-        temporary.write_text("".join(json.dumps(asdict(record)) + "\n"
-                                     for record in self.done.values()))
-        temporary.replace(self.path)
+    def start(self) -> None:
+        """The log as this tuning appends to it: what was read (without a cut-short
+        last line) on resume, else empty."""
+        if self.resume and self.path.exists():
+            temporary = self.path.with_suffix(".jsonl.tmp")
+            temporary.write_text("".join(self.line(record) for record in self.done.values()))
+            temporary.replace(self.path)
+        elif self.path.exists():
+            self.path.unlink()
+
+    @staticmethod
+    def line(record: Evaluation) -> str:
+        return jsontext.dumps(asdict(record)) + "\n"
 
     def cached(self, index: int, params: dict[str, Any]) -> Evaluation | None:
         record = self.done.get(index)
@@ -356,7 +377,7 @@ class EvaluationLog:
 
     def append(self, record: Evaluation) -> None:
         with self.lock, self.path.open("a") as handle:
-            handle.write(json.dumps(asdict(record)) + "\n")
+            handle.write(self.line(record))
             handle.flush()
         self.done[record.index] = record
 
@@ -393,7 +414,9 @@ class TuningSettings:
 
 
 class Tuner:
-    """Runs one tuning and writes its output directory."""
+    """Runs one tuning and writes its output directory. Everything that can refuse it
+    (settings, the directory's lock, a resumed log's conditions) is checked before
+    anything in the directory is written."""
 
     def __init__(self, values: dict[str, Any], settings: TuningSettings, out: Path,
                  resume: bool = False, evaluate: Callable[..., Evaluation] | None = None,
@@ -404,6 +427,8 @@ class Tuner:
         if settings.fitness not in FITNESS:
             raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
                                 f"{', '.join(FITNESS)}")
+        if settings.cluster and settings.keep_bags:
+            raise ScenarioError("--keep-bags keeps bags on this host; not with --cluster")
         self.values, self.settings, self.out = values, settings, out
         self.progress = progress
         try:
@@ -413,22 +438,26 @@ class Tuner:
         self.directory_lock = _hold_directory(out)
         self.conditions = conditions(values, settings)
         settings_file = out / "tuning.json"
-        described = {**settings.describe(), "conditions": self.conditions}
+        described = jsontext.dumps({**settings.describe(), "conditions": self.conditions},
+                                   indent=2)
         if resume and settings_file.exists():
             try:
                 before = json.loads(settings_file.read_text())
             except json.JSONDecodeError:
                 raise ScenarioError(f"{settings_file} is not valid JSON; tune into a new "
                                     "--out") from None
-            if before != json.loads(json.dumps(described)):
+            if before != json.loads(described):
                 raise ScenarioError(f"{out} holds a tuning with other settings or conditions "
                                     "(scenario, files, --set); resume it with the same options "
                                     "or tune into a new --out")
-        settings_file.write_text(json.dumps(described, indent=2))
         self.log = EvaluationLog(out / "evaluations.jsonl", resume, self.conditions)
+        self.summary = _finished_summary(out, self.conditions, len(self.log.done)) \
+            if resume else None
+        if self.summary is None:  # accepted, with work to do: the directory is this tuning's
+            _name_holder(self.directory_lock)
+            settings_file.write_text(described)
+            self.log.start()
         self.in_process_pool = evaluate is None and settings.in_process
-        if settings.cluster and settings.keep_bags:
-            raise ScenarioError("--keep-bags keeps bags on this host; not with --cluster")
         if evaluate is not None:
             self.evaluate = evaluate
         elif settings.in_process:
@@ -453,8 +482,17 @@ class Tuner:
         self.started = time.monotonic()
         self.best = math.inf
 
+    @property
+    def finished(self) -> bool:
+        """Resumed, and the tuning had finished: nothing to run (summary.json says how
+        it ended)."""
+        return self.summary is not None
+
     def _stamped(self, record: Evaluation) -> Evaluation:
         record.conditions = self.conditions
+        if not math.isfinite(record.fitness):  # the log's fitness is always a number
+            record.fitness, record.status = PENALTY, "failed"
+            record.message = record.message or "fitness not finite"
         return record
 
     def _evaluate_in_stack(self, values, overrides, objective, index,
@@ -485,6 +523,28 @@ class Tuner:
             self.client.close()
         if self.local_cluster is not None:
             self.local_cluster.close()
+
+    def _stop(self, pool: Executor) -> None:
+        """Stop at once: the candidates under way are cancelled (not logged: --resume
+        evaluates them again), a cluster is closed without its log messages about the
+        tasks it loses."""
+        self.cancel.set()
+        if self.client is None:
+            pool.shutdown(wait=True, cancel_futures=True)
+            return
+        if self.client.status == "running":
+            pool.shutdown(wait=False)  # a ClientExecutor cancels its tasks
+        self._close_cluster()
+
+    def _warm_kernels(self) -> None:
+        """Compile the in-process loop here, once, before the workers start: they then
+        load it (forked, or from the cache beside the source) instead of compiling it
+        each."""
+        if self.progress:
+            with kernels.announced(COMPILING):
+                fast_loop.warm(self.values)
+        else:
+            fast_loop.warm(self.values)
 
     def _batch_fitness(self, pool: Executor, population: np.ndarray,
                        bounds: np.ndarray | None = None) -> np.ndarray:
@@ -539,27 +599,39 @@ class Tuner:
         """The tuning. Ctrl-C stops the candidates under way at once (their runs are
         not logged; --resume evaluates them again) and re-raises."""
         s = self.settings
-        pool = self._pool()
-        try:
-            result = optimize(s.algorithm,
-                              lambda population, bounds=None: self._batch_fitness(
-                                  pool, population, bounds),
-                              s.space.lower, s.space.upper, s.evaluations, s.seed,
-                              x0=s.space.start(self.values), bounded=self.prune, **s.options)
-        except KeyboardInterrupt:
-            self.cancel.set()
-            pool.shutdown(wait=True, cancel_futures=True)
+        if self.in_process_pool:
+            self._warm_kernels()
+        with contextlib.ExitStack() as stack:
+            pool = self._pool()
+            if self.client is not None:  # the tuner says what goes wrong, in one line
+                stack.enter_context(_dask_logs_silenced())
+            try:
+                result = optimize(s.algorithm,
+                                  lambda population, bounds=None: self._batch_fitness(
+                                      pool, population, bounds),
+                                  s.space.lower, s.space.upper, s.evaluations, s.seed,
+                                  x0=s.space.start(self.values), bounded=self.prune,
+                                  **s.options)
+            except KeyboardInterrupt:
+                self._stop(pool)
+                raise
+            except (CancelledError, OSError):  # a task cancelled, a connection closed
+                if self.client is None or self.client.status == "running":
+                    raise
+                self._stop(pool)
+                raise TuningLost(f"the Dask scheduler {s.cluster} stopped answering "
+                                 f"mid-tuning; every finished evaluation is in "
+                                 f"{self.log.path}; continue with --resume") from None
+            pool.shutdown(wait=True)
             self._close_cluster()
-            raise
-        pool.shutdown(wait=True)
-        self._close_cluster()
         self._write_outputs(result)
         return result
 
     def _write_outputs(self, result: Result) -> None:
         best_overrides = self.settings.space.overrides(result.best_x)
-        best_values = apply_overrides(self.values, best_overrides)
-        (self.out / "best.yaml").write_text(self.best_scenario(result, best_values))
+        if result.best_f < PENALTY:  # else every candidate failed: there is no best to run
+            best_values = apply_overrides(self.values, best_overrides)
+            (self.out / "best.yaml").write_text(self.best_scenario(result, best_values))
         with (self.out / "history.csv").open("w", newline="") as handle:
             writer = csv.writer(handle)
             writer.writerow(["iteration", "evaluations", "best_fitness", "mean_fitness",
@@ -580,9 +652,10 @@ class Tuner:
                    "best_is_feasible": result.best_f < INFEASIBLE,
                    "best_at_bounds": at_bounds(self.settings.space, result.best_x),
                    "best_indices": _best_indices(self.log, best_overrides),
-                   "wall_time": time.monotonic() - self.started}
-        (self.out / "summary.json").write_text(json.dumps(summary, indent=2))
+                   "wall_time": time.monotonic() - self.started, "conditions": self.conditions}
         plot_convergence([self.out], self.out / "convergence.png")
+        # last: a summary.json under these conditions means the tuning finished
+        (self.out / "summary.json").write_text(jsontext.dumps(summary, indent=2))
 
 
     def best_scenario(self, result: Result, best_values: dict[str, Any]) -> str:
@@ -626,11 +699,43 @@ def _hold_directory(out: Path):
         handle.close()
         raise ScenarioError(f"{out} is being written by another tuning (pid {holder}); wait "
                             "for it or use another --out") from None
-    handle.seek(0)
-    handle.truncate()
-    handle.write(str(os.getpid()))
-    handle.flush()
     return handle
+
+
+@contextlib.contextmanager
+def _dask_logs_silenced():
+    """Dask's log lines in this process (a lost connection's tracebacks from its event
+    loop, tasks it cancels) are not shown while they last."""
+    loggers = [logging.getLogger(name) for name in list(logging.root.manager.loggerDict)
+               if name.partition(".")[0] in ("distributed", "tornado")]
+    disabled = [logger.disabled for logger in loggers]
+    for logger in loggers:
+        logger.disabled = True
+    try:
+        yield
+    finally:
+        for logger, before in zip(loggers, disabled):
+            logger.disabled = before
+
+
+def _name_holder(lock) -> None:
+    """This process's pid in the held lock file (what a refused second tuning names)."""
+    lock.seek(0)
+    lock.truncate()
+    lock.write(str(os.getpid()))
+    lock.flush()
+
+
+def _finished_summary(out: Path, expected_conditions: str, logged: int) -> dict[str, Any] | None:
+    """The summary.json of a tuning in OUT that finished under these conditions, its
+    `logged` evaluations all still in the log, or None."""
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    finished = (isinstance(summary, dict) and summary.get("conditions") == expected_conditions
+                and summary.get("evaluations_used") == logged)
+    return summary if finished else None
 
 
 def _best_indices(log: EvaluationLog, best: dict[str, Any]) -> dict[str, Any]:

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Creates .venv (CPython 3.11: the ROS 2 Jazzy wheels exist for it only) and installs
-# requirements.txt into it. Safe to run again: an existing .venv is reused.
+# Creates .venv (CPython 3.11: the ROS 2 Jazzy wheels exist for it only), installs
+# requirements.txt and the package into it and compiles the simulation kernels, saying
+# so before each step. Safe to run again: an existing .venv is reused.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python=${PYTHON:-}
@@ -17,11 +18,21 @@ if [ -z "$python" ]; then
   echo "error: CPython 3.11 is needed (the ros-jazzy-* wheels are built for it); set PYTHON=" >&2
   exit 2
 fi
-[ -x .venv/bin/python ] || "$python" -m venv .venv
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv with $python"
+  "$python" -m venv .venv
+fi
 # (pip's notes about configured local index folders that do not exist are noise)
+echo "setup: installing the pinned packages of requirements.txt into .venv (ROS 2 Jazzy" \
+  "wheels, numpy, scipy, numba, Dask, ...)"
 .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
 # The package itself, editable: `import ato_nodes` works from any directory, the node
 # entry points are on .venv/bin, and the checkout stays the code that runs.
+echo "setup: installing ato_nodes from this checkout, editable"
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e . \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
+# Compiled now, the in-process loop is loaded from its cache (ato_nodes/core/__pycache__)
+# by every later run, tuning worker and test instead of being compiled by the first.
+echo "setup: compiling the simulation kernels (once per checkout)"
+.venv/bin/python -c "from ato_nodes.core import fast_loop; fast_loop.warm()"

@@ -1,18 +1,26 @@
 """The Dask backend of the tuner: the same candidates give the same fitness as the local
 worker processes, on a LocalCluster and on a scheduler and workers started as separate
-processes with the README's commands, and a worker killed mid-tuning changes nothing."""
+processes with the README's commands, and a worker killed mid-tuning changes nothing;
+Ctrl-C and a scheduler that dies end the tuning in one line, the log kept for --resume."""
 
+import contextlib
 import json
 import os
+import selectors
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
 pytest.importorskip("distributed")
+import psutil  # noqa: E402  (a dependency of distributed)
+
+from ato_nodes.tuning import COMPILING  # noqa: E402
+
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,40 +59,114 @@ def test_a_local_cluster_gives_the_local_backends_result(tmp_path):
     assert best_and_evaluations(local) == best_and_evaluations(cluster)
 
 
-def test_separate_scheduler_and_workers_survive_a_killed_worker(tmp_path):
-    reference = tune(tmp_path / "local", "--workers", "2", evaluations=60)
-    address_file = tmp_path / "scheduler.json"
+class ClusterTuning(NamedTuple):
+    address: str
+    scheduler: subprocess.Popen
+    workers: list
+    tuner: subprocess.Popen
+
+
+@contextlib.contextmanager
+def cluster_tuning(directory: Path, out: Path):
+    """A scheduler (on loopback) and two workers as separate processes, as the README
+    starts them, and a 60-evaluation tuning on them into `out`, 12 evaluations in;
+    every one of these processes still running at the end is killed."""
+    address_file = directory / "scheduler.json"
     processes = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--scheduler-file",
-                                   str(address_file), "--no-dashboard", "--port", "0"],
+                                   str(address_file), "--no-dashboard", "--port", "0",
+                                   "--host", "127.0.0.1"],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
         deadline = time.monotonic() + 60
         while not address_file.exists() and time.monotonic() < deadline:
             time.sleep(0.05)
         address = json.loads(address_file.read_text())["address"]
-        workers = [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
-                                     "--no-nanny", "--no-dashboard"], cwd=tmp_path,
-                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                   for _ in range(2)]
-        processes += workers
-        out = tmp_path / "cluster"
-        tuner = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "tune.py"), *TUNING,
-                                  "--evaluations", "60", "--out", str(out), "--cluster",
-                                  address], cwd=ROOT, stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE, text=True)
-        processes.append(tuner)
-        log = out / "evaluations.jsonl"
-        while time.monotonic() < deadline + 120 and tuner.poll() is None and (
-                not log.exists() or len(log.read_text().splitlines()) < 12):
-            time.sleep(0.02)
-        assert tuner.poll() is None, "the tuning ended before a worker could be killed"
-        os.kill(workers[0].pid, signal.SIGKILL)  # mid-tuning: its task goes to the other
-        _, stderr = tuner.communicate(timeout=600)
-        assert tuner.returncode == 0, stderr
-        assert len(log.read_text().splitlines()) == 60
-        assert best_and_evaluations(outcome(out)) == best_and_evaluations(reference)
+        processes += [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
+                                        "--no-nanny", "--no-dashboard"], cwd=directory,
+                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                      for _ in range(2)]
+        processes.append(start_tuning(out, "--cluster", address))
+        wait_for_evaluations(processes[-1], out, 12)
+        yield ClusterTuning(address, processes[0], processes[1:3], processes[-1])
     finally:
         for process in processes:
             if process.poll() is None:
                 process.kill()
                 process.wait()
+
+
+def start_tuning(out: Path, *extra: str, evaluations: int = 60) -> subprocess.Popen:
+    """tune.py with its progress lines (one per finished evaluation) on stderr."""
+    return subprocess.Popen([sys.executable, str(ROOT / "scripts" / "tune.py"),
+                             *[a for a in TUNING if a != "--quiet"], "--evaluations",
+                             str(evaluations), "--out", str(out), *extra], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_evaluations(tuner: subprocess.Popen, out: Path, count: int) -> None:
+    """Until evaluations.jsonl has `count` lines, reading the progress line the tuner
+    prints after each one it logs (no fixed sleep); it must still be running then."""
+    log = out / "evaluations.jsonl"
+    deadline = time.monotonic() + 300
+    with selectors.DefaultSelector() as selector:
+        selector.register(tuner.stderr, selectors.EVENT_READ)
+        while not log.exists() or len(log.read_text().splitlines()) < count:
+            assert time.monotonic() < deadline and tuner.poll() is None, \
+                "the tuning ended before it could be stopped"
+            if selector.select(timeout=deadline - time.monotonic()):
+                tuner.stderr.readline()
+
+
+def messages(stderr: str) -> list[str]:
+    """stderr without the progress lines (and the note of a compilation)."""
+    return [line for line in stderr.splitlines()
+            if not line.startswith("iteration ") and line != COMPILING]
+
+
+def test_separate_scheduler_and_workers_survive_a_killed_worker(tmp_path):
+    reference = tune(tmp_path / "local", "--workers", "2", evaluations=60)
+    out = tmp_path / "cluster"
+    with cluster_tuning(tmp_path, out) as cluster:
+        os.kill(cluster.workers[0].pid, signal.SIGKILL)  # mid-tuning: its task goes elsewhere
+        _, stderr = cluster.tuner.communicate(timeout=600)
+    assert cluster.tuner.returncode == 0, stderr
+    assert len((out / "evaluations.jsonl").read_text().splitlines()) == 60
+    assert best_and_evaluations(outcome(out)) == best_and_evaluations(reference)
+
+
+def test_ctrl_c_of_a_local_cluster_tuning_is_one_line_exit_130_and_no_process_left(tmp_path):
+    out = tmp_path / "cluster"
+    tuner = start_tuning(out, "--cluster", "local:2", evaluations=600)
+    try:
+        wait_for_evaluations(tuner, out, 6)
+        started = psutil.Process(tuner.pid).children(recursive=True)
+        assert len(started) >= 2  # the cluster's worker processes, at least
+        tuner.send_signal(signal.SIGINT)
+        _, stderr = tuner.communicate(timeout=120)
+    finally:
+        if tuner.poll() is None:
+            tuner.kill()
+            tuner.wait()
+    log = out / "evaluations.jsonl"
+    assert tuner.returncode == 130, stderr
+    assert messages(stderr) == [f"interrupted; every finished evaluation is in {log}; "
+                                "continue with --resume"]
+    _, left = psutil.wait_procs(started, timeout=60)
+    assert left == []
+    assert 6 <= len(log.read_text().splitlines()) < 600
+
+
+def test_a_scheduler_that_dies_mid_tuning_is_one_line_and_the_log_resumes(tmp_path):
+    reference = tune(tmp_path / "local", "--workers", "2", evaluations=60)
+    out = tmp_path / "cluster"
+    with cluster_tuning(tmp_path, out) as cluster:
+        cluster.scheduler.kill()
+        _, stderr = cluster.tuner.communicate(timeout=300)
+    log = out / "evaluations.jsonl"
+    assert cluster.tuner.returncode == 1, stderr
+    assert messages(stderr) == [f"error: the Dask scheduler {cluster.address} stopped answering "
+                                f"mid-tuning; every finished evaluation is in {log}; continue "
+                                "with --resume"]
+    assert 12 <= len(log.read_text().splitlines()) < 60
+    resumed = tune(out, "--workers", "2", "--resume", evaluations=60)
+    assert best_and_evaluations(resumed) == best_and_evaluations(reference)

@@ -1,9 +1,13 @@
-"""The compiled loop (core/fast_loop.py) against the Python loop, bit for bit."""
+"""The compiled loop (core/fast_loop.py) against the Python loop, bit for bit, and
+against itself run in chunks of steps."""
+
+import itertools
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from ato_nodes.core import fast_loop, kernels
+from ato_nodes.core import fast_loop, kernels, loop
 from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
@@ -58,6 +62,61 @@ def test_a_diverging_run_ends_at_the_same_step(monkeypatch):
     compiled, python = simulate(values), python_run(monkeypatch, values)
     assert len(compiled["t"]) == len(python["t"]) < 6000
     assert np.array_equal(compiled["speed"], python["speed"], equal_nan=True)
+
+
+def chunked_run(monkeypatch, values, first_chunk, prune=None):
+    """simulate(), the compiled loop called first for `first_chunk` steps, then for
+    one step at a time (a chunk aims at no wall time at all)."""
+    with monkeypatch.context() as patch:
+        patch.setattr(fast_loop, "FIRST_CHUNK", first_chunk)
+        patch.setattr(fast_loop, "CHUNK_SECONDS", 0.0)
+        return simulate(values, prune=prune)
+
+
+@pytest.mark.parametrize("scenario,overrides", VARIANTS)
+def test_a_run_in_one_step_chunks_gives_the_bits_of_a_run_in_one_call(monkeypatch, scenario,
+                                                                       overrides):
+    values = apply_overrides(load_scenario(scenario), ["run.duration=300", *overrides])
+    whole, chunked = (chunked_run(monkeypatch, values, first) for first in (10**9, 1))
+    assert len(whole["t"]) == 6000
+    for name in whole:
+        assert np.array_equal(whole[name], chunked[name]), name
+
+
+def test_pruned_and_diverging_runs_end_at_the_same_step_in_chunks(monkeypatch):
+    values = apply_overrides(load_scenario("seed000"), ["run.duration=600", "adrc.mu1=700"])
+    ends = []
+    for first in (10**9, 7):
+        running = RunningIndex("itae")
+        steps = len(chunked_run(monkeypatch, values, first, (running, 5000.0))["t"])
+        ends.append((steps, running.value, running.last_t, running.last_w))
+    assert ends[0] == ends[1] and ends[0][0] < 12000
+    diverging = apply_overrides(load_scenario("seed000"), ["run.duration=300", "adrc.b0=0.001"])
+    whole, chunked = (chunked_run(monkeypatch, diverging, first) for first in (10**9, 3))
+    assert len(whole["t"]) == len(chunked["t"]) < 6000
+    assert np.array_equal(whole["speed"], chunked["speed"], equal_nan=True)
+
+
+def test_every_run_it_covers_calls_one_compiled_signature():
+    """So one compilation (setup.sh's, or a tuning's before its workers start) serves
+    every compiled run of the checkout."""
+    fast_loop.warm()
+    for scenario, overrides in VARIANTS:
+        values = apply_overrides(load_scenario(scenario), ["run.duration=1", *overrides])
+        simulate(values)
+        simulate(values, prune=(RunningIndex("max_abs_error"), 1.0))
+    assert len(fast_loop._steps.signatures) == 1
+
+
+def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):
+    """A clock that advances one second per reading: the run passes its deadline at
+    the sixth check, the sixth one-step chunk."""
+    clock = itertools.count()
+    monkeypatch.setattr(loop, "time", SimpleNamespace(monotonic=lambda: next(clock)))
+    monkeypatch.setattr(fast_loop, "FIRST_CHUNK", 1)
+    monkeypatch.setattr(fast_loop, "CHUNK_SECONDS", 0.0)
+    with pytest.raises(TimeoutError, match="deadline at step 5$"):
+        simulate(load_scenario("seed000"), deadline=4.5)
 
 
 def test_runs_it_does_not_cover_take_the_python_loop():

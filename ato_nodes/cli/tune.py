@@ -24,7 +24,8 @@ from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
-from ato_nodes.tuning import FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningSettings
+from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
+                              TuningSettings)
 
 
 def parse_args() -> argparse.Namespace:
@@ -97,19 +98,31 @@ def tune() -> None:
         if args.out.exists() and any(args.out.iterdir()) and not args.resume:
             raise ScenarioError(f"{args.out} is not empty; use --resume or another --out")
         tuner = Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet)
-        result = tuner.run()
+        if tuner.finished:
+            print(f"the tuning in {args.out} is finished; nothing to run")
+        else:
+            tuner.run()
     except (ScenarioError, ValueError) as exc:
         cli.fail(str(exc).splitlines()[0])
+    except TuningLost as exc:
+        cli.fail(str(exc), 1)
     except KeyboardInterrupt:
         print(f"interrupted; every finished evaluation is in {args.out / 'evaluations.jsonl'}; "
               "continue with --resume", file=sys.stderr)
         sys.exit(130)
-    summary = json.loads((args.out / "summary.json").read_text())
-    if result.best_f >= PENALTY:
-        cli.fail(f"every one of the {result.evaluations} candidates failed "
-                 f"({summary['failed_evaluations']}); see {args.out / 'evaluations.jsonl'}", 1)
-    print(f"best {args.fitness} {result.best_f:.6g} after {result.evaluations} evaluations, "
-          f"{result.iterations} iterations ({summary['stop_reason']})")
+    report(json.loads((args.out / "summary.json").read_text()), args.out)
+
+
+def report(summary: dict, out: Path) -> None:
+    """What a finished tuning prints, from its summary.json (a resume of a finished
+    tuning prints it again)."""
+    if summary["best_fitness"] >= PENALTY:
+        cli.fail(f"every one of the {summary['evaluations_used']} candidates failed "
+                 f"({summary['failed_evaluations']}), so there is no best.yaml; see "
+                 f"{out / 'evaluations.jsonl'}", 1)
+    print(f"best {summary['fitness']} {summary['best_fitness']:.6g} after "
+          f"{summary['evaluations_used']} evaluations, {summary['iterations']} iterations "
+          f"({summary['stop_reason']})")
     for name, value in summary["best_params"].items():
         print(f"  {name} = {value:.6g}")
     indices = summary["best_indices"]
@@ -120,5 +133,5 @@ def tune() -> None:
     for name in summary["best_at_bounds"]:
         print(f"warning: the best {name} sits on its bound; a wider --params box may do "
               f"better", file=sys.stderr)
-    print(f"outputs: {args.out}/best.yaml, evaluations.jsonl, history.csv, convergence.png")
-    print(f"run the best: python scripts/run_stack.py --scenario {args.out / 'best.yaml'}")
+    print(f"outputs: {out}/best.yaml, evaluations.jsonl, history.csv, convergence.png")
+    print(f"run the best: python scripts/run_stack.py --scenario {out / 'best.yaml'}")

@@ -21,6 +21,8 @@ from __future__ import annotations
 import functools
 import json
 import math
+import time
+from typing import Callable, NamedTuple
 
 import numpy as np
 
@@ -59,69 +61,153 @@ def horizons(profile) -> np.ndarray:
     return table
 
 
-def run(profile, plant, controller, columns: int, prune: tuple[RunningIndex, float] | None):
+class LoopInputs(NamedTuple):
+    """What every step of a compiled run reads and none changes."""
+
+    targets: np.ndarray   # every step's horizon (steps x (N + 1)), read-only
+    draws: np.ndarray     # the speed sensor's normal draws, one per step
+    noise: float          # plant.speed_noise
+    quantum: float        # plant.speed_quantum
+    preview: int          # the horizon entry the controller tracks
+    period: float         # s
+    substeps: int         # RK4 sub-steps per period
+    powered: bool         # traction power (always, on the open track)
+    constants: tuple      # TrainParameters.constants()
+    lagged: bool          # the force follows the command through the actuator lag
+    limited: bool         # the train has a traction or brake envelope
+    max_speed: float      # m/s, past it the run has diverged
+    gains: tuple          # HanADRC.gains_tuple
+    h: float              # the tracking differentiator's step
+    limits: tuple         # CommandLimiter.settings
+    kind: int             # RunningIndex.kind of the pruned fitness
+    limit: float          # the running fitness past which the run ends (inf: never)
+
+
+class LoopState(NamedTuple):
+    """Everything a step changes, carried from one chunk of steps to the next: a run
+    computed in chunks gives the bits of one computed in a single call."""
+
+    step: int             # the next step k
+    plant_steps: int      # periods the train has run (PointMassTrain.steps)
+    time: float           # s, the plant's clock
+    position: float       # m
+    speed: float          # m/s, true
+    force: float          # N/kN applied
+    lag: float            # the lag's output before the envelope (PointMassTrain.lag_state)
+    acting: float         # the command that acted over the last period
+    z1: float             # the observer's state (NonlinearESO)
+    z2: float
+    z3: float
+    v1: float             # the tracking differentiator's
+    v2: float
+    u_applied: float      # the command the observer was told (HanADRC.u_applied)
+    last: float           # the limiter's last command
+    value: float          # the running fitness (RunningIndex value, last_t, last_w)
+    last_t: float
+    last_w: float
+    ended: bool           # diverged or pruned: no step follows
+
+
+FIRST_CHUNK = 64  # steps computed by a run's first call of the compiled loop
+CHUNK_SECONDS = 0.05  # wall time each later call aims at: the deadline is checked between calls
+
+
+def run(profile, plant, controller, columns: int, prune: tuple[RunningIndex, float] | None,
+        check: Callable[[int], None]):
     """The run, compiled: (rows (steps x columns, loop.SERIES), the controller's
-    outputs (steps x 5), the horizons)."""
+    outputs (steps x 5), the horizons). It runs in chunks of steps, each a call of
+    the compiled loop lasting about CHUNK_SECONDS; `check(step)` is called before
+    each (simulate() raises there once past its deadline)."""
     targets = horizons(profile)
     train, han, limiter = plant.train, controller.controller, controller.limiter
-    state = train.state
     running, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
     rows = np.empty((len(targets), columns))
     extras = np.empty((len(targets), 5))
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
     draws = plant.rng.standard_normal(len(targets)) if plant.noise > 0.0 else \
         np.zeros(len(targets))
-    sensor = (plant.noise, plant.quantum)
-    done, running.value, running.last_t, running.last_w = _loop(
-        targets, draws, sensor, controller.preview, train.period, train.substeps, train.steps, state.time,
-        state.position, state.speed, state.force, train.lag_state, train.acting, train.powered,
-        train.constants, train.lagged, train.limited, plant.max_speed,
-        (han.eso.z1, han.eso.z2, han.eso.z3, han.td.v1, han.td.v2, han.u_applied),
-        han.gains_tuple, han.td.h, limiter.last, limiter.settings,
-        running.kind, limit, running.value, running.last_t, running.last_w, rows, extras)
-    return rows[:done], extras[:done], targets[:done]
+    inputs = LoopInputs(
+        targets, draws, float(plant.noise), float(plant.quantum), int(controller.preview),
+        float(train.period), int(train.substeps), bool(train.powered), train.constants,
+        bool(train.lagged), bool(train.limited), float(plant.max_speed), han.gains_tuple,
+        float(han.td.h), limiter.settings, int(running.kind), float(limit))
+    state, eso, td = train.state, han.eso, han.td
+    loop = LoopState(
+        0, int(train.steps), float(state.time), float(state.position), float(state.speed),
+        float(state.force), float(train.lag_state), float(train.acting), float(eso.z1),
+        float(eso.z2), float(eso.z3), float(td.v1), float(td.v2), float(han.u_applied),
+        float(limiter.last), float(running.value), float(running.last_t),
+        float(running.last_w), False)
+    chunk = FIRST_CHUNK
+    while loop.step < len(targets) and not loop.ended:
+        check(loop.step)
+        started = time.perf_counter()
+        loop = _steps(inputs, loop, min(len(targets), loop.step + chunk), rows, extras)
+        elapsed = time.perf_counter() - started
+        chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
+    running.value, running.last_t, running.last_w = loop.value, loop.last_t, loop.last_w
+    return rows[:loop.step], extras[:loop.step], targets[:loop.step]
 
 
-def _loop_source(targets, draws, sensor, preview, period, substeps, plant_steps, time, x, v,
-                 force, lag, acting, powered, constants, lagged, limited, max_speed, controller_state,
-                 gains, h, last, limits, kind, limit, value, last_t, last_w, rows, extras):
-    """simulate()'s loop for the runs `covers` accepts; returns (steps done, running
-    index state). Rows in loop.SERIES order."""
-    _, a, b, c, amplitude, omega, phase, _, _, _, envelope = constants
+def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, rows, extras) -> LoopState:
+    """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
+    (or the step the run ends at); the state after. Rows in loop.SERIES order."""
+    _, a, b, c, amplitude, omega, phase, _, _, _, envelope = inputs.constants
+    targets, period, substeps, constants = inputs.targets, inputs.period, inputs.substeps, \
+        inputs.constants
     sub = period / substeps
-    z1, z2, z3, v1, v2, u_applied = controller_state
-    for k in range(len(targets)):
+    plant_steps, clock, x, v, force = loop.plant_steps, loop.time, loop.position, loop.speed, \
+        loop.force
+    lag, acting, last, u_applied = loop.lag, loop.acting, loop.last, loop.u_applied
+    z1, z2, z3, v1, v2 = loop.z1, loop.z2, loop.z3, loop.v1, loop.v2
+    value, last_t, last_w = loop.value, loop.last_t, loop.last_w
+    k, ended = loop.step, False
+    while k < stop and not ended:
         # plant outputs at t_k (PlantStage.outputs)
-        measured = sensor_reading(v, draws[k], sensor[0], sensor[1])
-        acceleration = rates(time, v, lag, acting, powered, no_line(x), constants)[0]
-        reference = targets[k, preview]
+        measured = sensor_reading(v, inputs.draws[k], inputs.noise, inputs.quantum)
+        acceleration = rates(clock, v, lag, acting, inputs.powered, no_line(x), constants)[0]
+        reference = targets[k, inputs.preview]
         if k == 0:  # HanADRC.start
             v1, z1 = reference, measured
         u, z1, z2, z3, v1, v2 = han_adrc_step(z1, z2, z3, v1, v2, u_applied, reference,
-                                              measured, gains, h, last, limits)
+                                              measured, inputs.gains, inputs.h, last,
+                                              inputs.limits)
         u_applied = last = u
         row = rows[k]
         row[0], row[1], row[2], row[3], row[4] = k * period, targets[k, 0], x, measured, v
-        row[5], row[6], row[7] = acceleration, disturbance(time, amplitude, omega, phase), force
+        row[5], row[6], row[7] = acceleration, disturbance(clock, amplitude, omega, phase), force
         row[8], row[9], row[10], row[11] = basic_resistance(v, a, b, c), 0.0, math.inf, u
         extras[k, 0], extras[k, 1], extras[k, 2], extras[k, 3], extras[k, 4] = z1, z2, z3, v1, v2
         speed = v
         # plant.apply(u) (PointMassTrain.step)
-        start = time
+        start = clock
         for i in range(substeps):
-            x, v, lag = rk4_substep(start + i * sub, x, v, lag, sub, u, powered, constants,
-                                    no_line)
+            x, v, lag = rk4_substep(start + i * sub, x, v, lag, sub, u, inputs.powered,
+                                    constants, no_line)
         acting = u
         plant_steps += 1
-        time = plant_steps * period
-        force = achievable(lag if lagged else u, v, limited, envelope)
-        if not (abs(v) <= max_speed):  # PlantStage.diverged
-            return k + 1, value, last_t, last_w
-        value, last_t, last_w = running_add(kind, value, last_t, last_w, k * period,
-                                            targets[k, 0] - speed)
-        if value > limit:
-            return k + 1, value, last_t, last_w
-    return len(targets), value, last_t, last_w
+        clock = plant_steps * period
+        force = achievable(lag if inputs.lagged else u, v, inputs.limited, envelope)
+        if not (abs(v) <= inputs.max_speed):  # PlantStage.diverged
+            ended = True
+        else:
+            value, last_t, last_w = running_add(inputs.kind, value, last_t, last_w, k * period,
+                                                targets[k, 0] - speed)
+            ended = value > inputs.limit
+        k += 1
+    return LoopState(k, plant_steps, clock, x, v, force, lag, acting, z1, z2, z3, v1, v2,
+                     u_applied, last, value, last_t, last_w, ended)
 
 
-_loop = compiled(_loop_source)
+_steps = compiled(_steps_source)
+
+
+def warm(values: dict | None = None) -> None:
+    """Compile the loop now, or load it from its cache beside this file, by a two-step
+    run of `values` (default: the shipped seed000), if it is a run the loop covers.
+    Every run it covers calls it with the same argument types (LoopInputs, LoopState),
+    so this one compilation serves them all, in every process of this checkout."""
+    from .loop import simulate
+    from .scenario import apply_overrides, load_scenario
+    values = load_scenario("seed000") if values is None else values
+    simulate(apply_overrides(values, {"run.duration": 2 * values["run.period"]}))
