@@ -11,6 +11,14 @@ own function (core.kernels: plant.rates, rk4_substep and sensor_reading,
 adrc.han_adrc_step, limiter.limit_command, indices.running_add), compiled;
 tests/test_fast_loop.py checks that both paths give the same bits.
 
+A run is computed in chunks of steps, each one call of the compiled loop lasting
+about CHUNK_SECONDS, so that simulate() can check its deadline between them (a
+step at 10000 RK4 sub-steps takes ~1 ms); everything a step changes goes from one
+chunk to the next in a LoopState, by name, and the chunks give the bits of one
+uninterrupted call. Every covered run calls the loop with the same argument types,
+so it is compiled once (warm(): scripts/setup.sh, a tuning before its workers
+start) and loaded from numba's cache by every later process.
+
 The targets of a time-indexed plan do not depend on the run, so the horizons are
 computed once per process and plan, by the ProfileStage itself, and reused by
 every tuning candidate.

@@ -9,7 +9,7 @@ semantics (no fast-math, no fused multiply-add) and calls the same libm for sin,
 exp and pow, so the two agree bit for bit (tests/test_fast_loop.py checks it).
 Without numba nothing is compiled and every run takes the Python path.
 
-Compiling takes seconds (the loop of core/fast_loop.py: ~3 s here); the machine
+Compiling takes seconds (the loop of core/fast_loop.py: 3-5 s here); the machine
 code is then cached beside the source (`__pycache__`, cache=True), and every later
 process of the checkout loads it in a fraction of that. `announced` tells the
 user when a compilation really happens.
