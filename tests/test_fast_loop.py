@@ -108,6 +108,11 @@ def test_every_run_it_covers_calls_one_compiled_signature():
     assert len(fast_loop._steps.signatures) == 1
 
 
+def test_warming_takes_any_run_a_tuning_may_start_from():
+    for overrides in (["run.period=0.0001"], ["run.period=10"], ["controller.kind=pid"]):
+        fast_loop.warm(apply_overrides(load_scenario("seed000"), overrides))
+
+
 def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):
     """A clock that advances one second per reading: the run passes its deadline at
     the sixth check, the sixth one-step chunk."""

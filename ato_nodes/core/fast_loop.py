@@ -217,5 +217,7 @@ def warm(values: dict | None = None) -> None:
     so this one compilation serves them all, in every process of this checkout."""
     from .loop import simulate
     from .scenario import apply_overrides, load_scenario
+    from .schema import SPEC_BY_NAME
     values = load_scenario("seed000") if values is None else values
-    simulate(apply_overrides(values, {"run.duration": 2 * values["run.period"]}))
+    shortest = SPEC_BY_NAME["run.duration"].low
+    simulate(apply_overrides(values, {"run.duration": max(2 * values["run.period"], shortest)}))
