@@ -40,12 +40,12 @@ from ato_nodes.analysis import plot_convergence
 from ato_nodes.core import fast_loop, kernels
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
-from ato_nodes.core.components import CONTROLLERS, PROFILES
+from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.paths import config_dir
-from ato_nodes.core.scenario import (apply_overrides, load_scenario, resolve_scenario,
-                                     ros_parameter_file)
+from ato_nodes.core.scenario import (apply_overrides, check_used, load_scenario,
+                                     resolve_scenario, ros_parameter_file)
 from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
 from ato_nodes.core.scoring import Requirement, score_series
 
@@ -89,13 +89,8 @@ class SearchSpace:
                 spec.check(spec.value_type(value), "--params")
             if spec.name in names:
                 raise ScenarioError(f"--params: {spec.name} is given twice")
-            for registry in (CONTROLLERS, PROFILES) if values is not None else ():
-                owner = registry.owner(spec.name)
-                chosen = registry.chosen(values)
-                if owner is not None and owner is not chosen:
-                    raise ScenarioError(
-                        f"--params: {spec.name} belongs to {registry.role}.kind {owner.kind}; "
-                        f"this run's {registry.role} is {chosen.kind}, which does not use it")
+            if values is not None:
+                check_used([spec.name], values, "--params")
             names.append(spec.name)
             lower.append(low_value)
             upper.append(high_value)

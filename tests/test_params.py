@@ -1,11 +1,22 @@
-"""Scenario files and overrides: checked before any process starts."""
+"""Scenario files and overrides: checked before any process starts; what a node
+declares."""
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import (apply_overrides, load_scenario, ros_parameter_file,
-                                     scenario_names)
-from ato_nodes.core.schema import SPECS, steps
+from ato_nodes.core.scenario import (apply_overrides, check_launcher_free, load_scenario,
+                                     ros_parameter_file, scenario_names)
+from ato_nodes.core.schema import SPECS, NodeValues, for_node, steps, unused
+from ato_nodes.launch import DomainLock, node_environment
+
+ROOT = Path(__file__).resolve().parents[1]
+METRO_FILE = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
 
 
 def test_shipped_scenarios_load():
@@ -87,4 +98,109 @@ def test_ros_parameter_file_shares_under_the_wildcard_and_gives_each_node_its_ow
     assert not any(name in section["ros__parameters"] for node, section in file.items()
                    if node != "/**" for name in shared)
     declared = {name for section in file.values() for name in section["ros__parameters"]}
-    assert declared == {spec.name for spec in SPECS}
+    assert declared == {spec.name for spec in SPECS} - set(unused(load_scenario("seed000")))
+    assert "adrc.mu1" in declared and not any(name.startswith(("dadrc.", "pid.", "gpc.",
+                                                                "profile.step."))
+                                              for name in declared)
+
+
+METRO_USES = "this run uses discrete_adrc (its parameters are dadrc.*)"
+
+
+def test_a_parameter_of_a_kind_the_run_does_not_use_is_one_line_wherever_it_is_given(tmp_path):
+    metro = load_scenario("seed004-metro")
+    with pytest.raises(ScenarioError) as refused:
+        apply_overrides(metro, ["adrc.mu1=7000"])
+    assert str(refused.value) == f"--set: adrc.mu1 belongs to controller kind han_adrc; {METRO_USES}"
+    with pytest.raises(ScenarioError, match=r"--set: profile.step.speed belongs to profile kind "
+                                            r"step; this run uses ato \(its parameters are "
+                                            r"profile.ato.\*\)"):
+        apply_overrides(metro, ["profile.step.speed=3"])
+    scenario = tmp_path / "metro-adrc.yaml"  # its default value changes nothing either
+    scenario.write_text("base: seed004-metro\ncontroller:\n  ros__parameters:\n"
+                        "    adrc.mu1: 6000.0\n")
+    with pytest.raises(ScenarioError) as refused:
+        load_scenario(str(scenario))
+    assert str(refused.value) == f"{scenario}: adrc.mu1 belongs to controller kind han_adrc; " \
+                                 f"{METRO_USES}"
+    scenario.write_text("/**:\n  ros__parameters:\n    profile.kind: ato\n"
+                        "    line.file: lines/metro-interstation.yaml\n"
+                        "    profile.seed000.cycle: 10.0\n")
+    with pytest.raises(ScenarioError, match=f"^{scenario}: profile.seed000.cycle belongs to "
+                                            "profile kind seed000; this run uses ato"):
+        load_scenario(str(scenario))
+
+
+def test_a_new_kind_comes_with_its_own_parameters_and_leaves_the_old_ones_out():
+    values = apply_overrides(load_scenario("seed000"), ["controller.kind=pid", "pid.kp=900"])
+    assert values["pid.kp"] == 900.0
+    file = ros_parameter_file(values)
+    assert "pid.kp" in file["controller"]["ros__parameters"]
+    assert not any(name.startswith("adrc.") for name in file["controller"]["ros__parameters"])
+    controller = NodeValues("controller", values)
+    with pytest.raises(ScenarioError, match="controller: adrc.mu1 belongs to controller kind "
+                                            "han_adrc; this run uses pid"):
+        controller["adrc.mu1"]
+
+
+def test_a_node_declares_its_kinds_parameters_only():
+    metro = load_scenario("seed004-metro")
+    declared = {spec.name for spec in for_node("controller", metro)}
+    assert {"dadrc.b1", "profile.ato.acceleration", "controller.kind", "plant.mass"} <= declared
+    everything = {spec.name for spec in for_node("controller")}
+    assert {name.split(".")[0] for name in everything - declared} == {
+        "adrc", "nladrc", "ladrc", "pid", "gpc", "profile"}
+    assert len(declared) < len(everything) - 50
+    assert for_node("plant", metro) == for_node("plant")  # it runs no kind
+
+
+@pytest.mark.parametrize("override", ["recorder.output=/", "supervisor.report=/"])
+def test_what_the_launcher_sets_is_refused_naming_out(override):
+    values = apply_overrides(load_scenario("seed000"), [override])
+    with pytest.raises(ScenarioError, match=f"^{override.split('=')[0]} is set by the launcher "
+                                            "for each run it starts; give --out instead$"):
+        check_launcher_free(values)
+    check_launcher_free(load_scenario("seed000"))
+
+
+def start_node(node: str, *arguments) -> tuple[subprocess.Popen, DomainLock]:
+    """`python -m ato_nodes.nodes.NODE --ros-args ARGUMENTS` in a domain of its own."""
+    lock = DomainLock()
+    process = subprocess.Popen([sys.executable, "-m", f"ato_nodes.nodes.{node}", "--ros-args",
+                                *arguments], env=node_environment(lock.domain_id), cwd=ROOT,
+                               stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    return process, lock
+
+
+@pytest.mark.integration
+def test_a_running_node_lists_only_what_its_run_uses_and_keeps_use_sim_time_fixed():
+    """`ros2 param list /controller` on a discrete-ADRC run: no other kind's gains;
+    `ros2 param set /controller use_sim_time false`: read-only, as every start-up value."""
+    process, lock = start_node("controller", "--params-file", str(METRO_FILE))
+    try:
+        probe = subprocess.run([sys.executable, str(ROOT / "tests" / "param_probe.py"),
+                                "/controller", "use_sim_time", "false"], capture_output=True,
+                               text=True, timeout=90, env=node_environment(lock.domain_id))
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=60)
+        lock.release()
+    assert probe.returncode == 0, probe.stderr
+    answer = json.loads(probe.stdout)
+    assert answer["successful"] is False and "read-only" in answer["reason"], answer
+    declared = {spec.name for spec in for_node("controller", load_scenario("seed004-metro"))}
+    assert set(answer["names"]) == declared | {"use_sim_time", "start_type_description_service"}
+
+
+@pytest.mark.integration
+def test_a_node_given_a_parameter_of_a_kind_its_run_does_not_use_stops_in_one_line():
+    process, lock = start_node("controller", "--params-file", str(METRO_FILE),
+                               "-p", "adrc.mu1:=7000.0")
+    try:
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        lock.release()
+    assert process.returncode == 2
+    assert stderr.strip().splitlines() == [
+        f"controller: error: adrc.mu1 belongs to controller kind han_adrc; {METRO_USES}"]

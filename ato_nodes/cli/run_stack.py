@@ -17,7 +17,8 @@ from ato_nodes import jsontext
 from ato_nodes import cli
 from ato_nodes.bagio import BagError, message_counts, read_run
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.core.scenario import (apply_overrides, check_given_once, check_launcher_free,
+                                     load_scenario)
 from ato_nodes.core.schema import steps
 from ato_nodes.core.scoring import format_indices, score_series
 
@@ -55,6 +56,7 @@ def run_stack() -> None:
             overrides.append("run.real_time=true")
         check_given_once(overrides)
         values = apply_overrides(values, overrides)
+        check_launcher_free(values)
     except ScenarioError as exc:
         cli.fail(str(exc))
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:

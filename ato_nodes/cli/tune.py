@@ -23,7 +23,8 @@ from pathlib import Path
 from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.core.scenario import (apply_overrides, check_given_once, check_launcher_free,
+                                     load_scenario)
 from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
                               TuningSettings)
 
@@ -81,6 +82,7 @@ def tune() -> None:
     try:
         check_given_once(args.set)
         values = apply_overrides(load_scenario(args.scenario), args.set)
+        check_launcher_free(values)
         space = (SearchSpace.parse(args.params, values) if args.params
                  else SearchSpace.default(values))
         options = {"population_size": args.population} if args.population else {}

@@ -62,6 +62,13 @@ class Component:
     def output_names(self) -> tuple[str, ...]:
         return tuple(output.name for output in self.outputs)
 
+    @property
+    def own_parameters(self) -> str:
+        """Its parameter group, as a person reads it: 'dadrc.*'."""
+        if not self.parameters:
+            return "it has no parameters of its own"
+        return f"its parameters are {self.parameters[0].name.rsplit('.', 1)[0]}.*"
+
 
 class Registry:
     """The kinds of one component role; `role.kind` chooses among them."""
@@ -89,10 +96,19 @@ class Registry:
     def chosen(self, values) -> Component:
         return self[values[self.kind_parameter.name]]
 
-    def owner(self, name: str) -> Component | None:
-        """The kind whose own parameter group holds `name` (None for shared ones)."""
-        return next((c for c in self.components.values()
-                     if any(spec.name == name for spec in c.parameters)), None)
+    def unused(self, values) -> dict[str, str]:
+        """The parameters of the kinds `values` does not choose, each with the line that
+        says whose they are: a run declares none of them, and a scenario or an override
+        that gives one is refused (it would change nothing). Empty when `values` does not
+        say which kind runs (a node that does not declare `role.kind` has none of them)."""
+        name = self.kind_parameter.name
+        if name not in values:
+            return {}
+        chosen = self[values[name]]
+        return {spec.name: f"{spec.name} belongs to {self.role} kind {component.kind}; this "
+                           f"run uses {chosen.kind} ({chosen.own_parameters})"
+                for component in self.components.values() if component is not chosen
+                for spec in component.parameters}
 
     def parameters(self) -> tuple[ParamSpec, ...]:
         return (self.kind_parameter,

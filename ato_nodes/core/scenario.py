@@ -23,7 +23,7 @@ from .loop import ControllerStage, ProfileStage
 from .paths import config_dir, resolve_file
 from .scoring import Requirement
 from .schema import (FILE_PARAMETERS, NODES, SPEC_BY_NAME, SPECS, NodeValues, defaults,
-                     shared)
+                     shared, unused)
 
 
 def _unknown(name: str, where: str) -> ScenarioError:
@@ -84,7 +84,7 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
                                     f"{value!r}")
             given[name] = value
     if base is None:
-        return validate(complete(given, [path.parent]), str(path))
+        return validate(complete(given, [path.parent], str(path)), str(path))
     relative = path.parent / base
     base_values = load_scenario(str(relative) if relative.suffix in (".yaml", ".yml")
                                 else base)
@@ -97,20 +97,30 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
         raise ScenarioError(f"{path}: {exc}") from None
 
 
-def complete(given: dict[str, Any], bases: list[Path]) -> dict[str, Any]:
+def complete(given: dict[str, Any], bases: list[Path], where: str = "") -> dict[str, Any]:
     """Every value of a run from the given ones: the defaults, then the train preset's
     plant.* values (plant.train), then the given values; relative file parameters
     made absolute, from the first of `bases` that holds them, else from msg_config/.
-    The nodes complete what their parameter file gives them the same way."""
-    given = dict(given)
-    for name in FILE_PARAMETERS:
-        if given.get(name):
-            given[name] = resolve_file(given[name], bases)
+    A given parameter of a kind the run does not use is refused (`where` names the
+    source). The nodes complete what their parameter file gives them the same way."""
     values = defaults()
     if given.get("plant.train"):
         values.update(train_preset(given["plant.train"]))
     values.update(given)
+    check_used(given, values, where)
+    for name in FILE_PARAMETERS:
+        if given.get(name):
+            values[name] = resolve_file(given[name], bases)
     return values
+
+
+def check_used(given, values: dict[str, Any], where: str = "") -> None:
+    """Refuse a given parameter of a controller or profile kind the run (`values`) does
+    not use: it would change nothing, and no node declares it."""
+    idle = unused(values)
+    for name in given:
+        if name in idle:
+            raise ScenarioError(f"{where}: {idle[name]}" if where else idle[name])
 
 
 def train_names() -> list[str]:
@@ -180,6 +190,9 @@ def check_given_once(texts: list[str]) -> None:
 
 
 def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
+    """The run's `values` with `overrides` (--set texts, or a mapping) applied, checked as
+    a whole; an override of a kind the run does not use (after the overrides: a new
+    controller.kind's gains may come with it) is refused."""
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
@@ -187,9 +200,11 @@ def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any
             if spec is None:
                 raise _unknown(name, "override")
             checked[name] = spec.check(value, "override")
-        overrides = checked
+        overrides, where = checked, ""
     else:
         overrides = dict(parse_override(text) for text in overrides)  # the last one wins
+        where = "--set"
+    check_used(overrides, {**values, **overrides}, where)
     for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
         if overrides.get(name):
             overrides[name] = resolve_file(overrides[name], [Path.cwd()])
@@ -198,6 +213,19 @@ def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any
         merged.update(train_preset(overrides["plant.train"]))
         merged.update(overrides)
     return validate(merged, "parameters")
+
+
+# Set by the launcher (ato_nodes.launch.Stack) for every run it starts, from the command's
+# --out: a value given to run_stack.py or tune.py would be overridden without a word.
+LAUNCHER_PARAMETERS = ("recorder.output", "supervisor.report")
+
+
+def check_launcher_free(values: dict[str, Any]) -> None:
+    """Refuse a launcher's parameter given by the user (one line naming --out)."""
+    for name in LAUNCHER_PARAMETERS:
+        if values[name]:
+            raise ScenarioError(f"{name} is set by the launcher for each run it starts; give "
+                                f"--out instead")
 
 
 def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
@@ -221,14 +249,16 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
 
 
 def ros_parameter_file(values: dict[str, Any], names=None) -> dict[str, Any]:
-    """The values (those of `names`, default all) as a ROS 2 parameter file: shared
-    parameters under /**, the others under the one node that declares each; sections
-    left empty are left out when `names` is given."""
+    """The values (those of `names`, default all the run uses: none of the kinds it does
+    not use) as a ROS 2 parameter file: shared parameters under /**, the others under
+    the one node that declares each; sections left empty are left out when `names` is
+    given."""
     document: dict[str, Any] = {"/**": {"ros__parameters": {}}}
     for node in NODES:
         document[node] = {"ros__parameters": {}}
+    idle = unused(values)
     for spec in SPECS:
-        if names is not None and spec.name not in names:
+        if (names is not None and spec.name not in names) or spec.name in idle:
             continue
         if spec.nodes:
             section = "/**" if shared(spec) else spec.nodes[0]

@@ -140,8 +140,17 @@ def defaults() -> dict[str, Any]:
     return {spec.name: spec.default for spec in SPECS}
 
 
-def for_node(node: str) -> list[ParamSpec]:
-    return [spec for spec in SPECS if node in spec.nodes]
+def unused(values) -> dict[str, str]:
+    """The parameters of the controller and profile kinds a run's `values` do not choose,
+    each with the line that says so (core.registry.Registry.unused)."""
+    return {**PROFILES.unused(values), **CONTROLLERS.unused(values)}
+
+
+def for_node(node: str, values=None) -> list[ParamSpec]:
+    """The parameters `node` may declare; given a run's `values`, those it declares: none
+    of the kinds the run does not use."""
+    skipped = unused(values) if values is not None else {}
+    return [spec for spec in SPECS if node in spec.nodes and spec.name not in skipped]
 
 
 def shared(spec: ParamSpec) -> bool:
@@ -150,14 +159,18 @@ def shared(spec: ParamSpec) -> bool:
 
 
 class NodeValues(dict):
-    """A node's parameter values: exactly what the node declares. Reading anything
-    else is a start-up error, in the node and in simulate() alike."""
+    """A node's parameter values: exactly what the node declares for the run (no
+    parameter of a kind the run does not use). Reading anything else is a start-up
+    error, in the node and in simulate() alike."""
 
     def __init__(self, node: str, values: dict[str, Any]):
-        super().__init__({spec.name: values[spec.name] for spec in for_node(node)})
+        super().__init__({spec.name: values[spec.name] for spec in for_node(node, values)})
         self.node = node
+        self.unused = unused(values)
 
     def __missing__(self, name: str):
+        if name in self.unused:
+            raise ScenarioError(f"{self.node}: {self.unused[name]}")
         raise ScenarioError(f"{self.node}: parameter {name!r} is not declared by the {self.node} "
                             f"node")
 

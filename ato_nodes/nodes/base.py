@@ -49,6 +49,8 @@ HOUSEKEEPING_PERIOD = 0.02
 HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
 LOGGED_EVENTS = ("start", "finished", "recorded", "shutdown")  # INFO on /rosout
+# What rclpy.node.Node declares itself (start_type_description_service read-only already)
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
 def parameter_file_folders() -> list[Path]:
@@ -90,8 +92,7 @@ class AtoNode(Node):
 
     def __init__(self, use_sim_time: bool = True):
         super().__init__(self.role)
-        self.values = self._declare_parameters()
-        self.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, use_sim_time)])
+        self.values = self._declare_parameters(use_sim_time)
         self.topics = topic_map()
         self._outgoing: list[tuple[Any, Topic]] = []
         self._incoming: list[tuple[Any, Topic]] = []
@@ -110,15 +111,18 @@ class AtoNode(Node):
         self.announce_parameters()
 
     # Parameters -----------------------------------------------------------
-    def _declare_parameters(self) -> NodeValues:
-        """Declare this node's parameters, then complete them as a scenario is completed
+    def _declare_parameters(self, use_sim_time: bool) -> NodeValues:
+        """Declare the parameters this node uses in this run (none of the controller or
+        profile kinds it does not run), then complete them as a scenario is completed
         (core.scenario.complete): a train preset fills the plant.* values not given, and
-        relative file paths resolve from the parameter file's folder, else msg_config/.
-        So a node started from a scenario file by any launcher runs the same train; the
-        completed values are set back, so `ros2 param get` shows what the node uses."""
+        relative file paths resolve from the parameter file's folder, else msg_config/; a
+        given parameter of a kind the run does not use is refused. So a node started from
+        a scenario file by any launcher runs the same train; the completed values are set
+        back, so `ros2 param get` shows what the node uses. rclpy's own use_sim_time is
+        set to what the node needs and, like every other, fixed for the run."""
         overrides = self._parameter_overrides
         unknown = sorted(name for name in overrides
-                         if name not in SPEC_BY_NAME and name != "use_sim_time")
+                         if name not in SPEC_BY_NAME and name not in RCLPY_PARAMETERS)
         if unknown:
             raise ScenarioError(f"unknown parameter {unknown[0]!r}")
         given = {spec.name: spec.check(overrides[spec.name].value, self.role)
@@ -127,9 +131,13 @@ class AtoNode(Node):
             train_preset(given["plant.train"])  # an unknown train: one line, exit 2
         values = NodeValues(self.role, complete(given, [*parameter_file_folders(), Path.cwd()]))
         live = self.live_parameters(values)
-        for spec in for_node(self.role):  # declared with what the node runs with
+        for spec in for_node(self.role, values):  # declared with what the node runs with
             self.declare_parameter(spec.name, values[spec.name],
                                    _descriptor(spec, spec.name in live), ignore_override=True)
+        self.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, use_sim_time)])
+        self.set_descriptor("use_sim_time", ParameterDescriptor(
+            type=Parameter.Type.BOOL.value, read_only=True,
+            description="follow /clock (the plant's simulated time), fixed for the run"))
         return values
 
     def live_parameters(self, values: NodeValues) -> tuple[str, ...]:
