@@ -75,6 +75,9 @@ def test_line_files_that_would_exhaust_or_mislead(tmp_path, make, words):
     (["--timeout", "nan"], ["--timeout must be a positive"]),
     (["--out", "/proc/version/bag"], ["/proc/version"]),
     (["--out", "bags/" + "x" * 300], ["longer than 255"]),
+    (["--out", "/tmp/" + "/".join(["x" * 200] * 25)], ["longer than the system allows"]),
+    (["--out", "/sys/bag"], ["/sys/bag", "cannot be written"]),
+    (["--out", "/proc/bag"], ["/proc/bag", "cannot be written"]),
 ])
 def test_run_stack_options(args, words):
     one_line_exit_2(script("run_stack.py", *args), *words)
@@ -175,6 +178,54 @@ def test_optimize_strategy_refuses_a_line_without_a_stop(tmp_path):
                     "no stop")
 
 
+def model_with(tmp_path: Path, name: str, array) -> Path:
+    """The shipped model with one member replaced."""
+    import io
+    import zipfile
+    import numpy as np
+    with zipfile.ZipFile(ROOT / "msg_config" / "models" / "crh380al-lssvm.npz") as shipped:
+        stored = {info.filename: shipped.read(info) for info in shipped.infolist()}
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    stored[f"{name}.npy"] = buffer.getvalue()
+    path = tmp_path / "edited.npz"
+    with zipfile.ZipFile(path, "w") as edited:
+        for member, data in stored.items():
+            edited.writestr(member, data)
+    return path
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda tmp: ["--scenario", "seed004-metro", "--set", "adrc.mu1=7000"],
+     ["adrc.mu1 belongs to controller kind han_adrc; this run uses discrete_adrc (its "
+      "parameters are dadrc.*)"]),
+    (lambda tmp: ["--set", "recorder.output=/"], ["recorder.output is set by the launcher",
+                                                   "give --out instead"]),
+    (lambda tmp: ["--set", "supervisor.report=/"], ["supervisor.report is set by the launcher",
+                                                     "give --out instead"]),
+    (lambda tmp: ["--scenario", tmp / "folder.yaml"], ["folder.yaml is a directory"]),
+    (lambda tmp: ["--scenario", "seed004-metro", "--set", "line.file=" + str(line_file(
+        tmp, "  - {name: C, position: 950, dwell: -30}\n"))], ["dwell -30 s is negative"]),
+    (lambda tmp: ["--scenario", "seed001-crh380al", "--set", "gpc.prediction=multimodel",
+                  "--set", f"gpc.model={model_with(tmp, 'arx_width', float('nan'))}"],
+     ["arx_width holds non-finite numbers"]),
+])
+def test_run_stack_refuses_what_would_be_ignored_or_wrong_in_one_line(tmp_path, make, words):
+    (tmp_path / "folder.yaml").mkdir()
+    one_line_exit_2(script("run_stack.py", *make(tmp_path), "--out", tmp_path / "bag"), *words)
+    assert not (tmp_path / "bag").exists()
+
+
+def test_tune_refuses_what_the_launcher_sets_and_other_kinds_parameters(tmp_path):
+    base = ["--algorithm", "pso", "--scenario", "seed004-metro", "--in-process",
+            "--evaluations", "4", "--population", "2", "--out", tmp_path / "t"]
+    one_line_exit_2(script("tune.py", *base, "--set", "recorder.output=/"),
+                    "recorder.output is set by the launcher", "--out")
+    one_line_exit_2(script("tune.py", *base, "--set", "adrc.mu1=7000"),
+                    "--set: adrc.mu1 belongs to controller kind han_adrc")
+    assert not (tmp_path / "t").exists()
+
+
 # Bags, tuning directories and report outputs that are not what the offline tools expect
 # (bags written in-process, tests/bagfile.py).
 
@@ -273,55 +324,3 @@ def test_offline_commands_help_gives_their_whole_description(name):
     result = script(name, "--help")
     assert result.returncode == 0, result.stderr
     assert first.endswith(".") and first in " ".join(result.stdout.split()), result.stdout
-
-
-def model_with(tmp_path: Path, name: str, array) -> Path:
-    """The shipped model with one member replaced."""
-    import io
-    import zipfile
-    import numpy as np
-    with zipfile.ZipFile(ROOT / "msg_config" / "models" / "crh380al-lssvm.npz") as shipped:
-        stored = {info.filename: shipped.read(info) for info in shipped.infolist()}
-    buffer = io.BytesIO()
-    np.save(buffer, array)
-    stored[f"{name}.npy"] = buffer.getvalue()
-    path = tmp_path / "edited.npz"
-    with zipfile.ZipFile(path, "w") as edited:
-        for member, data in stored.items():
-            edited.writestr(member, data)
-    return path
-
-
-@pytest.mark.parametrize("make, words", [
-    (lambda tmp: ["--scenario", "seed004-metro", "--set", "adrc.mu1=7000"],
-     ["adrc.mu1 belongs to controller kind han_adrc; this run uses discrete_adrc (its "
-      "parameters are dadrc.*)"]),
-    (lambda tmp: ["--set", "recorder.output=/"], ["recorder.output is set by the launcher",
-                                                   "give --out instead"]),
-    (lambda tmp: ["--set", "supervisor.report=/"], ["supervisor.report is set by the launcher",
-                                                     "give --out instead"]),
-    (lambda tmp: ["--scenario", tmp / "folder.yaml"], ["folder.yaml is a directory"]),
-    (lambda tmp: ["--scenario", "seed004-metro", "--set", "line.file=" + str(line_file(
-        tmp, "  - {name: C, position: 950, dwell: -30}\n"))], ["dwell -30 s is negative"]),
-    (lambda tmp: ["--scenario", "seed001-crh380al", "--set", "gpc.prediction=multimodel",
-                  "--set", f"gpc.model={model_with(tmp, 'arx_width', float('nan'))}"],
-     ["arx_width holds non-finite numbers"]),
-])
-def test_run_stack_refuses_what_would_be_ignored_or_wrong_in_one_line(tmp_path, make, words):
-    (tmp_path / "folder.yaml").mkdir()
-    one_line_exit_2(script("run_stack.py", *make(tmp_path), "--out", tmp_path / "bag"), *words)
-    assert not (tmp_path / "bag").exists()
-
-
-def test_tune_refuses_what_the_launcher_sets_and_other_kinds_parameters(tmp_path):
-    base = ["--algorithm", "pso", "--scenario", "seed004-metro", "--in-process",
-            "--evaluations", "4", "--population", "2", "--out", tmp_path / "t"]
-    one_line_exit_2(script("tune.py", *base, "--set", "recorder.output=/"),
-                    "recorder.output is set by the launcher", "--out")
-    one_line_exit_2(script("tune.py", *base, "--set", "adrc.mu1=7000"),
-                    "--set: adrc.mu1 belongs to controller kind han_adrc")
-    assert not (tmp_path / "t").exists()
-
-
-# Bags, tuning directories and report outputs that are not what the offline tools expect
-# (bags written in-process, tests/bagfile.py).

@@ -4,25 +4,32 @@ nodes started straight from a shipped scenario file with no launcher in between.
 import hashlib
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from ato_nodes import jsontext
 from ato_nodes.analysis import write_report
-from ato_nodes.bagio import read_parameters, read_run, read_series
+from ato_nodes.bagio import message_counts, read_parameters, read_run, read_series
 from ato_nodes.core.line import load_line
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.scoring import kept_file, score_series
+from ato_nodes.core.scoring import format_indices, kept_file, score_series
 from ato_nodes.core.schema import NODES
 from ato_nodes.launch import DomainLock, Stack, node_environment
 from ato_nodes.tuning import evaluate_in_process, evaluate_in_stack
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def refuse_constant(name):
+    raise ValueError(f"not JSON: {name}")
 
 
 def assert_bag_equals_in_process(bag, values):
@@ -95,21 +102,33 @@ def test_the_seed002_strategy_is_tracked_through_the_stack_with_no_traction_in_n
         values["profile.strategy.file"]).read_bytes()
 
 
-def start_nodes_directly(parameter_file: Path, bag: Path, report: Path):
+def start_nodes_directly(parameter_file: Path, bag: Path, report: Path | None,
+                         interrupt_when=None):
     """`python -m ato_nodes.nodes.<node> --ros-args --params-file FILE` for each node, as a
-    standard launch file or `ros2 run` starts them; returns {node: exit status}."""
+    standard launch file or `ros2 run` starts them (without a report file, as `ros2
+    launch` does by default); SIGINT to every node once interrupt_when() holds. Returns
+    ({node: exit status}, {node: stderr}, the supervisor's stdout)."""
     lock = DomainLock()
     env = node_environment(lock.domain_id)
+    report_argument = ["-p", f"supervisor.report:={report}"] if report else []
     try:
         processes = {node: subprocess.Popen(
             [sys.executable, "-m", f"ato_nodes.nodes.{node}", "--ros-args", "--params-file",
-             str(parameter_file), "-p", f"recorder.output:={bag}", "-p",
-             f"supervisor.report:={report}"], env=env, cwd=ROOT, stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) for node in NODES}
-        errors = {}
+             str(parameter_file), "-p", f"recorder.output:={bag}", *report_argument],
+            env=env, cwd=ROOT, stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE if node == "supervisor" else subprocess.DEVNULL,
+            stderr=subprocess.PIPE, text=True) for node in NODES}
+        if interrupt_when is not None:
+            deadline = time.monotonic() + 60
+            while not interrupt_when() and time.monotonic() < deadline:
+                time.sleep(0.05)
+            for process in processes.values():
+                process.send_signal(signal.SIGINT)
+        errors, printed = {}, ""
         for node, process in processes.items():
-            errors[node] = process.communicate(timeout=120)[1]
-        return {node: process.returncode for node, process in processes.items()}, errors
+            output, errors[node] = process.communicate(timeout=120)
+            printed = output if node == "supervisor" else printed
+        return {node: process.returncode for node, process in processes.items()}, errors, printed
     finally:
         for process in processes.values():
             if process.poll() is None:
@@ -119,7 +138,7 @@ def start_nodes_directly(parameter_file: Path, bag: Path, report: Path):
 
 def test_nodes_started_from_a_shipped_scenario_file_run_its_train_on_its_line(tmp_path):
     scenario = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
-    codes, errors = start_nodes_directly(scenario, tmp_path / "direct", tmp_path / "r.json")
+    codes, errors, _ = start_nodes_directly(scenario, tmp_path / "direct", tmp_path / "r.json")
     assert set(codes.values()) == {0}, errors
     launched = tmp_path / "launched"
     assert Stack(load_scenario("seed004-metro"), launched, quiet=True, timeout=120).run().ok
@@ -131,10 +150,38 @@ def test_nodes_started_from_a_shipped_scenario_file_run_its_train_on_its_line(tm
     assert json.loads((tmp_path / "r.json").read_text())["steps"] == 2000
 
 
+def test_nodes_without_a_launcher_write_the_runs_summary_and_print_its_indices(tmp_path):
+    scenario = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
+    bag = tmp_path / "direct"
+    codes, errors, printed = start_nodes_directly(scenario, bag, report=None)
+    assert set(codes.values()) == {0}, errors
+    summary = json.loads((bag / "summary.json").read_text(), parse_constant=refuse_constant)
+    indices = score_series(read_series(bag), read_parameters(bag))
+    assert summary["status"] == "completed" and summary["steps"] == 2000
+    assert summary["indices"] == json.loads(jsontext.dumps(indices))
+    assert summary["recorded"] == message_counts(bag)
+    assert format_indices(indices) in printed
+
+
+def test_interrupted_nodes_without_a_launcher_say_so_in_the_runs_summary(tmp_path):
+    scenario = tmp_path / "slow.yaml"
+    scenario.write_text((ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml").read_text()
+                        .replace("/**:\n  ros__parameters:\n",
+                                 "/**:\n  ros__parameters:\n    run.real_time: true\n", 1))
+    bag = tmp_path / "direct"
+    codes, errors, _ = start_nodes_directly(
+        scenario, bag, report=None, interrupt_when=lambda: any(bag.glob("*.mcap")) and sum(
+            path.stat().st_size for path in bag.glob("*.mcap")) > 5000)
+    assert set(codes.values()) == {0}, errors
+    summary = json.loads((bag / "summary.json").read_text(), parse_constant=refuse_constant)
+    assert summary["status"] == "interrupted" and 0 < summary["steps"] < 2000
+    assert "indices" not in summary and (bag / "metadata.yaml").exists()
+
+
 def test_a_shared_parameter_given_to_one_node_only_is_refused_before_the_run(tmp_path):
     scenario = tmp_path / "one-node.yaml"
     scenario.write_text("plant:\n  ros__parameters:\n    plant.train: metro-b\n")
-    codes, errors = start_nodes_directly(scenario, tmp_path / "bag", tmp_path / "r.json")
+    codes, errors, _ = start_nodes_directly(scenario, tmp_path / "bag", tmp_path / "r.json")
     assert codes["supervisor"] == 2
     (line,) = errors["supervisor"].strip().splitlines()
     assert "plant.train is" in line and "'metro-b' in plant" in line and "'' in" in line
@@ -199,5 +246,7 @@ def test_the_nodes_log_their_run_to_rosout(tmp_path):
         assert node == "supervisor" or (node, "every edge of the topic map matched: ready") \
             in said, node
         assert (node, "run event: start") in said, node
-    assert any(name == "recorder" and msg.startswith("run event: finished ")
-               for name, msg in said)
+    for node, event in (("plant", "finished"), ("recorder", "recorded"),
+                        ("supervisor", "finished"), ("supervisor", "recorded")):
+        assert any(name == node and msg.startswith(f"run event: {event} ")
+                   for name, msg in said), (node, event)

@@ -14,9 +14,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
+from ato_nodes import jsontext
 from ato_nodes.bagio import read_run, read_series, resimulate
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
@@ -114,6 +116,39 @@ def test_short_run_records_every_step_and_scores_like_the_in_process_simulation(
     summary = json.loads((bag / "summary.json").read_text())
     assert summary["status"] == "completed" and summary["steps"] == 100
     assert summary["indices"]["itae"] == pytest.approx(expected["itae"], rel=1e-9)
+
+    # metadata.yaml as rosbag2 writes it for Jazzy: ros2 bag play replays with these QoS
+    metadata = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert metadata["version"] == 9 and metadata["ros_distro"] == "jazzy"
+    for entry in metadata["topics_with_message_count"]:
+        (offered,) = entry["topic_metadata"]["offered_qos_profiles"]
+        assert (offered["reliability"], offered["history"], offered["durability"]) == \
+            ("reliable", "keep_all", "volatile"), entry["topic_metadata"]["name"]
+
+
+END_OF_RUN_LINES = {"plant": ("finished",), "recorder": ("recorded",),
+                    "supervisor": ("finished", "recorded"), "profile": (), "controller": ()}
+
+
+def test_rosout_carries_every_nodes_end_of_run_lines(tmp_path):
+    """What `ros2 topic echo /rosout` sees through a run: each node's last lines reach it
+    before the node exits, and the launcher's console shows none of them."""
+    process = start_stack("--scenario", "seed004-metro", "--duration", "8", "--real-time",
+                          "--out", str(tmp_path / "watched"))
+    banner = process.stderr.readline()
+    domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
+    env = {**os.environ, "ROS_DOMAIN_ID": domain, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    probe = subprocess.run([sys.executable, str(ROOT / "tests" / "rosout_probe.py"), "60",
+                            *END_OF_RUN_LINES], capture_output=True, text=True, timeout=90,
+                           env=env)
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 0 and probe.returncode == 0, (stderr, probe.stderr)
+    lines = json.loads(probe.stdout)
+    for node, words in END_OF_RUN_LINES.items():
+        for word in (*words, "shutdown"):
+            assert any(line.startswith(f"run event: {word}") for line in lines[node]), \
+                (node, word, lines[node])
+    assert "[INFO]" not in stdout + stderr
 
 
 def test_two_simultaneous_runs_are_isolated_and_identical(tmp_path):
@@ -252,7 +287,8 @@ def test_line_scenarios_run_through_the_stack_exactly_as_in_process(tmp_path, sc
         np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)
     scored = subprocess.run([*SCORE_BAG, str(bag), "--json"], capture_output=True, text=True)
     from_bag = json.loads(scored.stdout)
-    assert from_bag == pytest.approx(score_series(expected, values), nan_ok=True)
+    strict = json.loads(jsontext.dumps(score_series(expected, values)))  # NaN as null
+    assert from_bag == pytest.approx(strict)
     assert from_bag["traction_energy_kwh"] > 0 and "overspeed_time" in from_bag
 
 

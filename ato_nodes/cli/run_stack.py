@@ -13,20 +13,19 @@ import sys
 import time
 from pathlib import Path
 
-from ato_nodes import jsontext
 from ato_nodes import cli
-from ato_nodes.bagio import BagError, message_counts, read_run
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import (apply_overrides, check_given_once, check_launcher_free,
                                      load_scenario)
 from ato_nodes.core.schema import steps
-from ato_nodes.core.scoring import format_indices, score_series
+from ato_nodes.core.scoring import format_indices
+from ato_nodes.summary import bag_contents, write_summary
 
 EXIT_FAILED, EXIT_INTERRUPTED = 1, 130
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = cli.argument_parser(__doc__)
     parser.add_argument("--scenario", default="seed000",
                         help="scenario name in msg_config/scenarios or a YAML file (default seed000)")
     parser.add_argument("--duration", type=float, help="simulated seconds (overrides run.duration)")
@@ -83,31 +82,23 @@ def run_stack() -> None:
                "message": outcome.message, "domain_id": outcome.domain_id,
                "wall_time": outcome.wall_time, **outcome.report}
     if bag.exists():
-        try:
-            summary["recorded"] = message_counts(bag)
-            summary["scored_steps"] = 0
-            if any(summary["recorded"].values()):
-                run = read_run(bag)
-                summary["scored_steps"] = len(run.series["t"])
-                summary["notes"] = run.notes
-                summary["indices"] = score_series(run.series, run.parameters)
-            else:
-                summary["notes"] = ["the run ended before its first step: the bag is empty"]
-        except BagError as exc:
-            summary["message"] += f"; bag not scored: {exc}"
+        summary.update(bag_contents(bag))
+        if "bag_error" in summary:
+            summary["message"] += f"; bag not scored: {summary['bag_error']}"
         try:
             (bag / "params.yaml").write_text(stack.params_yaml)
-            (bag / "summary.json").write_text(jsontext.dumps(summary, indent=2))
         except OSError as exc:
-            summary["message"] += f"; summary not written: {exc.strerror or exc}"
-    if pressed:
-        print(f"interrupted; {summary.get('scored_steps', 0)} steps in {bag}", file=sys.stderr)
-        sys.exit(EXIT_INTERRUPTED)
-    if not outcome.ok:
-        steps_recorded = summary.get("indices", {}).get("steps", 0)
-        print(f"error: {outcome.message}; {steps_recorded} steps recorded in {bag}",
+            summary["message"] += f"; params.yaml not written: {exc.strerror or exc}"
+        summary["message"] = "; ".join(filter(None, [summary["message"],
+                                                     write_summary(bag, summary)]))
+    if pressed or outcome.status == "interrupted":
+        print(f"interrupted; {summary.get('scored_steps', 0)} steps recorded in {bag}",
               file=sys.stderr)
-        sys.exit(EXIT_INTERRUPTED if outcome.status == "interrupted" else EXIT_FAILED)
+        sys.exit(EXIT_INTERRUPTED)
+    if not outcome.ok or "indices" not in summary:
+        print(f"error: {summary['message']}; {summary.get('scored_steps', 0)} steps recorded "
+              f"in {bag}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
     print(f"real-time factor {outcome.report['real_time_factor']:.1f} "
           f"({outcome.report['steps_per_second']:.0f} steps/s, loop {outcome.report['loop_wall_time']:.2f} s, "

@@ -30,9 +30,7 @@ from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner,
 
 
 def parse_args() -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter,
-                                     epilog="\n".join(__doc__.splitlines()[2:]))
+    parser = cli.argument_parser(__doc__)
     parser.add_argument("--algorithm", default="bas-pso", choices=sorted(ALGORITHMS))
     parser.add_argument("--scenario", default="seed000")
     parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, Log, ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
@@ -40,6 +40,12 @@ QOS = {
     "events": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL),
 }
+# rcl's own /rosout profile (rcl_qos_profile_rosout_default), which `ros2 topic echo`
+# and rqt_console expect of a /rosout publisher
+ROSOUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                        reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                        lifespan=Duration(seconds=10))
 READINESS_POLL = 0.01  # s of wall time between checks of the graph
 INTRUDER_POLL = 0.5    # s of wall time between checks for foreign publishers during a run
 # The lockstep data path bypasses the executor (see spin_lockstep); everything
@@ -48,17 +54,63 @@ INTRUDER_POLL = 0.5    # s of wall time between checks for foreign publishers du
 HOUSEKEEPING_PERIOD = 0.02
 HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
-LOGGED_EVENTS = ("start", "finished", "recorded", "shutdown")  # INFO on /rosout
+# Run events logged (INFO, /rosout): each node logs the start it hears and its own
+# shutdown; the end of the run once, by the node that announces it (the plant's
+# 'finished', the recorder's 'recorded') and by the supervisor, which waits for both
+# (a node hears events of different nodes in no fixed order, so others might not).
+HEARD_EVENTS = ("start",)
+ANNOUNCED_EVENTS = ("finished", "recorded")
 # What rclpy.node.Node declares itself (start_type_description_service read-only already)
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
-def parameter_file_folders() -> list[Path]:
-    """The folders of the --params-file arguments this process was given (relative
-    file parameters in a scenario are relative to the scenario's folder)."""
+class DeliveredLogger:
+    """The node's logger, whose /rosout records reach their subscribers before the node
+    exits. rcl's own /rosout writer (off for these nodes) dies with the node's context,
+    taking the last records with it (a `ros2 topic echo /rosout` missed a run's
+    end-of-run lines); this one is the node's, so flush() can wait for them to be
+    acknowledged. Records are what rcl writes: system-time stamp, level, logger name,
+    text and the caller's file, function and line; the console output (unless
+    --disable-stdout-logs) and the log file are rcl's as usual."""
+
+    def __init__(self, node: Node):
+        self._logger = node.get_logger()
+        self._rosout = node.create_publisher(Log, "/rosout", ROSOUT_QOS)
+
+    def info(self, text: str) -> None:
+        # one call site per severity: rclpy refuses a call site whose severity changes
+        if self._logger.info(text):
+            self._publish(Log.INFO, text)
+
+    def error(self, text: str) -> None:
+        if self._logger.error(text):
+            self._publish(Log.ERROR, text)
+
+    def _publish(self, level: int, text: str) -> None:
+        caller = sys._getframe(2)
+        now = time.time_ns()
+        record = Log(level=level, name=self._logger.name, msg=text,
+                     file=caller.f_code.co_filename, function=caller.f_code.co_name,
+                     line=caller.f_lineno)
+        record.stamp.sec, record.stamp.nanosec = divmod(now, 10**9)
+        self._rosout.publish(record)
+
+    def flush(self) -> None:
+        """Wait (FLUSH_TIMEOUT at most) until every record reached every subscriber."""
+        self._rosout.wait_for_all_acked(Duration(seconds=FLUSH_TIMEOUT))
+
+
+def parameter_files() -> list[Path]:
+    """The --params-file arguments this process was given."""
     argv = sys.argv
-    return [Path(argv[i + 1]).resolve().parent for i, arg in enumerate(argv[:-1])
+    return [Path(argv[i + 1]).resolve() for i, arg in enumerate(argv[:-1])
             if arg == "--params-file"]
+
+
+def parameter_file_folders() -> list[Path]:
+    """Their folders (relative file parameters in a scenario are relative to the
+    scenario's folder)."""
+    return [path.parent for path in parameter_files()]
 
 
 def message_class(type_name: str) -> type:
@@ -87,11 +139,14 @@ class AtoNode(Node):
     publishers and subscriptions exist, and override `on_event()`."""
 
     role: str = ""
+    heard_events = HEARD_EVENTS  # the run events this node logs as it hears them
     exit_status = 0  # set by a node that ends the run for a reason of its own
     stop_requested = False  # SIGINT or SIGTERM: leave the spin loop, then on_stop()
 
     def __init__(self, use_sim_time: bool = True):
-        super().__init__(self.role)
+        super().__init__(self.role, enable_rosout=False)  # self.log publishes /rosout
+        self.log = DeliveredLogger(self)
+        self._shut_down = False
         self.values = self._declare_parameters(use_sim_time)
         self.topics = topic_map()
         self._outgoing: list[tuple[Any, Topic]] = []
@@ -201,7 +256,7 @@ class AtoNode(Node):
             self._ready_timer.cancel()
             self.destroy_timer(self._ready_timer)
             self.announce(f"ready {self.role}")
-            self.get_logger().info("every edge of the topic map matched: ready")
+            self.log.info("every edge of the topic map matched: ready")
             self.create_timer(INTRUDER_POLL, self._check_intruders, clock=self._wall_clock)
 
     def _check_intruders(self) -> bool:
@@ -241,21 +296,33 @@ class AtoNode(Node):
         """A failure, as early as it is known: an ERROR record on /rosout and, when the
         node's console logs are off (the launcher's `--disable-stdout-logs`), one
         `node: error: ...` line on stderr, so a console shows it once either way."""
-        self.get_logger().error(message)
+        self.log.error(message)
         if "--disable-stdout-logs" in sys.argv:
             print(f"{self.role}: error: {message}", file=sys.stderr, flush=True)
 
     def announce(self, text: str) -> None:
+        if text.partition(" ")[0] in ANNOUNCED_EVENTS:
+            self.log.info(f"run event: {text}")
         self.events_out.publish(String(data=text))
 
     def _on_event_message(self, msg: String) -> None:
         word, _, argument = msg.data.partition(" ")
-        if word in LOGGED_EVENTS:
-            self.get_logger().info(f"run event: {word} {argument}".rstrip())
         if word == "shutdown":
-            self.context.try_shutdown()
-        else:
-            self.on_event(word, argument)
+            self.shut_down()
+            return
+        if word in self.heard_events:
+            self.log.info(f"run event: {word} {argument}".rstrip())
+        self.on_event(word, argument)
+
+    def shut_down(self) -> None:
+        """End this node's part of the run: say so, see the log records delivered, then
+        shut the context down (the spin loop ends)."""
+        if self._shut_down:
+            return
+        self._shut_down = True
+        self.log.info("run event: shutdown")
+        self.log.flush()
+        self.context.try_shutdown()
 
     def on_event(self, word: str, argument: str) -> None:
         """Run events other than 'shutdown' (which every node obeys by exiting)."""

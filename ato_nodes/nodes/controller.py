@@ -70,7 +70,7 @@ class ControllerNode(AtoNode):
         for step, changes in self.stage.applied:
             self.changes_pub.publish(String(data=json.dumps({"step": step,
                                                              "parameters": changes})))
-            self.get_logger().info(f"from step {step} (t = {step * self.stage.context.period:g}"
+            self.log.info(f"from step {step} (t = {step * self.stage.context.period:g}"
                                    f" s): " + ", ".join(f"{n} = {v!r}" for n, v in changes.items()))
         self.stage.applied.clear()
         for out in outputs:

@@ -24,7 +24,10 @@ from std_msgs.msg import Float64
 from ato_nodes import jsontext
 from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.schema import steps
-from ato_nodes.nodes.base import AtoNode, run_node
+from ato_nodes.core.scoring import format_indices
+from ato_nodes.nodes.base import (ANNOUNCED_EVENTS, HEARD_EVENTS, AtoNode, parameter_files,
+                                 run_node)
+from ato_nodes.summary import bag_contents, write_summary
 
 PARTICIPANTS = ("profile", "plant", "controller", "recorder")
 PROGRESS_PERIOD = 0.5  # s of wall time
@@ -34,6 +37,7 @@ FOLLOW_GRACE = 2.0  # s after 'recorded' for the running fitness to take the las
 
 class SupervisorNode(AtoNode):
     role = "supervisor"
+    heard_events = (*HEARD_EVENTS, *ANNOUNCED_EVENTS)  # every run event
 
     def __init__(self):
         super().__init__()
@@ -78,7 +82,7 @@ class SupervisorNode(AtoNode):
             self.fitness_out.publish(Float64(data=value))
             if 0.0 < self.prune_above < value and not self.ended:
                 self.pruned = self.ended = True
-                self.get_logger().info(f"pruned at step {self.paired}: running "
+                self.log.info(f"pruned at step {self.paired}: running "
                                        f"{self.values['supervisor.fitness']} {value:.9g} passed "
                                        f"{self.prune_above:.9g}")
                 self.report(self.paired, pruned=True)
@@ -146,7 +150,7 @@ class SupervisorNode(AtoNode):
         to stop them would wait for ever)."""
         self.announce("shutdown")
         self.events_out.wait_for_all_acked(Duration(seconds=SHUTDOWN_ACK_TIMEOUT))
-        self.context.try_shutdown()
+        self.shut_down()
 
     def on_tick(self) -> None:
         now = time.monotonic()
@@ -155,7 +159,7 @@ class SupervisorNode(AtoNode):
             return
         if self.started is None:
             if now - self.created > self.values["supervisor.ready_timeout"]:
-                self.get_logger().error("nodes not ready after "
+                self.log.error("nodes not ready after "
                                         f"{self.values['supervisor.ready_timeout']:g} s: "
                                         + ", ".join(sorted(self.waiting)))
                 self.exit_status = 1  # a run that never started is a failure
@@ -197,6 +201,36 @@ class SupervisorNode(AtoNode):
         path = self.values["supervisor.report"]
         if path:
             Path(path).write_text(jsontext.dumps(report, indent=2))
+        else:
+            status = "pruned" if pruned else "diverged" if self.diverged else "completed"
+            self.summarize({"status": status, **report}, score=True)
+
+    def summarize(self, summary: dict, score: bool) -> None:
+        """Without a launcher to take the report (`ros2 launch`, `ros2 run`), the run's
+        summary.json goes into the bag directory, with the indices of the closed bag
+        (`score`) printed as run_stack.py prints them."""
+        bag = self.announced.get("recorder", {}).get("recorder.output")
+        if not bag or not Path(bag).is_dir():
+            return
+        if score:
+            summary.update(bag_contents(Path(bag)))
+            if "indices" in summary:
+                print(format_indices(summary["indices"]), flush=True)
+        files = parameter_files()  # the scenario file a launch file or `ros2 run` gave
+        problem = write_summary(Path(bag), {"scenario": files[0].stem if files else "",
+                                            "bag": bag, "message": "", **summary})
+        if problem:
+            self.error(problem)
+
+    def on_stop(self) -> None:
+        """Interrupted (SIGINT, SIGTERM): a run without a launcher says so in its
+        summary.json, with the step it had reached (the recorder is still closing the
+        bag: scored later by score_bag.py)."""
+        super().on_stop()
+        if not self.values["supervisor.report"] and not self.ended:
+            steps_done = round(self.get_clock().now().nanoseconds * 1e-9 / self.period)
+            self.summarize({"status": "interrupted", "steps": steps_done,
+                            "message": "interrupted by a signal"}, score=False)
 
 
 def main() -> None:
