@@ -30,6 +30,7 @@ def handle_signals_while_starting() -> None:
     SIGINT ignored); interrupted_quietly() takes over in main()."""
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)
     signal.signal(signal.SIGINT, _interrupted_while_starting)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # held since scripts/_cli.py
 
 
 def _interrupted_while_starting(signum, frame) -> None:
