@@ -70,8 +70,39 @@ def _stopped(pid: int) -> bool:
         return False
 
 
+# A domain lock handed down by the process that started this one: the number of an
+# inherited file descriptor, the lock's socket (see DomainLock).
+HANDED_DOWN_LOCK = "ATO_DOMAIN_LOCK_FD"
+
+
+def _handed_down(domain_id: int) -> socket.socket | None:
+    """The lock of `domain_id` this process inherited, if $ATO_DOMAIN_LOCK_FD names it."""
+    number = os.environ.get(HANDED_DOWN_LOCK, "")
+    if not number.isdigit():
+        return None
+    try:
+        sock = socket.socket(fileno=os.dup(int(number)))
+    except OSError:  # not open, or not a socket
+        return None
+    try:
+        if sock.getsockname() == ("127.0.0.1", DOMAIN_LOCK_PORT + domain_id):
+            return sock
+    except OSError:
+        pass
+    sock.close()
+    return None
+
+
 class DomainLock:
-    """A ROS domain id reserved for one run by holding a localhost TCP port."""
+    """A ROS domain id reserved for one run by holding a localhost TCP port.
+
+    A process holding a domain's lock can hand it to a command it starts for that
+    domain (`--domain-id N`): pass the lock's descriptor (subprocess's pass_fds) and
+    its number in $ATO_DOMAIN_LOCK_FD; the command's DomainLock(N) then shares the
+    lock instead of refusing the domain. Releasing the lock just before the command
+    takes it would leave a moment when nobody holds the domain (another run could
+    take it) and, once the command ends, the domain unheld while the parent still
+    has participants in it (a test's probe)."""
 
     def __init__(self, domain_id: int | None = None):
         candidates = [domain_id] if domain_id is not None else list(DOMAIN_IDS)
@@ -85,8 +116,20 @@ class DomainLock:
             self.domain_id, self._socket = candidate, sock
             return
         if domain_id is not None:
+            inherited = _handed_down(domain_id)
+            if inherited is not None:
+                self.domain_id, self._socket = domain_id, inherited
+                return
             raise RuntimeError(f"ROS domain {domain_id} is in use by another run")
         raise RuntimeError("no free ROS domain id")
+
+    def handed_down(self, env: dict[str, str] | None = None) -> dict[str, Any]:
+        """subprocess keyword arguments that hand this lock to the command started with
+        them (given `--domain-id` this lock's domain_id): pass_fds, and `env` (default
+        this process's environment) naming the descriptor."""
+        return {"pass_fds": (self.fileno(),),
+                "env": {**(os.environ if env is None else env),
+                        HANDED_DOWN_LOCK: str(self.fileno())}}
 
     def fileno(self) -> int:
         return self._socket.fileno()
@@ -147,6 +190,7 @@ def isolate_to_this_host(env: dict[str, str]) -> None:
 
 def node_environment(domain_id: int) -> dict[str, str]:
     env = dict(os.environ)
+    env.pop(HANDED_DOWN_LOCK, None)  # the launcher's; the nodes get their run's lock fd
     env["ROS_DOMAIN_ID"] = str(domain_id)
     isolate_to_this_host(env)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO_ROOT), env.get("PYTHONPATH")]))

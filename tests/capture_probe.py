@@ -16,12 +16,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import rclpy  # noqa: E402
 
 from ato_nodes.nodes.base import QOS, message_class  # noqa: E402
-from probes import spin_then_print  # noqa: E402
+from probes import init_in_held_domain, spin_then_print  # noqa: E402
 
 
 def main() -> None:
     timeout = float(sys.argv[1])
-    rclpy.init()
+    init_in_held_domain()
     node = rclpy.create_node("capture_probe")
     received = {}
     expected = {}

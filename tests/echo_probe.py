@@ -17,16 +17,18 @@ from rclpy.node import Node  # noqa: E402
 
 from ato_nodes.core.topics import topic_map  # noqa: E402
 from ato_nodes.nodes.base import message_class  # noqa: E402
+from probes import init_in_held_domain  # noqa: E402
 
 
 def main() -> None:
     seconds = float(sys.argv[1])
-    rclpy.init()
+    init_in_held_domain()
     node = Node("echo_probe")
     arrivals = {topic.name: [] for topic in topic_map().values()}
     for topic in topic_map().values():
         node.create_subscription(message_class(topic.type), topic.name,
-                                 lambda msg, name=topic.name: arrivals[name].append(time.monotonic()),
+                                 lambda msg, name=topic.name:
+                                 arrivals[name].append(time.monotonic()),
                                  10)  # default QoS: reliable, volatile, keep last 10
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:

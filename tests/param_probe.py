@@ -14,10 +14,12 @@ import yaml
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
+from probes import init_in_held_domain
+
 
 def main() -> None:
     node_name, name, text = sys.argv[1:4]
-    rclpy.init()
+    init_in_held_domain()
     node = rclpy.create_node("param_probe")
     client = AsyncParameterClient(node, node_name)
     if not client.wait_for_services(timeout_sec=20.0):

@@ -10,19 +10,18 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import rclpy  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
-from probes import spin_then_print  # noqa: E402
+from probes import init_in_held_domain, spin_then_print  # noqa: E402
 
 LAST_LINE = "run event: shutdown"
 
 
 def main() -> None:
     seconds, nodes = float(sys.argv[1]), sys.argv[2:]
-    rclpy.init()
+    init_in_held_domain()
     node = Node("rosout_probe")
     lines: dict[str, list[str]] = {name: [] for name in nodes}
     # what `ros2 topic echo` chooses against /rosout's publishers: reliable, transient local

@@ -31,8 +31,9 @@ def float64(value: float) -> bytes:
     return b"\x00\x01\x00\x00" + struct.pack("<d", value)  # CDR little endian
 
 
-def write(bag: Path, steps: int, gaps: dict[str, set[int]] = {}, close: bool = True,
+def write(bag: Path, steps: int, gaps: dict[str, set[int]] | None = None, close: bool = True,
           flush_every: int = 0):
+    gaps = gaps or {}
     writer = Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP)
     writer.open()
     topics = ("/ato/target_speed", "/train/measured_speed", "/ato/traction_command")

@@ -16,7 +16,7 @@ from rosbags.highlevel import AnyReader
 
 from ato_nodes.bagio import read_run
 from ato_nodes.core.topics import step_topics
-from ato_nodes.launch import DOMAIN_LOCK_PORT, IGNORED_ENVIRONMENT
+from ato_nodes.launch import DOMAIN_LOCK_PORT, IGNORED_ENVIRONMENT, node_environment
 from test_stack import (ROOT, alive, children, message_counts, run_stack, start_stack,
                         wait_for_children, wait_for_stepping)
 
@@ -260,13 +260,15 @@ def domain_of(banner: str) -> int:
     return int(banner.split("ROS_DOMAIN_ID=")[1].split(",")[0])
 
 
-def test_another_publisher_in_a_runs_domain_ends_the_run_and_is_named(tmp_path):
+def test_another_publisher_in_a_runs_domain_ends_the_run_and_is_named(tmp_path, ros_domain):
+    """The intruder publishes in the test's own domain, handed to the run: it outlives
+    the run (until killed) in a domain still held."""
     bag = tmp_path / "intruded"
-    process = start_stack("--duration", "600", "--real-time", "--out", str(bag))
-    domain = domain_of(wait_for_stepping(process)[0])
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE":
-           "LOCALHOST", "PYTHONPATH": str(ROOT)}
-    intruder = subprocess.Popen([sys.executable, "-c", INTRUDER], env=env,
+    process = start_stack("--duration", "600", "--real-time", "--out", str(bag),
+                          domain=ros_domain)
+    wait_for_stepping(process)
+    intruder = subprocess.Popen([sys.executable, "-c", INTRUDER],
+                                env=node_environment(ros_domain.domain_id),
                                 stdout=subprocess.PIPE, text=True)
     try:
         assert intruder.stdout.readline().strip() == "publishing"

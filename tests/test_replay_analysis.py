@@ -1,7 +1,6 @@
 """Replay onto a live graph, re-recording, reports, and bags that are not ours."""
 
 import json
-import os
 import shutil
 import signal
 import subprocess
@@ -14,6 +13,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.topics import step_topics
+from ato_nodes.launch import node_environment
 
 pytestmark = pytest.mark.integration
 
@@ -22,9 +22,9 @@ PYTHON = sys.executable
 STEP_TOPICS = {topic.name: topic.type for topic in step_topics()}
 
 
-def script(name, *args, timeout=120, env=None):
+def script(name, *args, timeout=120, **popen):
     return subprocess.run([PYTHON, str(ROOT / "scripts" / name), *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout, env=env, cwd=ROOT)
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT, **popen)
 
 
 @pytest.fixture(scope="module")
@@ -54,20 +54,23 @@ def stopped(process):
         process.communicate()
 
 
-def domain_env(domain):
-    return {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+def replay_into(domain, bag):
+    """replay_bag.py into the test's domain, handed the test's lock (replay_bag.py refuses
+    a domain held by a lock it was not given): the domain stays held throughout, for the
+    test's own participants before the replay starts and after it ends."""
+    return script("replay_bag.py", bag, "--rate", "0", "--wait-subscribers", "1",
+                  "--domain-id", domain.domain_id, **domain.handed_down())
 
 
-def test_replay_delivers_every_message_in_order_with_identical_values(recorded):
-    env = domain_env(150)
+def test_replay_delivers_every_message_in_order_with_identical_values(recorded, ros_domain):
+    env = node_environment(ros_domain.domain_id)
     recorded_topics = by_topic(bag_messages(recorded))
     probe = subprocess.Popen([PYTHON, str(ROOT / "tests" / "capture_probe.py"), "60",
                               *(f"{t}:{ty}:{len(recorded_topics[t])}"
                                 for t, ty in STEP_TOPICS.items())],
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
-        replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
-                        "--domain-id", "150")
+        replay = replay_into(ros_domain, recorded)
         assert replay.returncode == 0, replay.stderr
         out, err = probe.communicate(timeout=90)
     finally:
@@ -79,8 +82,8 @@ def test_replay_delivers_every_message_in_order_with_identical_values(recorded):
         assert received[topic] == [data.hex() for _, data in messages], topic
 
 
-def test_a_replay_re_recorded_gives_the_same_bag_data(recorded, tmp_path):
-    env = domain_env(151)
+def test_a_replay_re_recorded_gives_the_same_bag_data(recorded, tmp_path, ros_domain):
+    env = node_environment(ros_domain.domain_id)
     copy = tmp_path / "rerecorded"
     recorder = subprocess.Popen(
         [PYTHON, "-m", "ato_nodes.nodes.recorder", "--ros-args", "-p",
@@ -89,8 +92,7 @@ def test_a_replay_re_recorded_gives_the_same_bag_data(recorded, tmp_path):
     try:
         # the replay exits once the recorder has acknowledged every message; on SIGINT
         # the recorder writes what it holds, then closes the bag
-        replay = script("replay_bag.py", recorded, "--rate", "0", "--wait-subscribers", "1",
-                        "--domain-id", "151")
+        replay = replay_into(ros_domain, recorded)
         assert replay.returncode == 0, replay.stderr
         recorder.send_signal(signal.SIGINT)
         recorder.communicate(timeout=30)
@@ -129,7 +131,8 @@ def test_lone_mcap_and_renamed_topics_read_like_the_bag(recorded, tmp_path):
     renamed = tmp_path / "renamed"
     write_bag(renamed, [(f"/other{topic}", STEP_TOPICS[topic], stamp, data)
                         for topic, stamp, data in bag_messages(recorded)])
-    mapping = ["--map", "target_speed=/other/ato/target_speed", "--map", "state=/other/train/state",
+    mapping = ["--map", "target_speed=/other/ato/target_speed",
+               "--map", "state=/other/train/state",
                "--map", "command=/other/ato/traction_command"]
     result = script("analyze.py", renamed, "--out", tmp_path / "report", *mapping)
     assert result.returncode == 0, result.stderr
@@ -150,10 +153,12 @@ def write_bag(path, messages):
 def test_a_bag_missing_some_topics_gives_what_it_can(recorded, tmp_path):
     partial = tmp_path / "partial"
     keep = {"/ato/target_speed", "/train/measured_speed"}
-    write_bag(partial, [(t, STEP_TOPICS[t], s, d) for t, s, d in bag_messages(recorded) if t in keep])
+    write_bag(partial, [(t, STEP_TOPICS[t], s, d) for t, s, d in bag_messages(recorded)
+                        if t in keep])
     result = script("analyze.py", partial, "--out", tmp_path / "report")
     assert result.returncode == 0, result.stderr
-    assert "no state, speed_limit, command, controller_state, target_preview, position topic" in result.stdout
+    assert "no state, speed_limit, command, controller_state, target_preview, position " \
+        "topic" in result.stdout
     indices = json.loads((tmp_path / "report" / "indices.json").read_text())["partial"]
     assert indices["steps"] == 100 and "itae" in indices and "j_seed004" not in indices
 

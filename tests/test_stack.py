@@ -5,7 +5,6 @@ Each test launches scripts/run_stack.py as a user would.
 
 import json
 import os
-import re
 import signal
 import struct
 import subprocess
@@ -28,7 +27,7 @@ from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring import score_series
 from ato_nodes.core.topics import step_topics
-from ato_nodes.launch import node_processes
+from ato_nodes.launch import node_environment, node_processes
 
 pytestmark = pytest.mark.integration
 
@@ -43,9 +42,16 @@ def run_stack(*args, timeout=180):
                           cwd=ROOT)
 
 
-def start_stack(*args):
-    return subprocess.Popen([*RUN_STACK, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=ROOT)
+def start_stack(*args, domain=None):
+    """run_stack.py started; given `domain` (a DomainLock: the ros_domain fixture), in that
+    domain, the lock handed to the launcher, so that the domain stays held by the test
+    for its probes before the run starts and after it ends."""
+    if domain is None:
+        return subprocess.Popen([*RUN_STACK, *args], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    return subprocess.Popen([*RUN_STACK, *args, "--domain-id", str(domain.domain_id)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                            **domain.handed_down())
 
 
 def children(pid):
@@ -161,17 +167,14 @@ END_OF_RUN_LINES = {"plant": ("finished",), "recorder": ("recorded",),
                     "supervisor": ("finished", "recorded"), "profile": (), "controller": ()}
 
 
-def test_rosout_carries_every_nodes_end_of_run_lines(tmp_path):
+def test_rosout_carries_every_nodes_end_of_run_lines(tmp_path, ros_domain):
     """What `ros2 topic echo /rosout` sees through a run: each node's last lines reach it
     before the node exits, and the launcher's console shows none of them."""
     process = start_stack("--scenario", "seed004-metro", "--duration", "8", "--real-time",
-                          "--out", str(tmp_path / "watched"))
-    banner = process.stderr.readline()
-    domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
-    env = {**os.environ, "ROS_DOMAIN_ID": domain, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+                          "--out", str(tmp_path / "watched"), domain=ros_domain)
     probe = subprocess.run([sys.executable, str(ROOT / "tests" / "rosout_probe.py"), "60",
                             *END_OF_RUN_LINES], capture_output=True, text=True, timeout=90,
-                           env=env)
+                           env=node_environment(ros_domain.domain_id))
     stdout, stderr = process.communicate(timeout=60)
     assert process.returncode == 0 and probe.returncode == 0, (stderr, probe.stderr)
     lines = json.loads(probe.stdout)
@@ -262,24 +265,23 @@ def test_malformed_scenario_file_is_one_line_and_exit_2(tmp_path):
     assert result.stderr.strip().count("\n") == 0 and "malformed YAML" in result.stderr
 
 
-def test_a_node_rejects_a_bad_parameter_alone(tmp_path):
+def test_a_node_rejects_a_bad_parameter_alone(tmp_path, ros_domain):
     """`ros2 run ato_nodes controller --ros-args -p adrc.r0:=-1` fails cleanly too."""
     result = subprocess.run([sys.executable, "-m", "ato_nodes.nodes.controller", "--ros-args",
                              "-p", "adrc.r0:=-1.0"], capture_output=True, text=True, timeout=60,
-                            cwd=ROOT, env={**os.environ, "ROS_DOMAIN_ID": "199"})
+                            cwd=ROOT, env=node_environment(ros_domain.domain_id))
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
     assert "controller: error:" in result.stderr and "adrc.r0" in result.stderr
 
 
-def test_a_separate_process_echoes_every_topic_at_the_configured_rate(tmp_path):
+def test_a_separate_process_echoes_every_topic_at_the_configured_rate(tmp_path, ros_domain):
     bag = tmp_path / "watched"
-    process = start_stack("--duration", "30", "--real-time", "--out", str(bag))
-    banner = wait_for_stepping(process)[0]
-    domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
-    env = {**os.environ, "ROS_DOMAIN_ID": domain, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    process = start_stack("--duration", "30", "--real-time", "--out", str(bag), domain=ros_domain)
+    wait_for_stepping(process)
     probe = subprocess.run([sys.executable, str(ROOT / "tests" / "echo_probe.py"), "6"],
-                           capture_output=True, text=True, timeout=60, env=env)
+                           capture_output=True, text=True, timeout=60,
+                           env=node_environment(ros_domain.domain_id))
     process.send_signal(signal.SIGINT)
     process.communicate(timeout=60)
     assert probe.returncode == 0, probe.stderr
@@ -323,17 +325,16 @@ def test_line_scenarios_run_through_the_stack_exactly_as_in_process(tmp_path, sc
     assert from_bag["traction_energy_kwh"] > 0 and "overspeed_time" in from_bag
 
 
-def test_ros2_param_set_refuses_fixed_parameters_and_applies_live_gains_reproducibly(tmp_path):
+def test_ros2_param_set_refuses_fixed_parameters_and_applies_live_gains_reproducibly(
+        tmp_path, ros_domain):
     """A gain set on the live controller takes effect at a step boundary, is recorded with
     its step, and the bag alone re-simulates the run bit for bit; parameters fixed at
     start-up are refused with rclpy's standard read-only answer."""
     bag = tmp_path / "bag"
-    process = start_stack("--duration", "60", "--real-time", "--out", str(bag))
+    process = start_stack("--duration", "60", "--real-time", "--out", str(bag), domain=ros_domain)
     try:
-        banner = wait_for_stepping(process)[0]
-        domain = re.search(r"ROS_DOMAIN_ID=(\d+)", banner).group(1)
-        env = {**os.environ, "ROS_DOMAIN_ID": domain,
-               "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        wait_for_stepping(process)
+        env = node_environment(ros_domain.domain_id)
         answers = {}
         for node, name, value in (("/controller", "adrc.mu1", "7000.0"),
                                   ("/plant", "run.period", "0.1"),

@@ -1,7 +1,7 @@
 """Stands in for `ros2 topic echo TOPIC` (no ros2 CLI wheel exists): prints 'ready' once
 subscribed, then what arrived, as a JSON list, once nothing has for QUIET seconds
-(default 1; or after SECONDS): the values of a topic of the topic map (std_msgs/Float64: `data`), or the
-log records of /rosout ({"name", "level", "msg"}).
+(default 1; or after SECONDS): the values of a topic of the topic map (std_msgs/Float64:
+`data`), or the log records of /rosout ({"name", "level", "msg"}).
 
     ROS_DOMAIN_ID=N python tests/topic_probe.py /ato/running_fitness SECONDS
     ROS_DOMAIN_ID=N python tests/topic_probe.py /rosout SECONDS QUIET
@@ -19,7 +19,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E
 
 from ato_nodes.core.topics import topic_map  # noqa: E402
 from ato_nodes.nodes.base import QOS, message_class  # noqa: E402
-from probes import spin_then_print  # noqa: E402
+from probes import init_in_held_domain, spin_then_print  # noqa: E402
 
 ROSOUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -28,7 +28,7 @@ ROSOUT_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
 def main() -> None:
     name, seconds = sys.argv[1], float(sys.argv[2])
     quiet = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
-    rclpy.init()
+    init_in_held_domain()
     node = rclpy.create_node("topic_probe")
     received, last = [], [time.monotonic()]
     if name == "/rosout":
