@@ -311,7 +311,7 @@ def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure |
     plt = _pyplot()
     figure, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs) + 0.8),
                                 sharex=True, squeeze=False)
-    for axis, output in zip(axes[:, 0], outputs):
+    for axis, output in zip(axes[:, 0], outputs, strict=True):
         axis.plot(run.series["t"], run.series[output.name], color=colour, lw=0.8)
         _mark_changes(axis, run, "black", named=axis is axes[0, 0])
         axis.set_ylabel(f"{output.name}\n({output.unit})")

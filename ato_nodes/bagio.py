@@ -166,7 +166,8 @@ def _mcap_messages(path: Path, wanted: dict[str, str] | None):
     def generate():
         try:
             topics = None if wanted is None else list(wanted)
-            for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=False):
+            for _schema, channel, message in reader.iter_messages(topics=topics,
+                                                                  log_time_order=False):
                 yield channel.topic, message.log_time, message.data
         finally:
             handle.close()

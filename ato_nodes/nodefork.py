@@ -18,6 +18,14 @@ file on the socket) with nodes still running, the server gives them their death
 signals, kills those still there after STOP_GRACE and repairs the recorder's bag
 if it had to kill the recorder; then it ends. A server killed outright leaves
 the nodes their death signals (PR_SET_PDEATHSIG).
+
+The plain start stays supported (`start_plain`): each node a `python -m
+ato_nodes.nodes.ROLE` subprocess of the launcher with the same environment,
+arguments, working directory, console, session, held stop signals, death signal and
+lock descriptor. The launcher uses it when ATO_NODE_START=subprocess is set, and for
+a run whose fork server failed to start or died before forking its first node. What
+it lacks: nobody outlives a killed launcher to SIGKILL a node deaf to its death
+signal or repair the bag of a recorder killed that way.
 """
 
 from __future__ import annotations
@@ -205,6 +213,39 @@ def main() -> None:
 
 
 # Launcher side -------------------------------------------------------------
+NODE_START = "ATO_NODE_START"  # =subprocess: every node started by start_plain()
+
+
+def plain_start_requested() -> bool:
+    return os.environ.get(NODE_START) == "subprocess"
+
+
+def start_plain(role: str, argv: list[str], env: dict[str, str], cwd: Path,
+                death_signal: int, output: tuple[int, int], lock_fd: int,
+                notify: threading.Event) -> subprocess.Popen:
+    """A node started as `python -m ato_nodes.nodes.ROLE ARGV...` (argv as the fork
+    server takes it: module name first), made what a forked node makes itself: own
+    session, SIGINT and SIGTERM held until the node's handlers are in (run_node), the
+    death signal, the lock descriptor kept. `notify` is set when it ends."""
+    def in_the_child() -> None:  # after fork, before exec; survives the exec
+        signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(death_signal))
+
+    # PR_SET_PDEATHSIG fires when the thread that started the node ends: the Stack's
+    # thread, which waits for its nodes before it ends.
+    process = subprocess.Popen(  # noqa: PLW1509 (preexec_fn: no locks taken in it)
+        [sys.executable, "-m", *argv], env=env, cwd=cwd, stdin=subprocess.DEVNULL,
+        stdout=output[0], stderr=output[1], pass_fds=(lock_fd,), start_new_session=True,
+        preexec_fn=in_the_child)
+
+    def watch() -> None:
+        process.wait()
+        notify.set()
+
+    threading.Thread(target=watch, name=f"node-{role}", daemon=True).start()
+    return process
+
+
 class NodeStartError(RuntimeError):
     """The fork server could not start a node (it died: see its stderr)."""
 

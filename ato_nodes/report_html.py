@@ -47,10 +47,11 @@ if (zoom) { var plot = document.getElementById('{plot_id}'), range = {};
 COUNT_RENDERED = ("document.body.setAttribute('%s', "
                   "Number(document.body.getAttribute('%s') || 0) + 1);"
                   % (RENDERED_ATTRIBUTE, RENDERED_ATTRIBUTE))
-STYLE = """body{font-family:sans-serif;margin:1em 2em}table{border-collapse:collapse;
-margin:0.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}
-th:first-child,td:first-child,table.identity td{text-align:left}.summary{padding:4px 8px;margin:2px 0;
-font-weight:bold}"""
+STYLE = ("body{font-family:sans-serif;margin:1em 2em}table{border-collapse:collapse;\n"
+         "margin:0.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}\n"
+         "th:first-child,td:first-child,table.identity td{text-align:left}"
+         ".summary{padding:4px 8px;margin:2px 0;\n"
+         "font-weight:bold}")
 
 
 def _colours():
@@ -74,7 +75,7 @@ def mode_segments(t: np.ndarray, modes: np.ndarray, mode: int) -> list:
     ends = np.append(t[1:], t[-1])
     changes = np.flatnonzero(np.diff(np.concatenate(([0], modes == mode, [0]))))
     xs: list = []
-    for first, last in zip(changes[::2], changes[1::2]):
+    for first, last in zip(changes[::2], changes[1::2], strict=True):
         xs += [float(t[first]), float(ends[last - 1]), None]
     return xs
 
@@ -132,7 +133,7 @@ def _bands(values: dict[float, str], colour: str, dash: str):
 
 def _change_lines(reports: list[RunReport]):
     """Each run's live parameter changes: a dotted line in its colour, named on top."""
-    marks = [(change, colour) for report, colour in zip(reports, _colours())
+    marks = [(change, colour) for report, colour in zip(reports, _colours(), strict=False)
              for change in live_changes(report.run)]
 
     def draw(figure, row):
@@ -146,71 +147,86 @@ def _change_lines(reports: list[RunReport]):
     return (draw,) if marks else ()
 
 
-def time_figure(reports: list[RunReport]):
+def _line(x, y, name, colour, group, first, **style):
     import plotly.graph_objects as go
+    return go.Scatter(x=_f32(x), y=_f32(y), name=_text(name), legendgroup=group,
+                      showlegend=first, mode="lines",
+                      line=dict(color=colour, width=style.pop("width", 1.2), **style))
 
-    def line(x, y, name, colour, group, first, **style):
-        return go.Scatter(x=_f32(x), y=_f32(y), name=_text(name), legendgroup=group,
-                          showlegend=first, mode="lines",
-                          line=dict(color=colour, width=style.pop("width", 1.2), **style))
 
+def _run_traces(report: RunReport, colour: str, base: RunReport, panels: dict[str, list],
+                outputs: dict[str, list], modes: list) -> None:
+    """One run's traces, added to `panels` (by name), `outputs` (by title) and `modes`;
+    its differences to `base` (the first run) when it is another run."""
+    s, name = report.run.series, report.label
+    t = s["t"]
+
+    def add(panel, y, what, x=t, **style):
+        panels[panel].append(_line(x, y, f"{name} {what}", colour, name, panel == "speed",
+                                   **style))
+    add("speed", s["speed"] * MS_TO_KMH, "speed")
+    if "measured_speed" in s and np.any(s["measured_speed"] != s["speed"]):
+        add("speed", s["measured_speed"] * MS_TO_KMH, "measured speed", width=0.6,
+            dash="dot")
+        add("measured", (s["measured_speed"] - s["speed"]) * MS_TO_KMH, "measured - true")
+    add("error", (s["target"] - s["speed"]) * MS_TO_KMH, "error")
+    if "command" in s:
+        add("command", s["command"], "command u")
+    if "force" in s:
+        add("command", s["force"], "applied force", dash="dot")
+    drive = s.get("force", s.get("command"))
+    if drive is not None:
+        modes.append((name, drive_modes(drive), t))
+    if "acceleration" in s:
+        _acceleration_traces(add, report)
+    for output in _outputs(report):
+        outputs.setdefault(f"{output.name} ({output.unit}): {output.description}", []
+                           ).append(_line(t, s[output.name], f"{name} {output.name}", colour,
+                                          name, False))
+    if report is not base:
+        first_series = base.run.series
+        add("speed_diff", (s["speed"] - np.interp(t, first_series["t"],
+                                                  first_series["speed"])) * MS_TO_KMH,
+            f"speed - {base.label}")
+        if "command" in s and "command" in first_series:
+            add("command_diff", s["command"] - np.interp(t, first_series["t"],
+                                                         first_series["command"]),
+                f"u - {base.label}")
+
+
+def _acceleration_traces(add, report: RunReport) -> None:
+    """A run's acceleration, its jerk and, with an observer's z1..z3, those against the
+    true speed, acceleration and total disturbance; `add` as in _run_traces."""
+    s = report.run.series
+    t = s["t"]
+    add("acceleration", s["acceleration"], "acceleration")
+    if len(t) > 1:
+        centres, jerk = windowed_jerk(t, s["acceleration"])
+        add("jerk", jerk, "jerk (1 s)", x=centres)
+    if {"z1", "z2", "z3"} <= s.keys():
+        add("z1", (s["z1"] - s["speed"]) * MS_TO_KMH, "z1 - v")
+        add("z2", s["acceleration"], "acceleration a")
+        add("z2", s["z2"], "z2", dash="dash")
+        b0 = observer_b0(report.run.parameters or {})
+        if b0 is not None and "command" in s:
+            add("z3", total_disturbance(s, b0), "total disturbance f")
+        add("z3", s["z3"], "z3", dash="dash")
+
+
+def time_figure(reports: list[RunReport]):
     panels = {name: [] for name in ("speed", "measured", "error", "command", "acceleration",
                                     "jerk", "z1", "z2", "z3", "outputs", "speed_diff",
                                     "command_diff")}
     outputs: dict[str, list] = {}
     modes = []
-    first_series = s = reports[0].run.series
-    panels["speed"].append(line(s["t"], s["target"] * MS_TO_KMH, "target", "black",
-                                "target", True, dash="dash"))
+    s = reports[0].run.series
+    panels["speed"].append(_line(s["t"], s["target"] * MS_TO_KMH, "target", "black",
+                                 "target", True, dash="dash"))
     if np.any(np.isfinite(s.get("speed_limit", [np.inf]))):
-        panels["speed"].append(line(s["t"], s["speed_limit"] * MS_TO_KMH, "speed limit",
-                                    LIMIT_COLOUR, "limit", True, dash="dashdot"))
-    for report, colour in zip(reports, _colours()):
-        s, name = report.run.series, report.label
-        t = s["t"]
-
-        def add(panel, y, what, x=t, **style):
-            panels[panel].append(line(x, y, f"{name} {what}", colour, name, panel == "speed",
-                                      **style))
-        add("speed", s["speed"] * MS_TO_KMH, "speed")
-        if "measured_speed" in s and np.any(s["measured_speed"] != s["speed"]):
-            add("speed", s["measured_speed"] * MS_TO_KMH, "measured speed", width=0.6,
-                dash="dot")
-            add("measured", (s["measured_speed"] - s["speed"]) * MS_TO_KMH, "measured - true")
-        add("error", (s["target"] - s["speed"]) * MS_TO_KMH, "error")
-        if "command" in s:
-            add("command", s["command"], "command u")
-        if "force" in s:
-            add("command", s["force"], "applied force", dash="dot")
-        drive = s.get("force", s.get("command"))
-        if drive is not None:
-            modes.append((name, drive_modes(drive), t))
-        if "acceleration" in s:
-            add("acceleration", s["acceleration"], "acceleration")
-            if len(t) > 1:
-                centres, jerk = windowed_jerk(t, s["acceleration"])
-                add("jerk", jerk, "jerk (1 s)", x=centres)
-            if {"z1", "z2", "z3"} <= s.keys():
-                add("z1", (s["z1"] - s["speed"]) * MS_TO_KMH, "z1 - v")
-                add("z2", s["acceleration"], "acceleration a")
-                add("z2", s["z2"], "z2", dash="dash")
-                b0 = observer_b0(report.run.parameters or {})
-                if b0 is not None and "command" in s:
-                    add("z3", total_disturbance(s, b0), "total disturbance f")
-                add("z3", s["z3"], "z3", dash="dash")
-        for output in _outputs(report):
-            outputs.setdefault(f"{output.name} ({output.unit}): {output.description}", []
-                               ).append(line(t, s[output.name], f"{name} {output.name}", colour,
-                                             name, False))
-        if report is not reports[0]:
-            base = reports[0]
-            add("speed_diff", (s["speed"] - np.interp(t, first_series["t"],
-                                                      first_series["speed"])) * MS_TO_KMH,
-                f"speed - {base.label}")
-            if "command" in s and "command" in first_series:
-                add("command_diff", s["command"] - np.interp(t, first_series["t"],
-                                                             first_series["command"]),
-                    f"u - {base.label}")
+        panels["speed"].append(_line(s["t"], s["speed_limit"] * MS_TO_KMH, "speed limit",
+                                     LIMIT_COLOUR, "limit", True, dash="dashdot"))
+    for report, colour in zip(reports, _colours(), strict=False):
+        _run_traces(report, colour, reports[0], panels, outputs, modes)
 
     figure = Panels()
     figure.add("speed (km/h): target, true and measured", panels["speed"])
@@ -283,7 +299,8 @@ def distance_figure(reports: list[RunReport]):
     """Speed and error against distance over the line's gradients (None without
     positions)."""
     import plotly.graph_objects as go
-    with_position = [(r, c) for r, c in zip(reports, _colours()) if "position" in r.run.series]
+    with_position = [(r, c) for r, c in zip(reports, _colours(), strict=False)
+                     if "position" in r.run.series]
     if not with_position:
         return None
     lines = (run_line(r.run.parameters) for r, _ in with_position if r.run.parameters)
@@ -369,7 +386,7 @@ def page_sections(reports: list[RunReport], rows: list[VerdictRow]) -> list[str]
     parts.append(_table(["index", "requirement"] + labels, [
         [(row.heading, ""), (row.requirement, "")]
         + [(text + (f" {status}" if status else ""), status, why.get(row.key, ""))
-           for (text, status), why in zip(row.cells, whys)]
+           for (text, status), why in zip(row.cells, whys, strict=True)]
         for row in rows]))
     parts += [f"<p>{html.escape(note)}</p>" for note in report_notes(reports)]
     return parts

@@ -109,11 +109,11 @@ class SearchSpace:
 
     def describe(self) -> str:
         return ", ".join(f"{n}={lo:g}:{hi:g}" for n, lo, hi in zip(self.names, self.lower,
-                                                                   self.upper))
+                                                                   self.upper, strict=True))
 
     def overrides(self, x: np.ndarray) -> dict[str, Any]:
         return {name: (int(round(value)) if SPEC_BY_NAME[name].value_type is int else float(value))
-                for name, value in zip(self.names, x)}
+                for name, value in zip(self.names, x, strict=True)}
 
     def start(self, values: dict[str, Any]) -> np.ndarray:
         """The scenario's own values, clipped into the box: the starting region."""
@@ -401,7 +401,7 @@ class TuningSettings:
     def describe(self) -> dict[str, Any]:
         return {"algorithm": self.algorithm, "scenario": self.scenario,
                 "params": {n: [lo, hi] for n, lo, hi in zip(self.space.names, self.space.lower,
-                                                            self.space.upper)},
+                                                            self.space.upper, strict=True)},
                 "evaluations": self.evaluations, "seed": self.seed, "fitness": self.fitness,
                 "in_process": self.in_process, "options": self.options,
                 "prune": self.prune,
@@ -633,7 +633,8 @@ class Tuner:
                              *self.settings.space.names])
             for record in result.history:  # plain decimal text, full precision
                 writer.writerow([record.iteration, record.evaluations, repr(float(record.best_f)),
-                                 repr(float(record.mean_f)), *(repr(float(v)) for v in record.best_x)])
+                                 repr(float(record.mean_f)),
+                                 *(repr(float(v)) for v in record.best_x)])
         failures, pruned = {}, 0
         for record in self.log.done.values():
             if record.status == "pruned":
@@ -678,7 +679,7 @@ def at_bounds(space: SearchSpace, x: np.ndarray) -> list[str]:
     do better)."""
     width = space.upper - space.lower
     return [name for name, value, low, high, span in zip(space.names, x, space.lower,
-                                                         space.upper, width)
+                                                         space.upper, width, strict=True)
             if min(value - low, high - value) <= 1e-6 * span]
 
 
@@ -709,7 +710,7 @@ def _dask_logs_silenced():
     try:
         yield
     finally:
-        for logger, before in zip(loggers, disabled):
+        for logger, before in zip(loggers, disabled, strict=True):
             logger.disabled = before
 
 

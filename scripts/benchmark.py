@@ -76,7 +76,8 @@ def main() -> None:
     rate = report["steps_per_second"]
     print(f"ping-pong: median {ping_rate:,.0f} round trips/s "
           f"(runs before and after the stack: {', '.join(f'{p:,.0f}' for p in pings)})")
-    print(f"stack: {report['steps']} steps in {report['loop_wall_time']:.2f} s = {rate:,.0f} steps/s "
+    print(f"stack: {report['steps']} steps in {report['loop_wall_time']:.2f} s = "
+          f"{rate:,.0f} steps/s "
           f"with all nodes in the loop and the recorder on")
     print(f"stack / ping-pong: {100 * rate / ping_rate:.0f} %  (target >= 40 %)")
     print(f"full run through the stack: real-time factor {report['real_time_factor']:.1f}, "

@@ -221,7 +221,7 @@ def markdown_table(header: list[str], rows: list[list[str]]) -> str:
 
 def plain_table(header: list[str], rows: list[list[str]]) -> str:
     widths = [max(len(row[i]) for row in [header, *rows]) for i in range(len(header))]
-    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(row, widths))
+    return "\n".join("  ".join(cell.rjust(w) for cell, w in zip(row, widths, strict=False))
                      for row in [header, *rows])
 
 

@@ -136,7 +136,8 @@ def main() -> None:
           f"compiled loop and computes the plan's horizons: {times[0]:.2f} s)")
     for workers in (1, 2):
         rate = in_process_rate(values, 40 * workers, workers)
-        print(f"in-process, full 2400 s seed-000 run, {workers} worker(s): {rate:.2f} evaluations/s")
+        print(f"in-process, full 2400 s seed-000 run, {workers} worker(s): "
+              f"{rate:.2f} evaluations/s")
     overhead = dask_overhead(values)
     print("Dask overhead per task (LocalCluster, 2 workers): "
           + (f"{overhead * 1000:.1f} ms" if overhead is not None else "dask not installed"))

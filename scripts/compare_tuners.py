@@ -139,12 +139,15 @@ def main() -> None:
         agreement = abs(stack_itae - best["best_indices"]["itae"]) / best["best_indices"]["itae"]
         rows.append(f"| {algorithm} | {len(summaries)} | {budget(args, algorithm)} | "
                     f"{statistics.median(itae):.6g} | "
-                    f"{min(itae):.6g} | {statistics.median(max_error):.4f} | {min(max_error):.4f} | "
+                    f"{min(itae):.6g} | {statistics.median(max_error):.4f} | "
+                    f"{min(max_error):.4f} | "
                     f"{stack_itae:.6g} (rel. diff {agreement:.1e}) | "
                     f"{PAPER_MAX_ERROR.get(algorithm, '-')} |")
     table = "\n".join(rows)
+    spent = (f"{args.evaluations} evaluations" if args.evaluations is not None
+             else f"{args.iterations} iterations")
     (args.out / "comparison.md").write_text(
-        f"Budget {f'{args.evaluations} evaluations' if args.evaluations is not None else f'{args.iterations} iterations'} each, population {args.population}, seeds "
+        f"Budget {spent} each, population {args.population}, seeds "
         f"{' '.join(map(str, args.seeds))}, fitness {args.fitness}, scenario {args.scenario} "
         f"{' '.join(args.set)}; options {' '.join(args.options) or 'the defaults'}\n\n{table}\n")
     plot_convergence(sorted(p for p in args.out.iterdir() if (p / "history.csv").exists()),

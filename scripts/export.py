@@ -40,7 +40,7 @@ def main() -> None:
                 writer = csv.writer(handle)
                 writer.writerow(columns)
                 writer.writerows(zip(*(map(repr, values.tolist())
-                                       for values in columns.values())))
+                                       for values in columns.values()), strict=True))
             rows = len(columns["t"])
         else:
             frame = read_frame(args.bag, mapping)

@@ -134,7 +134,7 @@ def main() -> None:
     period = parameters["run.period"]
     train_values = {name: value for name, value in parameters.items()
                     if name.startswith("plant.") and not name.startswith("plant.disturbance")}
-    for path, (_, _, other) in zip(args.bags, runs):
+    for path, (_, _, other) in zip(args.bags, runs, strict=True):
         if other["run.period"] != period or other.get("plant.train") != parameters.get(
                 "plant.train"):
             _cli.fail(f"{path}: another train or period than {args.bags[0]}")
@@ -145,7 +145,7 @@ def main() -> None:
                               * args.samples / lengths.sum()).astype(int))
     xs, ts, vs = [], [], []
     try:
-        for (speeds, commands, _), count in zip(runs, counts):
+        for (speeds, commands, _), count in zip(runs, counts, strict=True):
             x, t = layout.samples(speeds, commands, ident.sample_steps(len(speeds), layout,
                                                                        count))
             xs.append(x), ts.append(t), vs.append(x[:, 0])
@@ -185,8 +185,9 @@ def main() -> None:
                        ("mu", math.log10(search.mu), ident.LOG_MU),
                        ("delta", search.delta, ident.DELTA))
                        if not low + 1e-3 * (high - low) < value < high - 1e-3 * (high - low)]},
-        "one_step": {part: {**ranges(e), "within_ctcs3": within_ctcs3(
-            e, v[rows])} for (part, e), rows in zip(errors.items(), (train_rows, test_rows))},
+        "one_step": {part: {**ranges(e), "within_ctcs3": within_ctcs3(e, v[rows])}
+                     for (part, e), rows in zip(errors.items(), (train_rows, test_rows),
+                                                strict=True)},
         "paper": PAPER,
     }
     if args.validation:

@@ -111,7 +111,7 @@ def plot(results: list[dict], path: Path, scenario: str) -> None:
     import matplotlib.pyplot as plt
     factors = ("plant.mass_factor", "plant.resistance_factor", "plant.lag_factor")
     figure, axes = plt.subplots(1, 3, figsize=(13, 3.8), sharey=True)
-    for axis, name in zip(axes, factors):
+    for axis, name in zip(axes, factors, strict=True):
         axis.plot([r[name] for r in results], [r["max_abs_error_kmh"] for r in results], "o",
                   ms=3)
         axis.set(xlabel=name.split(".")[1].replace("_", " "))

@@ -98,7 +98,8 @@ def one_run(bag: Path, rng: random.Random, kind: str) -> tuple[bool, str]:
     if kind != "sigkill" and "(run already over)" not in what and process.returncode != 130:
         return False, f"{what}: exit {process.returncode}, not 130"
     if not bag.exists():
-        return True, f"{what}: exit {process.returncode}, no bag (interrupted before the recorder started)"
+        return True, (f"{what}: exit {process.returncode}, no bag "
+                      "(interrupted before the recorder started)")
     kept, holds = check(bag)
     return kept, f"{what}: exit {process.returncode}, {holds}"
 

@@ -52,8 +52,8 @@ def write_run_bag(bag: Path, series: dict, parameters: dict | None, steps: int |
                   changes: dict[int, dict[str, float]] | None = None,
                   status: str | None = None) -> Path:
     """The first `steps` steps (all by default) of a simulated run as its bag, the
-    controller's outputs on its state topic; with `status`, a summary.json saying it. Parameters naming a line file keep its text,
-    as the recorder's do."""
+    controller's outputs on its state topic; with `status`, a summary.json saying it.
+    Parameters naming a line file keep its text, as the recorder's do."""
     names = {key: topic.name for key, topic in topic_map().items()}
     steps = len(series["t"]) if steps is None else steps
     period_ns = (parameters or {}).get("run.period", 0.05) * 1e9

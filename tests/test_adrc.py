@@ -114,7 +114,7 @@ class TestExtendedStateObserver:
     def test_stable_for_the_seed_gains_at_a_long_step(self):
         # Explicit Euler would need beta1 * h < ~1; backward Euler does not.
         eso = NonlinearESO(1200.0, 1700.0, 4500.0, b0=0.2, delta=0.01, period=0.1)
-        for k in range(2000):
+        for _ in range(2000):
             z = eso.update(1.0, 0.0)
         assert z[0] == pytest.approx(1.0, abs=1e-9)
         assert abs(z[1]) < 1e-6 and abs(z[2]) < 1e-6

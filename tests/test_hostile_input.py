@@ -161,7 +161,7 @@ def test_identify_refuses_a_missing_bag_in_one_line(tmp_path):
 ])
 def test_optimize_strategy_refuses_impossible_plans_in_one_line(tmp_path, args, words):
     base = {"--line": "lines/lanxin-67km.yaml", "--train": "crh5"}
-    base.update(dict(zip(args[::2], args[1::2])))
+    base.update(dict(zip(args[::2], args[1::2], strict=True)))
     options = [item for pair in base.items() for item in pair]
     extra = [a for a in args if a not in base and a not in base.values()]
     result = script("optimize_strategy.py", *options, *extra, "--algorithm", "flatout",

@@ -53,7 +53,7 @@ def test_resistance_varies_linearly_while_straddling_a_change(tmp_path):
     length = 100.0  # the head goes from 400 m (all on +10) to 500 m (all on -5)
     values = [line.additional_resistance(400.0 + d, length) for d in (0, 25, 50, 75, 100)]
     assert values[0] == pytest.approx(10.0) and values[-1] == pytest.approx(-5.0)
-    steps = [b - a for a, b in zip(values, values[1:])]
+    steps = [b - a for a, b in zip(values, values[1:], strict=False)]
     assert steps == pytest.approx([-3.75] * 4)  # (-5 - 10) / 100 m * 25 m
 
 

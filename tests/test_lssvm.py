@@ -65,7 +65,7 @@ def test_online_updates_stay_within_1e6_kmh_of_a_fresh_solve(window, updates):
     x, t = train_like_samples(900)
     new_x, new_t = train_like_samples(updates, seed=1)
     model = lssvm.fit(LAYOUT, x, t, mu=6000.0, delta=0.5, window=window)
-    for row, target in zip(new_x, new_t):
+    for row, target in zip(new_x, new_t, strict=True):
         assert model.add(row, target)
     assert model.added == updates and model.size == 900 + min(window, updates)
     assert model.forgotten == max(0, updates - window)

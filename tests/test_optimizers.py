@@ -50,9 +50,9 @@ def test_same_seed_same_run_other_seed_other_run(name):
         recorder = Recorder(sphere)
         runs.append((optimize(name, recorder, LOWER, UPPER, 500, seed), recorder.batches))
     (first, batches), (again, batches_again), (other, _) = runs
-    assert all(np.array_equal(a, b) for a, b in zip(traces(first), traces(again)))
+    assert all(np.array_equal(a, b) for a, b in zip(traces(first), traces(again), strict=True))
     assert len(batches) == len(batches_again)
-    assert all(np.array_equal(a, b) for a, b in zip(batches, batches_again))
+    assert all(np.array_equal(a, b) for a, b in zip(batches, batches_again, strict=True))
     assert not np.array_equal(first.trace("best_x"), other.trace("best_x"))
 
 

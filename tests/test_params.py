@@ -29,7 +29,8 @@ def test_shipped_scenarios_load():
 
 def test_seed000_has_the_papers_parameters():
     values = load_scenario("seed000")
-    assert (values["adrc.mu1"], values["adrc.mu2"], values["adrc.beta3"]) == (6000.0, 5500.0, 4500.0)
+    assert ((values["adrc.mu1"], values["adrc.mu2"], values["adrc.beta3"])
+            == (6000.0, 5500.0, 4500.0))
     assert values["run.duration"] == 2400.0 and steps(values) == 48000
     assert not values["plant.envelope"]
 
@@ -57,7 +58,8 @@ def test_malformed_yaml_names_file_and_line(tmp_path):
 def test_misspelled_parameter_gets_a_suggestion(tmp_path):
     bad = tmp_path / "typo.yaml"
     bad.write_text("controller:\n  ros__parameters:\n    adrc.mu11: 3.0\n")
-    with pytest.raises(ScenarioError, match="unknown parameter 'adrc.mu11' \\(did you mean adrc.mu1"):
+    with pytest.raises(ScenarioError,
+                       match="unknown parameter 'adrc.mu11' \\(did you mean adrc.mu1"):
         load_scenario(str(bad))
 
 
@@ -111,7 +113,8 @@ def test_a_parameter_of_a_kind_the_run_does_not_use_is_one_line_wherever_it_is_g
     metro = load_scenario("seed004-metro")
     with pytest.raises(ScenarioError) as refused:
         apply_overrides(metro, ["adrc.mu1=7000"])
-    assert str(refused.value) == f"--set: adrc.mu1 belongs to controller kind han_adrc; {METRO_USES}"
+    assert str(refused.value) == (f"--set: adrc.mu1 belongs to controller kind han_adrc; "
+                                  f"{METRO_USES}")
     with pytest.raises(ScenarioError, match=r"--set: profile.step.speed belongs to profile kind "
                                             r"step; this run uses ato \(its parameters are "
                                             r"profile.ato.\*\)"):

@@ -31,7 +31,8 @@ def test_resistance_is_davis_in_m_per_s():
     p = TrainParameters()
     v = 350 / 3.6
     assert p.resistance(v) == pytest.approx(0.16 + 0.0053 * v + 0.0018 * v * v)
-    assert p.resistance(v) == pytest.approx(17.68, abs=0.01)  # docs/papers.md: 17.7 N/kN at 350 km/h
+    # docs/papers.md: 17.7 N/kN at 350 km/h
+    assert p.resistance(v) == pytest.approx(17.68, abs=0.01)
     assert p.resistance(-v) == -p.resistance(v)
 
 

@@ -34,7 +34,8 @@ def test_cruise_levels_and_shape(curve):
     assert curve.speed(1100.0) == pytest.approx(200 * KMH)  # low cruise
     assert curve.speed(1700.0) == pytest.approx(350 * KMH)  # second cruise
     # Steepest acceleration at t = 0: Vinc / 120 s = 0.853 m/s^2
-    assert (curve.speed(0.01) - curve.speed(0.0)) / 0.01 == pytest.approx(368.34 * KMH / 120, rel=1e-3)
+    assert ((curve.speed(0.01) - curve.speed(0.0)) / 0.01
+            == pytest.approx(368.34 * KMH / 120, rel=1e-3))
     assert curve.speed(800.0) < curve.speed(700.0)  # decelerating piece
 
 

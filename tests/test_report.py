@@ -103,7 +103,7 @@ def test_the_mode_timeline_and_jerk_plot_show_what_the_indices_count(metro):
     traction = mode_segments(t, modes, 1)
     braking = mode_segments(t, modes, -1)
     starts = sorted([(x, 1) for x in traction[::3]] + [(x, -1) for x in braking[::3]])
-    changes = sum(a[1] != b[1] for a, b in zip(starts, starts[1:]))
+    changes = sum(a[1] != b[1] for a, b in zip(starts, starts[1:], strict=False))
     assert changes == indices["switch_count"] > 0
     _, jerk = windowed_jerk(t, metro.series["acceleration"])
     assert np.max(np.abs(jerk)) == pytest.approx(indices["max_jerk"])

@@ -25,9 +25,11 @@ from ato_nodes import jsontext
 from ato_nodes.bagio import read_run, read_series, resimulate
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.schema import NODES
 from ato_nodes.core.scoring import score_series
 from ato_nodes.core.topics import step_topics
 from ato_nodes.launch import node_environment, node_processes
+from ato_nodes.nodes.base import STANDARD_EXECUTOR
 
 pytestmark = pytest.mark.integration
 
@@ -374,3 +376,41 @@ def test_a_compiled_in_process_run_equals_the_nodes_run_bit_for_bit(tmp_path):
     values = apply_overrides(load_scenario("seed000-realistic"), ["run.duration=60"])
     _, identical = run_checked(values, tmp_path / "realistic")
     assert identical
+
+
+def sorted_messages(bag):
+    """Every topic's (timestamp, CDR bytes) sequence: messages of one step on different
+    topics interleave in arrival order, which varies from run to run."""
+    with AnyReader([Path(bag)]) as reader:
+        return sorted((c.topic, t, bytes(d)) for c, t, d in reader.messages())
+
+
+def test_the_standard_executor_fallback_records_the_fast_paths_bag(tmp_path, ros_domain):
+    """ATO_STANDARD_EXECUTOR=1 (what another rclpy release gets without it): every node says
+    on /rosout that rclpy's executor serves its per-step inputs, and the bag holds the
+    fast path's messages, bit for bit, and the in-process series."""
+    fast, fallback = tmp_path / "fast", tmp_path / "fallback"
+    assert run_stack("--duration", "5", "--out", str(fast), "--quiet").returncode == 0
+    env = node_environment(ros_domain.domain_id)
+    probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "rosout_probe.py"), "90",
+                              *NODES], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        handed = ros_domain.handed_down({**os.environ, STANDARD_EXECUTOR: "1"})
+        result = subprocess.run([*RUN_STACK, "--duration", "5", "--real-time", "--quiet",
+                                 "--out", str(fallback), "--domain-id",
+                                 str(ros_domain.domain_id)], capture_output=True, text=True,
+                                timeout=120, cwd=ROOT, **handed)
+        lines = json.loads(probe.communicate(timeout=120)[0])
+    finally:
+        if probe.poll() is None:
+            probe.kill()
+            probe.wait()
+    assert result.returncode == 0, result.stderr
+    for node in NODES:
+        assert f"per-step inputs served by the standard executor: {STANDARD_EXECUTOR}=1" in \
+            lines[node], (node, lines[node])
+    assert sorted_messages(fallback) == sorted_messages(fast)
+    expected = in_process(5)
+    recorded = read_series(fallback)
+    for name in ("target", "speed", "command", "z3"):
+        np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)

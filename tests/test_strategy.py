@@ -54,7 +54,7 @@ def test_traction_is_off_through_every_neutral_section_and_the_cap_holds():
     fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
     best = strategy.solve(track, CRH5, 0.9, 1.05 * fastest.time)
     for result in (fastest, best):
-        for start, force in zip(result.positions[:-1], result.forces):
+        for start, force in zip(result.positions[:-1], result.forces, strict=False):
             stage = (start - CRH5.pantograph_offset, start + track.ds - CRH5.pantograph_offset)
             if any(stage[0] < s.end and stage[1] > s.start for s in test_line.neutral_sections):
                 assert force <= 0.0
@@ -78,7 +78,8 @@ def test_more_time_costs_less_energy():
 
 def test_switching_strategies_keep_traction_off_in_neutral_sections_and_stop_at_the_mark():
     neutral = "neutral_sections:\n  - {start: 6000, end: 6300}\n"
-    grades = "gradients:\n  - {start: 0, end: 9000, grade: -8.0}\n  - {start: 9000, end: 20000, grade: 5.0}\n"
+    grades = ("gradients:\n  - {start: 0, end: 9000, grade: -8.0}\n"
+              "  - {start: 9000, end: 20000, grade: 5.0}\n")
     test_line = line(body=neutral + grades)
     track = strategy.Track.of(test_line, CRH5, ds=100.0)
     problem = strategy.Problem(track, CRH5, 0.9)
@@ -88,7 +89,7 @@ def test_switching_strategies_keep_traction_off_in_neutral_sections_and_stop_at_
     low, high = switching.bounds()
     for x in [np.ones(switching.dimension), *(rng.uniform(low, high) for _ in range(20))]:
         result = switching.run(x)
-        for start, force in zip(result.positions[:-1], result.forces):
+        for start, force in zip(result.positions[:-1], result.forces, strict=False):
             head = start - CRH5.pantograph_offset
             if 6000 - track.ds < head < 6300:
                 assert force <= 0.0

@@ -15,7 +15,7 @@ from ato_nodes.analysis import markdown_table
 from ato_nodes.core.adrc import LinearADRC, LinearADRCGains
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.limiter import CommandLimiter
-from ato_nodes.core.line import load_line, parse_line
+from ato_nodes.core.line import load_line
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
 from ato_nodes.core.profiles import AtoCurve, FeasiblePlan, Seed000Profile

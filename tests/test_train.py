@@ -154,13 +154,14 @@ stations:
 
 
 def ato_line(planned=None):
-    return parse_line(f"name: t\nlength: 3000\n"
+    return parse_line("name: t\nlength: 3000\n"
                       + (f"planned_run_time: {planned}\n" if planned else "") + TRACK)
 
 
 def test_the_ato_curve_respects_limits_braking_and_the_stop():
     curve = AtoCurve(ato_line(), 0.6, 0.8, margin=1.0, start_speed=0.3, train_length=100.0)
-    assert curve.limit(999.9) == 15.0 and curve.limit(1099.9) == 15.0 and curve.limit(1100.0) == 25.0
+    assert curve.limit(999.9) == 15.0 and curve.limit(1099.9) == 15.0
+    assert curve.limit(1100.0) == 25.0
     x, v = curve.positions, curve.speeds
     assert np.all(v <= curve.limits - 1.0 + 1e-9)
     assert v[0] == pytest.approx(0.3) and v[-1] == 0.0 and x[-1] == 2900.0

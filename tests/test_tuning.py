@@ -74,8 +74,8 @@ def test_crashing_and_hanging_candidates_are_penalised_logged_and_cleaned_up(tmp
                               options={"population_size": 2})
     tuner = Tuner(short(2), settings, tmp_path, evaluate=evaluate_with_faults, progress=False)
     result = tuner.run()
-    records = {r["index"]: r for r in map(json.loads,
-                                          (tmp_path / "evaluations.jsonl").read_text().splitlines())}
+    lines = (tmp_path / "evaluations.jsonl").read_text().splitlines()
+    records = {r["index"]: r for r in map(json.loads, lines)}
     assert sorted(records) == [0, 1, 2, 3]
     assert records[1]["status"] == "failed" and "controller" in records[1]["message"]
     assert records[2]["status"] == "timeout"
@@ -110,7 +110,8 @@ def test_interrupted_tuning_resumes_to_the_uninterrupted_result(tmp_path):
     process = subprocess.Popen([*TUNE, *common, "--out", str(out)], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 15):
+    while time.monotonic() < deadline and (not log.exists()
+                                           or len(log.read_text().splitlines()) < 15):
         time.sleep(0.02)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)

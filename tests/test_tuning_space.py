@@ -71,9 +71,11 @@ def test_best_yaml_is_the_base_scenario_and_its_changes_and_history_is_plain_num
     assert "base: seed004-metro-ato" in text and str(ROOT) not in text.split("\n", 2)[2]
     summary = json.loads((out / "summary.json").read_text())
     expected = apply_overrides(load_scenario("seed004-metro-ato"),
-                               ["run.duration=4", f"ladrc.omega_c={summary['best_params']['ladrc.omega_c']!r}"])
+                               ["run.duration=4",
+                                f"ladrc.omega_c={summary['best_params']['ladrc.omega_c']!r}"])
     assert load_scenario(str(out / "best.yaml")) == expected
-    assert f"run the best: python scripts/run_stack.py --scenario {out / 'best.yaml'}" in result.stdout
+    best = out / "best.yaml"
+    assert f"run the best: python scripts/run_stack.py --scenario {best}" in result.stdout
     with (out / "history.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     import pandas
@@ -89,7 +91,7 @@ def test_the_running_index_ends_at_the_scorers_value(name):
     series = simulate(values)
     running = RunningIndex(name)
     trace = [running.add(t, r - v) for t, r, v in zip(series["t"], series["target"],
-                                                        series["speed"])]
+                                                        series["speed"], strict=True)]
     assert trace == sorted(trace)  # only grows
     assert trace[-1] == pytest.approx(score_series(series, values)[name], rel=1e-12)
 
@@ -105,7 +107,8 @@ def test_pruning_leaves_the_tuning_result_as_it_is(tmp_path, algorithm):
                                   prune=prune)
         out = tmp_path / f"prune-{prune}"
         result = Tuner(values, settings, out, progress=False).run()
-        records = [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
+        records = [json.loads(line)
+                   for line in (out / "evaluations.jsonl").read_text().splitlines()]
         results[prune] = (result, records, json.loads((out / "summary.json").read_text()))
     (cut, cut_log, cut_summary), (whole, whole_log, _) = results[True], results[False]
     assert cut.best_f == whole.best_f and np.array_equal(cut.best_x, whole.best_x)

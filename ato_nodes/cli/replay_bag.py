@@ -58,7 +58,7 @@ def main() -> None:
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     isolate_to_this_host(os.environ)
     try:  # a run's domain is its own: never replay into it
-        lock = DomainLock(domain)
+        _held = DomainLock(domain)  # released when the process exits
     except RuntimeError:
         cli.fail(f"ROS domain {domain} is in use by a run of this project; replay into "
                  "another --domain-id")

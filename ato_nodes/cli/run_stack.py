@@ -27,7 +27,8 @@ EXIT_FAILED, EXIT_INTERRUPTED = 1, 130
 def parse_args() -> argparse.Namespace:
     parser = cli.argument_parser(__doc__)
     parser.add_argument("--scenario", default="seed000",
-                        help="scenario name in msg_config/scenarios or a YAML file (default seed000)")
+                        help="scenario name in msg_config/scenarios or a YAML file "
+                             "(default seed000)")
     parser.add_argument("--duration", type=float, help="simulated seconds (overrides run.duration)")
     parser.add_argument("--out", type=Path,
                         help="bag directory to create (default bags/<scenario>-<time>)")
@@ -101,6 +102,7 @@ def run_stack() -> None:
         sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
     print(f"real-time factor {outcome.report['real_time_factor']:.1f} "
-          f"({outcome.report['steps_per_second']:.0f} steps/s, loop {outcome.report['loop_wall_time']:.2f} s, "
+          f"({outcome.report['steps_per_second']:.0f} steps/s, "
+          f"loop {outcome.report['loop_wall_time']:.2f} s, "
           f"total {outcome.wall_time:.2f} s wall)")
     print(f"bag: {bag}  summary: {bag / 'summary.json'}")

@@ -36,7 +36,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",
                         help="parameters to tune and their bounds (repeatable; default: the "
                         "default search space of the scenario's controller kind)")
-    parser.add_argument("--evaluations", type=int, default=300, help="budget of fitness evaluations")
+    parser.add_argument("--evaluations", type=int, default=300,
+                        help="budget of fitness evaluations")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=1, help="candidates run in parallel")
     parser.add_argument("--fitness", default="itae", choices=sorted(FITNESS))

@@ -54,7 +54,8 @@ def tracking_indices(t: np.ndarray, target: np.ndarray, speed: np.ndarray,
         "max_abs_error": max_abs,
         "max_abs_error_kmh": max_abs * MS_TO_KMH,
         "median_abs_error_kmh": float(np.median(np.abs(error))) * MS_TO_KMH if len(error) else 0.0,
-        "p95_abs_error_kmh": float(np.percentile(np.abs(error), 95)) * MS_TO_KMH if len(error) else 0.0,
+        "p95_abs_error_kmh": (float(np.percentile(np.abs(error), 95)) * MS_TO_KMH
+                              if len(error) else 0.0),
     }
     if command is not None:
         result["j_seed004"] = seed004_j(t, error, np.asarray(command, dtype=float))

@@ -58,8 +58,8 @@ class CommandLimiter:
       (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
     * saturation to [u_min, u_max] (acceleration limit);
     * holding brake, `holding_brake` > 0: with a zero target (at most `holding_target`)
-      and the train (nearly) stopped, at least this much braking, as an ATO holds a train berthed at a
-      station; without it a controller dithers about zero speed and creeps.
+      and the train (nearly) stopped, at least this much braking, as an ATO holds a train
+      berthed at a station; without it a controller dithers about zero speed and creeps.
     """
 
     def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,

@@ -51,7 +51,7 @@ class ProfileStage:
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
         self.context = RunContext(values, line)
-        self.context.plan  # built now: a bad table or line fails at start-up
+        _ = self.context.plan  # built (and cached) now: a bad table or line fails at start-up
         self.period = values["run.period"]
         self.total_steps = steps(values)
         self.preview = values["controller.preview"]

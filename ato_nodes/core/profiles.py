@@ -285,7 +285,8 @@ class AtoCurve:
         low = speed * speed / (2.0 * a)
         if not math.isfinite(vp):
             return low
-        return np.where(speed <= vp, low, vp * vp / (2.0 * a) + (speed ** 3 - vp ** 3) / (3.0 * a * vp))
+        return np.where(speed <= vp, low,
+                        vp * vp / (2.0 * a) + (speed ** 3 - vp ** 3) / (3.0 * a * vp))
 
     def run_up_speed(self, distance: np.ndarray) -> np.ndarray:
         """The inverse of run_up."""

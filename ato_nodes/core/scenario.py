@@ -189,7 +189,8 @@ def check_given_once(texts: list[str]) -> None:
         seen.add(name)
 
 
-def apply_overrides(values: dict[str, Any], overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
+def apply_overrides(values: dict[str, Any],
+                    overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
     """The run's `values` with `overrides` (--set texts, or a mapping) applied, checked as
     a whole; an override of a kind the run does not use (after the overrides: a new
     controller.kind's gains may come with it) is refused."""

@@ -59,14 +59,17 @@ BASE: tuple[ParamSpec, ...] = (
     param("plant.train", "", "train preset (msg_config/trains/NAME.yaml) whose plant.* values "
        "the scenario starts from; the scenario's own plant.* values override it", PLANT_NODES),
     param("plant.gamma", 0.11, "rotating-mass coefficient", PLANT_NODES, 0.0, 1.0),
-    param("plant.gravity", 9.8, "g, m/s^2 (seed 000's xi = 0.0098 / (1 + gamma))", PLANT_NODES, 9.0, 10.5),
+    param("plant.gravity", 9.8, "g, m/s^2 (seed 000's xi = 0.0098 / (1 + gamma))", PLANT_NODES,
+          9.0, 10.5),
     param("plant.davis_a", 0.16, "basic resistance a, N/kN", PLANT_NODES, 0.0, 100.0),
     param("plant.davis_b", 0.0053, "basic resistance b, N/kN per m/s", PLANT_NODES, 0.0, 10.0),
     param("plant.davis_c", 0.0018, "basic resistance c, N/kN per (m/s)^2", PLANT_NODES, 0.0, 1.0),
     param("plant.mass", 388.4, "train mass, t (converts kN and kW envelopes to N/kN)", PLANT_NODES,
        1.0, 1e5),
-    param("plant.disturbance.amplitude", 1.0 / 3.6, "phi(t) amplitude, m/s^2", PLANT_NODES, 0.0, 10.0),
-    param("plant.disturbance.frequency", 0.77, "phi(t) angular frequency, rad/s", PLANT_NODES, 0.0, 1e3),
+    param("plant.disturbance.amplitude", 1.0 / 3.6, "phi(t) amplitude, m/s^2", PLANT_NODES,
+          0.0, 10.0),
+    param("plant.disturbance.frequency", 0.77, "phi(t) angular frequency, rad/s", PLANT_NODES,
+          0.0, 1e3),
     param("plant.disturbance.phase", 0.0, "phi(t) phase, rad", PLANT_NODES, -10.0, 10.0),
     param("plant.envelope", False, "apply the traction/brake force and power limits", PLANT_NODES),
     param("plant.max_traction_force", 220.0, "traction force limit, kN", PLANT_NODES, 0.0, 1e5),
@@ -98,7 +101,8 @@ BASE: tuple[ParamSpec, ...] = (
        0.0, 10.0),
     param("plant.speed_quantum", 0.0, "speed sensor resolution, m/s (0 = exact)", PLANT_NODES,
        0.0, 10.0),
-    param("plant.noise_seed", 0, "seed of the speed sensor noise (same seed, same run)", PLANT_NODES,
+    param("plant.noise_seed", 0, "seed of the speed sensor noise (same seed, same run)",
+          PLANT_NODES,
        0, 2**31 - 1),
     param("plant.substeps", 1, "RK4 sub-steps per control period", PLANT_NODES, 1, 10000),
     param("plant.max_speed", 200.0, "speed beyond which a run counts as diverged and ends, m/s",
@@ -133,7 +137,8 @@ SPECS: tuple[ParamSpec, ...] = (*BASE, *PROFILES.parameters(), *CONTROLLERS.para
 SPEC_BY_NAME = {spec.name: spec for spec in SPECS}
 if len(SPEC_BY_NAME) != len(SPECS):
     raise ValueError("a parameter name is defined twice in the schema")
-FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "gpc.model")  # resolved to absolute paths
+# resolved to absolute paths
+FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "gpc.model")
 
 
 def defaults() -> dict[str, Any]:

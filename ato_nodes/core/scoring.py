@@ -217,7 +217,8 @@ def stepped_approach(series: dict[str, np.ndarray], parameters: dict, line: Line
     context's, rebuilt from the run's parameters and line): the stairs sit at least a
     step below it, the extrapolated targets within centimetres per second of it."""
     plan = RunContext({**defaults(), **parameters}, line).plan
-    planned = np.array([plan.speed(t, s) for t, s in zip(series["t"], series["position"])])
+    planned = np.array([plan.speed(t, s)
+                        for t, s in zip(series["t"], series["position"], strict=True)])
     return series["target"] < planned - 0.2 * parameters["profile.approach_step"]
 
 

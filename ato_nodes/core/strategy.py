@@ -106,7 +106,7 @@ class Strategy:
     def traction_in(self, sections) -> float:
         """Largest traction force in any stage that overlaps one of `sections`."""
         worst = 0.0
-        for start, force in zip(self.positions[:-1], self.forces):
+        for start, force in zip(self.positions[:-1], self.forces, strict=False):
             end = start + (self.positions[1] - self.positions[0])
             if force > 0 and any(start < sec.end and end > sec.start for sec in sections):
                 worst = max(worst, force)
@@ -299,7 +299,7 @@ def segments(track: Track) -> list[tuple[int, int]]:
             bounds.append(stage)
         previous = powered
     bounds.append(len(track.powered))
-    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
 
 
 # Switching strategies brake along a curve at this share of the brake envelope: the
@@ -465,7 +465,7 @@ def write_strategy(path, header: dict, result: Strategy) -> None:
     forces = np.append(result.forces, 0.0)
     modes = np.append(result.modes, 0)
     lines += [f"{s:.1f},{v:.5f},{int(m)},{f:.5f}"
-              for s, v, m, f in zip(result.positions, result.speeds, modes, forces)]
+              for s, v, m, f in zip(result.positions, result.speeds, modes, forces, strict=False)]
     Path(path).write_text("\n".join(lines) + "\n")
 
 

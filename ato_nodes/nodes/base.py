@@ -4,6 +4,7 @@ the readiness gate and the run-event protocol, and a clean life cycle."""
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 import json
 import os
 import resource
@@ -18,7 +19,6 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, Log, ParameterD
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -62,6 +62,11 @@ HEARD_EVENTS = ("start",)
 ANNOUNCED_EVENTS = ("finished", "recorded")
 # What rclpy.node.Node declares itself (start_type_description_service read-only already)
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+# The lockstep fast path's private rclpy calls (SubscriptionWaitSet) were written and
+# tested against this release of this distribution; with any other the standard executor
+# serves the per-step inputs instead (slower, the same callbacks in the same order).
+FAST_PATH_RCLPY = ("ros-jazzy-rclpy", "7.1.6")
+STANDARD_EXECUTOR = "ATO_STANDARD_EXECUTOR"  # =1 in a node's environment: force that
 
 
 class DeliveredLogger:
@@ -359,10 +364,14 @@ def spin_lockstep(node: AtoNode, executor: SingleThreadedExecutor) -> None:
     as the executor would). The executor serves everything else (run events,
     /clock for the node's sim time, timers, parameter services) every
     HOUSEKEEPING_PERIOD, so /clock, published every step, costs no callback. Run
-    events are on the fast path as well (see AtoNode.__init__).
+    events are on the fast path as well (see AtoNode.__init__). Where the fast
+    path is unavailable (LockstepInputs) the executor serves everything, logged
+    once on /rosout with the reason.
     """
     context = node.context
     lockstep = LockstepInputs(node)
+    if lockstep.fallback:
+        node.log.info(f"per-step inputs served by the standard executor: {lockstep.fallback}")
     next_housekeeping = 0.0
     while context.ok() and not node.stop_requested:
         now = time.monotonic()
@@ -373,32 +382,103 @@ def spin_lockstep(node: AtoNode, executor: SingleThreadedExecutor) -> None:
         lockstep.take(next_housekeeping - now)
 
 
-class LockstepInputs:
-    """A wait set of a node's per-step subscriptions and run events: wait, then take and
-    handle every queued message of each ready one (in arrival order per topic)."""
+class SubscriptionWaitSet:
+    """The private rclpy API of the lockstep fast path, in one place: an rcl wait set of
+    subscriptions (rclpy.impl.implementation_singleton's WaitSet), waited on directly,
+    and messages taken from a ready subscription's handle (take_message). Only for the
+    rclpy release FAST_PATH_RCLPY names: see `unavailable()`."""
 
-    def __init__(self, node: AtoNode):
-        self.inputs = [(sub.handle, sub.msg_type, sub.raw, callback)
-                       for sub, callback in node.lockstep_inputs]
-        self.wait_set = _rclpy.WaitSet(len(self.inputs), 0, 0, 0, 0, 0, node.context.handle)
+    def __init__(self, subscriptions: list, context):
+        from rclpy.impl.implementation_singleton import rclpy_implementation
+        self.handles = [subscription.handle for subscription in subscriptions]
+        self.wait_set = rclpy_implementation.WaitSet(len(self.handles), 0, 0, 0, 0, 0,
+                                                     context.handle)
 
-    def take(self, timeout: float) -> int:
-        """Wait up to `timeout` s; the number of messages handled."""
+    @staticmethod
+    def unavailable() -> str:
+        """Why the fast path cannot be used here ("" if it can): forced off by
+        $ATO_STANDARD_EXECUTOR=1, another rclpy release than FAST_PATH_RCLPY, or the
+        private API missing."""
+        if os.environ.get(STANDARD_EXECUTOR) == "1":
+            return f"{STANDARD_EXECUTOR}=1"
+        distribution, tested = FAST_PATH_RCLPY
+        try:
+            version = importlib.metadata.version(distribution)
+        except importlib.metadata.PackageNotFoundError:
+            return f"{distribution} is not installed (rclpy from elsewhere)"
+        if version != tested:
+            return f"{distribution} {version}, not {tested} (the release the fast path is for)"
+        try:
+            from rclpy.impl.implementation_singleton import rclpy_implementation
+        except ImportError as exc:
+            return f"rclpy's implementation singleton is missing ({exc})"
+        missing = [f"{kind}.{name}" for kind, names in (
+            ("WaitSet", ("clear_entities", "add_subscription", "wait", "get_ready_entities")),
+            ("Subscription", ("take_message",)))
+            for name in names if not hasattr(getattr(rclpy_implementation, kind, None), name)]
+        return f"rclpy lacks {', '.join(missing)}" if missing else ""
+
+    def wait(self, timeout: float) -> list[bool]:
+        """Wait up to `timeout` s; which subscriptions (in the given order) are ready."""
         wait_set = self.wait_set
         wait_set.clear_entities()
-        for handle, _, _, _ in self.inputs:
+        for handle in self.handles:
             wait_set.add_subscription(handle)
         wait_set.wait(int(timeout * 1e9))
         ready = wait_set.get_ready_entities("subscription")
+        return [handle.pointer in ready for handle in self.handles]
+
+    def take(self, index: int, msg_type: type, raw: bool):
+        """The next queued message of subscription `index`, or None."""
+        taken = self.handles[index].take_message(msg_type, raw)
+        return None if taken is None else taken[0]
+
+
+class LockstepInputs:
+    """A node's per-step subscriptions and run events: wait, then take and handle every
+    queued message of each ready one (in arrival order per topic).
+
+    On the fast path (SubscriptionWaitSet) the messages are taken straight from rcl.
+    Where that path is unavailable (another rclpy release, or $ATO_STANDARD_EXECUTOR=1)
+    the node's standard executor waits and runs the subscriptions' own callbacks (the
+    same callbacks, in arrival order per topic, so the same bag; only slower)."""
+
+    def __init__(self, node: AtoNode):
+        self.subscriptions = [sub for sub, _ in node.lockstep_inputs]
+        self.inputs = [(sub.msg_type, sub.raw, callback) for sub, callback in
+                       node.lockstep_inputs]
+        self.fallback = SubscriptionWaitSet.unavailable()  # why not the fast path, or ""
+        self.wait_set = None if self.fallback else SubscriptionWaitSet(self.subscriptions,
+                                                                       node.context)
+        self.executor = node.executor  # run_node's (the fallback's)
+
+    def take(self, timeout: float) -> int:
+        """Wait up to `timeout` s; the number of messages handled."""
+        if self.wait_set is None:
+            return self._take_through_executor(timeout)
         handled = 0
-        for handle, msg_type, raw, callback in self.inputs:
-            if handle.pointer in ready:
-                taken = handle.take_message(msg_type, raw)
-                while taken is not None:
-                    callback(taken[0])
-                    handled += 1
-                    taken = handle.take_message(msg_type, raw)
+        for index, ready in enumerate(self.wait_set.wait(timeout)):
+            if not ready:
+                continue
+            msg_type, raw, callback = self.inputs[index]
+            message = self.wait_set.take(index, msg_type, raw)
+            while message is not None:
+                callback(message)
+                handled += 1
+                message = self.wait_set.take(index, msg_type, raw)
         return handled
+
+    def _take_through_executor(self, timeout: float) -> int:
+        """The fallback: one ready callback of the node run by its executor (whatever it
+        is: the executor serves the node's timers and services too); 1 if it handled a
+        per-step input."""
+        try:
+            handler, entity, _ = self.executor.wait_for_ready_callbacks(timeout_sec=timeout)
+        except TimeoutException:
+            return 0
+        handler()
+        handler.result()  # re-raise what the callback raised
+        return int(any(entity is subscription for subscription in self.subscriptions))
 
     def drain(self, quiet: float, limit: float) -> None:
         """Handle what still arrives until nothing has for `quiet` s (`limit` s at most)."""

@@ -59,7 +59,8 @@ class PlantNode(AtoNode):
         self.clock_msg.clock.sec, self.clock_msg.clock.nanosec = divmod(nanoseconds, 1_000_000_000)
         self.clock_pub.publish(self.clock_msg)
         state = self.state_msg
-        state.linear.x, state.linear.y, state.linear.z = out.speed, out.acceleration, out.disturbance
+        state.linear.x, state.linear.y, state.linear.z = (out.speed, out.acceleration,
+                                                          out.disturbance)
         state.angular.x, state.angular.y, state.angular.z = (out.force, out.resistance,
                                                              out.line_resistance)
         self.state_pub.publish(state)

@@ -14,8 +14,9 @@ written to parameters.json in the bag as soon as they are known.
 Against a hard kill (SIGKILL, power loss) the MCAP chunk is closed and handed to
 the operating system every half run.record_lag of simulated time (0.5 s), and
 the plant never runs more than run.record_lag (1 s) ahead of what is on disk, so
-a killed recorder loses at most that, however loaded the machine; ato_nodes.bagrepair makes what is on disk a complete bag again
-(the launcher runs it; scripts/repair_bag.py for a bag left by anything else).
+a killed recorder loses at most that, however loaded the machine; ato_nodes.bagrepair
+makes what is on disk a complete bag again (the launcher runs it; scripts/repair_bag.py
+for a bag left by anything else).
 A write that fails (a full disk) ends the recording with one line and exit
 status 1; what was written before stays readable after the repair.
 """

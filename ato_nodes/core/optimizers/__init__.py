@@ -17,8 +17,8 @@ One interface for every algorithm (see base.py for the details):
   gives them) and every choice the paper leaves open.
 
 Algorithms: "pso" (seed 000), "bas" and "bas-pso" (seed 000), "aw-pso"
-(seed 001, per-particle adaptive inertia), "apso" (seed 003), "ga-pso" (seed 004), "wso" (white shark, the improved shark
-optimizer seed 000 compares with), "kh" (krill herd, seed 002).
+(seed 001, per-particle adaptive inertia), "apso" (seed 003), "ga-pso" (seed 004), "wso"
+(white shark, the improved shark optimizer seed 000 compares with), "kh" (krill herd, seed 002).
 """
 
 from __future__ import annotations
@@ -65,6 +65,6 @@ def optimize(name: str, fitness: Fitness, lower: Any, upper: Any, budget: int, s
         stall_iterations=stall_iterations, stall_tolerance=stall_tolerance, bounded=bounded)
 
 
-__all__ = ["ALGORITHMS", "AdaptivePSO", "AdaptiveWeightPSO", "BeetleAntennaeSearch", "BeetleSwarm", "GeneticPSO",
-           "IterationRecord", "KrillHerd", "Optimizer", "ParticleSwarm", "Result", "StopReason",
-           "WhiteShark", "create", "optimize"]
+__all__ = ["ALGORITHMS", "AdaptivePSO", "AdaptiveWeightPSO", "BeetleAntennaeSearch", "BeetleSwarm",
+           "GeneticPSO", "IterationRecord", "KrillHerd", "Optimizer", "ParticleSwarm", "Result",
+           "StopReason", "WhiteShark", "create", "optimize"]
