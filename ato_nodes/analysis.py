@@ -21,18 +21,20 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ato_nodes import jsontext
-from ato_nodes.bagio import Run
 from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.indices import MS_TO_KMH
 from ato_nodes.core.schema import SPEC_BY_NAME
-from ato_nodes.core.scoring import (GROWING_INDICES, STOP_INDICES, Requirement, observer_b0,
-                                    run_line, score_series, stop_not_reached,
+from ato_nodes.core.scoring import (FITNESS, GROWING_INDICES, STOP_INDICES, Requirement,
+                                    observer_b0, run_line, score_series, stop_not_reached,
                                     total_disturbance)
+
+if TYPE_CHECKING:  # annotations only: in-process tuning plots without the bag reader
+    from ato_nodes.bagio import Run
 
 # One colour per run, in the PNG figures and the page alike: none red, which is the
 # speed limit's (drawn dash-dotted as well), nor grey, the reference bands'.
@@ -174,7 +176,6 @@ class Tuning:
 def read_tuning(directory: Path) -> Tuning:
     """A tuning directory's history.csv (and the fitness its tuning.json names); a file
     that is not tune.py's is a ReportError naming it and its line."""
-    from ato_nodes.tuning import FITNESS  # here: ato_nodes.tuning imports this module
     history = directory / "history.csv"
     evaluations, best = [], []
     try:
@@ -620,26 +621,3 @@ def markdown_report(reports: list[RunReport], rows: list[VerdictRow],
         title = md_text(figure.title)
         lines += ["", f"## {title}", "", f"![{title}]({figure.path.name})"]
     return "\n".join(lines) + "\n"
-
-
-def write_report(runs: list[Run], tunings: list[Path], out: Path) -> tuple[Path, Path]:
-    """report.md with the PNG figures, report.html (interactive) and indices.json in
-    `out`. Every run is judged and every tuning read before anything is written: a
-    bad report.* parameter in a bag is a ScenarioError, a tuning directory that is not
-    tune.py's a ReportError (one line each)."""
-    reports = [judge(run) for run in runs]
-    rows = verdict_rows(reports)
-    histories = [read_tuning(directory) for directory in tunings]
-    out.mkdir(parents=True, exist_ok=True)
-    figures = plot_runs(runs, out) if runs else []
-    if histories:
-        figures.append(plot_convergence(histories, out / "convergence.png"))
-    (out / "indices.json").write_text(jsontext.dumps(
-        {report.label: {**report.indices, **({"partial": report.partial} if report.partial
-                                             else {})} for report in reports}, indent=2))
-    md_path = out / "report.md"
-    md_path.write_text(markdown_report(reports, rows, figures))
-    html_path = out / "report.html"
-    from ato_nodes import report_html  # here, not above: it imports this module
-    report_html.write_html(reports, rows, histories, html_path)
-    return md_path, html_path

@@ -22,12 +22,13 @@ import logging
 import math
 import os
 import shutil
+import signal
 import sys
 import tempfile
 import threading
 import time
-from concurrent.futures import (CancelledError, Executor, ProcessPoolExecutor,
-                                ThreadPoolExecutor, as_completed)
+from concurrent.futures import (FIRST_COMPLETED, CancelledError, Executor, ProcessPoolExecutor,
+                                ThreadPoolExecutor, wait)
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -135,6 +136,7 @@ class Evaluation:
 INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
 PRUNE_MARGIN = 1e-9  # relative: a pruned run's value is above its bound by more than this
 BAR_WIDTH = 30  # characters of the progress bar on a terminal
+INTERRUPT_POLL = 0.1  # s: how soon a Ctrl-C stops the candidates under way
 
 
 @dataclass(frozen=True)
@@ -471,6 +473,7 @@ class Tuner:
         self.initial_evaluations = algorithm.initial_evaluations()
         self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
         self.cancel = threading.Event()  # stops the stack candidates under way
+        self.interrupted = False  # Ctrl-C during the tuning (see _on_interrupt)
         self.next_index = 0
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
         self.pruned = 0  # of them, ended early by pruning
@@ -559,13 +562,23 @@ class Tuner:
                 extra = (float(bounds[index - requests[0][0]]),) if bounds is not None else ()
                 pending[pool.submit(self.evaluate, self.values, overrides,
                                     self.settings.objective, index, *extra)] = index
-        for future in as_completed(pending):
-            record = self._stamped(future.result())
-            self.fresh += 1
-            self.log.append(record)
-            results[record.index] = record
-            self._report(record)
+        waiting = set(pending)
+        while waiting:
+            finished, waiting = wait(waiting, timeout=INTERRUPT_POLL, return_when=FIRST_COMPLETED)
+            if self.interrupted:  # raised here, where the stop is handled, not in a callback
+                raise KeyboardInterrupt
+            for future in sorted(finished, key=pending.get):
+                record = self._stamped(future.result())
+                self.fresh += 1
+                self.log.append(record)
+                results[record.index] = record
+                self._report(record)
         return np.array([results[index].fitness for index, _ in requests])
+
+    def _on_interrupt(self, signum, frame) -> None:
+        """Ctrl-C: noted, acted on within INTERRUPT_POLL (a KeyboardInterrupt raised at
+        whatever line runs can land in a library's finaliser and be swallowed)."""
+        self.interrupted = True
 
     def _report(self, record: Evaluation) -> None:
         self.best = min(self.best, record.fitness)
@@ -597,6 +610,9 @@ class Tuner:
         if self.in_process_pool:
             self._warm_kernels()
         with contextlib.ExitStack() as stack:
+            if threading.current_thread() is threading.main_thread():
+                previous = signal.signal(signal.SIGINT, self._on_interrupt)
+                stack.callback(signal.signal, signal.SIGINT, previous)
             pool = self._pool()
             if self.client is not None:  # the tuner says what goes wrong, in one line
                 stack.enter_context(_dask_logs_silenced())

@@ -35,4 +35,4 @@ echo "setup: installing ato_nodes from this checkout, editable"
 # Compiled now, the in-process loop is loaded from its cache (ato_nodes/core/__pycache__)
 # by every later run, tuning worker and test instead of being compiled by the first.
 echo "setup: compiling the simulation kernels (once per checkout)"
-.venv/bin/python -c "from ato_nodes.core import fast_loop; fast_loop.warm()"
+.venv/bin/python -c "from ato_nodes.core import loop; loop.warm()"

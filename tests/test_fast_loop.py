@@ -100,7 +100,7 @@ def test_pruned_and_diverging_runs_end_at_the_same_step_in_chunks(monkeypatch):
 def test_every_run_it_covers_calls_one_compiled_signature():
     """So one compilation (setup.sh's, or a tuning's before its workers start) serves
     every compiled run of the checkout."""
-    fast_loop.warm()
+    loop.warm()
     for scenario, overrides in VARIANTS:
         values = apply_overrides(load_scenario(scenario), ["run.duration=1", *overrides])
         simulate(values)
@@ -110,7 +110,7 @@ def test_every_run_it_covers_calls_one_compiled_signature():
 
 def test_warming_takes_any_run_a_tuning_may_start_from():
     for overrides in (["run.period=0.0001"], ["run.period=10"], ["controller.kind=pid"]):
-        fast_loop.warm(apply_overrides(load_scenario("seed000"), overrides))
+        loop.warm(apply_overrides(load_scenario("seed000"), overrides))
 
 
 def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):
@@ -130,7 +130,7 @@ def test_runs_it_does_not_cover_take_the_python_loop():
 
 
 def stages(values):
-    from ato_nodes.core.loop import ControllerStage, PlantStage, ProfileStage
+    from ato_nodes.core.stages import ControllerStage, PlantStage, ProfileStage
     from ato_nodes.core.schema import NodeValues
     return (ProfileStage(NodeValues("profile", values)), PlantStage(NodeValues("plant", values)),
             ControllerStage(NodeValues("controller", values)), None)

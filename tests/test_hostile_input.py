@@ -290,7 +290,7 @@ def test_report_markdown_shows_names_from_a_bag_as_text(tmp_path):
     report.md they stay text (no live HTML, no broken table) as in report.html."""
     import re
 
-    from ato_nodes.analysis import write_report
+    from ato_nodes.report import write_report
     from ato_nodes.bagio import read_run
     hostile = "<svg onload=alert(1)>|x"
     line = (ROOT / "msg_config" / "lines" / "metro-interstation.yaml").read_text()

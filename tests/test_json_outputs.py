@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.analysis import write_report
+from ato_nodes.report import write_report
 from ato_nodes.bagio import read_run
 from ato_nodes.cli import score_bag
 from ato_nodes.core.loop import simulate

@@ -9,7 +9,8 @@ import pytest
 from ato_nodes.core import loop
 from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import ControllerStage, ProfileStage, simulate
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.stages import ControllerStage, ProfileStage
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 
 

@@ -8,7 +8,8 @@ import pytest
 from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.context import RunContext
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import SERIES, ControllerStage, ProfileStage, simulate
+from ato_nodes.core.loop import SERIES, simulate
+from ato_nodes.core.stages import ControllerStage, ProfileStage
 from ato_nodes.core.scenario import apply_overrides, load_scenario, validate
 from ato_nodes.core.schema import SPECS, NodeValues, defaults
 

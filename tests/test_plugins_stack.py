@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ato_nodes import jsontext
-from ato_nodes.analysis import write_report
+from ato_nodes.report import write_report
 from ato_nodes.bagio import message_counts, read_parameters, read_run, read_series
 from ato_nodes.core.line import load_line
 from ato_nodes.core.loop import simulate

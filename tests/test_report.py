@@ -10,8 +10,9 @@ import pytest
 
 from ato_nodes.analysis import (FAIL, INDEX_COLUMNS, LIMIT_COLOUR, PASS, RUN_COLOURS, UNMEASURED,
                                 LiveChange, _mark_changes, heading, judge, live_changes,
-                                read_tuning, verdict_rows, write_report)
+                                read_tuning, verdict_rows)
 from ato_nodes.bagio import Run
+from ato_nodes.report import write_report
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario, scenario_names

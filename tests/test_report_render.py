@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.analysis import write_report
+from ato_nodes.report import write_report
 from ato_nodes.bagio import Run
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario

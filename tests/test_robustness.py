@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import ControllerStage, PlantStage, simulate
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.stages import ControllerStage, PlantStage
 from ato_nodes.core.scenario import apply_overrides, load_scenario
 from ato_nodes.core.schema import NodeValues
 

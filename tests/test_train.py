@@ -10,7 +10,8 @@ import pytest
 from ato_nodes.core.adrc import DiscreteADRC, DiscreteADRCGains, fal, nladrc_gains
 from ato_nodes.core.limiter import CommandLimiter
 from ato_nodes.core.line import parse_line
-from ato_nodes.core.loop import PlantStage, ProfileStage, simulate
+from ato_nodes.core.loop import simulate
+from ato_nodes.core.stages import PlantStage, ProfileStage
 from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.scenario import apply_overrides, load_scenario, train_names, train_preset
 from ato_nodes.core.schema import defaults

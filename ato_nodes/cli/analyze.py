@@ -17,9 +17,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ato_nodes import cli
-from ato_nodes.analysis import ReportError, write_report
+from ato_nodes.analysis import ReportError
 from ato_nodes.bagio import BagError, parse_mapping, read_run
 from ato_nodes.core.errors import ScenarioError
+from ato_nodes.report import write_report
 
 
 def main() -> None:

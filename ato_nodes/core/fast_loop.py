@@ -6,7 +6,7 @@ target without the stepped approach, the point-mass train on the open track
 (no line) with no dead time; lag, envelopes and the noisy, quantised speed sensor
 included. Everything else (lines, position-indexed curves, other controllers,
 dead time, live gain changes) runs the Python loop. The step is the one
-core/loop.py describes, in the same order, and every formula is the Python path's
+core/stages.py describes, in the same order, and every formula is the Python path's
 own function (core.kernels: plant.rates, rk4_substep and sensor_reading,
 adrc.han_adrc_step, limiter.limit_command, indices.running_add), compiled;
 tests/test_fast_loop.py checks that both paths give the same bits.
@@ -16,7 +16,7 @@ about CHUNK_SECONDS, so that simulate() can check its deadline between them (a
 step at 10000 RK4 sub-steps takes ~1 ms); everything a step changes goes from one
 chunk to the next in a LoopState, by name, and the chunks give the bits of one
 uninterrupted call. Every covered run calls the loop with the same argument types,
-so it is compiled once (warm(): scripts/setup.sh, a tuning before its workers
+so it is compiled once (loop.warm(): scripts/setup.sh, a tuning before its workers
 start) and loaded from numba's cache by every later process.
 
 The targets of a time-indexed plan do not depend on the run, so the horizons are
@@ -38,6 +38,7 @@ from .adrc import HanADRC, han_adrc_step
 from .indices import RunningIndex, running_add
 from .kernels import AVAILABLE, compiled
 from .schema import NodeValues
+from .stages import ProfileStage
 from .plant import (achievable, basic_resistance, disturbance, no_line, rates, rk4_substep,
                     sensor_reading)
 
@@ -53,7 +54,6 @@ def covers(profile, plant, controller, changes) -> bool:
 
 @functools.lru_cache(maxsize=4)
 def _horizons(profile_values: str) -> np.ndarray:
-    from .loop import ProfileStage
     profile = ProfileStage(NodeValues("profile", json.loads(profile_values)))
     rows = []
     while len(rows) < profile.total_steps:
@@ -208,16 +208,3 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, rows, extras) 
 
 
 _steps = compiled(_steps_source)
-
-
-def warm(values: dict | None = None) -> None:
-    """Compile the loop now, or load it from its cache beside this file, by a two-step
-    run of `values` (default: the shipped seed000), if it is a run the loop covers.
-    Every run it covers calls it with the same argument types (LoopInputs, LoopState),
-    so this one compilation serves them all, in every process of this checkout."""
-    from .loop import simulate
-    from .scenario import apply_overrides, load_scenario
-    from .schema import SPEC_BY_NAME
-    values = load_scenario("seed000") if values is None else values
-    shortest = SPEC_BY_NAME["run.duration"].low
-    simulate(apply_overrides(values, {"run.duration": max(2 * values["run.period"], shortest)}))

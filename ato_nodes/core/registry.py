@@ -40,7 +40,7 @@ class Component:
     controllers: the attribute paths of what the controller carries from step to step
     (observer, filters, integrators); with it, the kind's own float parameters are live
     during a run: a change rebuilds the controller with the new values and carries
-    the state over (loop.ControllerStage.retune). Without it none are.
+    the state over (stages.ControllerStage.retune). Without it none are.
     """
 
     kind: str

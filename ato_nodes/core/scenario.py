@@ -19,7 +19,7 @@ from . import yamlfile
 from .errors import ScenarioError
 from .faults import parse_fault
 from .line import load_line
-from .loop import ControllerStage, ProfileStage
+from .stages import ControllerStage, ProfileStage
 from .paths import config_dir, resolve_file
 from .scoring import Requirement
 from .schema import (FILE_PARAMETERS, NODES, SPEC_BY_NAME, SPECS, NodeValues, defaults,

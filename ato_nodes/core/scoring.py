@@ -97,6 +97,9 @@ GROWING_INDICES = (
     "stepped_time")
 # Those that judge the run's stop: they say nothing of a run that ended short of it.
 STOP_INDICES = ("stopping_error", "abs_stopping_error", "arrival_time", "running_time_error")
+# A tuning's fitness (tune.py --fitness) -> the index it minimises.
+FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
+           "p95_abs_error_kmh": "p95_abs_error_kmh"}
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ the controller's named outputs.
 
 The controller kind's gains are live (core.registry.Component.state): a `ros2 param
 set` is checked against the schema, takes effect at the next step boundary
-(loop.ControllerStage.pending), and is published on the parameter_changes topic with
+(stages.ControllerStage.pending), and is published on the parameter_changes topic with
 the step it took effect at, for the bag."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
 from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import ControllerStage
+from ato_nodes.core.stages import ControllerStage
 from ato_nodes.core.schema import SPEC_BY_NAME
 from ato_nodes.nodes.base import AtoNode, run_node
 

@@ -1,0 +1,95 @@
+"""The package's modules import each other without a cycle (counting imports inside
+functions, which only hide one), and in-process tuning loads no bag reader."""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent / "ato_nodes"
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(source: str, name: str, is_package: bool, modules: set[str]) -> set[str]:
+    """The `modules` that module `name` imports, at any level of its code. `from X
+    import Y` counts as an import of X.Y when that is a module, else of X; the parent
+    packages an import initialises on the way are not counted (every submodule would
+    otherwise import its package)."""
+    package = name if is_package else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(source, name)):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[:len(package.split(".")) - (node.level - 1)]
+                base = ".".join(anchor + ([base] if base else []))
+            found.update(f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base
+                         for alias in node.names)
+    return {module for module in found if module in modules and module != name}
+
+
+def import_graph() -> dict[str, set[str]]:
+    paths = sorted(PACKAGE.rglob("*.py"))
+    modules = {module_name(path) for path in paths}
+    return {module_name(path): imported_modules(path.read_text(), module_name(path),
+                                                path.name == "__init__.py", modules)
+            for path in paths}
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle as the modules along it (first repeated at the end), or []."""
+    state: dict[str, str] = {}  # "open" while on the path, "done" after
+    path: list[str] = []
+
+    def visit(module: str) -> list[str]:
+        state[module] = "open"
+        path.append(module)
+        for target in sorted(graph[module]):
+            if state.get(target) == "open":
+                return path[path.index(target):] + [target]
+            if target not in state:
+                cycle = visit(target)
+                if cycle:
+                    return cycle
+        path.pop()
+        state[module] = "done"
+        return []
+
+    for module in sorted(graph):
+        if module not in state:
+            cycle = visit(module)
+            if cycle:
+                return cycle
+    return []
+
+
+def test_the_graph_sees_every_kind_of_import():
+    modules = {"p", "p.a", "p.b", "p.c", "p.d", "p.sub", "p.sub.e"}
+    source = ("import p.a\nfrom .. import b\nfrom . import e, NAME\n"
+              "def f():\n    from ..c import thing\n    import p.d as d\n")
+    assert imported_modules(source, "p.sub.m", False, modules) == {
+        "p.a", "p.b", "p.sub", "p.sub.e", "p.c", "p.d"}
+    assert imported_modules("from . import e", "p.sub", True, modules) == {"p.sub.e"}
+    graph = import_graph()
+    assert "ato_nodes.core.schema" in graph["ato_nodes.core.loop"]
+    assert "ato_nodes.jsontext" in graph["ato_nodes.report"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) == []
+
+
+def test_the_package_has_no_import_cycle():
+    cycle = find_cycle(import_graph())
+    assert not cycle, " -> ".join(cycle)
+
+
+def test_in_process_tuning_does_not_load_the_bag_reader():
+    code = "import ato_nodes.tuning, sys; assert 'rosbags' not in sys.modules, 'rosbags loaded'"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
