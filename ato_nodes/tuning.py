@@ -38,8 +38,8 @@ import yaml
 
 from ato_nodes import jsontext
 from ato_nodes.analysis import plot_convergence
-from ato_nodes.core import fast_loop, kernels
-from ato_nodes.core.loop import simulate
+from ato_nodes.core import kernels
+from ato_nodes.core.loop import simulate, warm
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
 from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
@@ -48,12 +48,10 @@ from ato_nodes.core.paths import config_dir
 from ato_nodes.core.scenario import (apply_overrides, check_used, load_scenario,
                                      resolve_scenario, ros_parameter_file)
 from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
-from ato_nodes.core.scoring import Requirement, score_series
+from ato_nodes.core.scoring import FITNESS, Requirement, score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
 COMPILING = "compiling the simulation kernels (once per checkout)"
-FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
-           "p95_abs_error_kmh": "p95_abs_error_kmh"}
 
 
 @dataclass(frozen=True)
@@ -540,9 +538,9 @@ class Tuner:
         each."""
         if self.progress:
             with kernels.announced(COMPILING):
-                fast_loop.warm(self.values)
+                warm(self.values)
         else:
-            fast_loop.warm(self.values)
+            warm(self.values)
 
     def _batch_fitness(self, pool: Executor, population: np.ndarray,
                        bounds: np.ndarray | None = None) -> np.ndarray:
