@@ -14,6 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ato_nodes.launch import DomainLock  # noqa: E402
 
 LOCK_POLL = 0.05  # s between checks that the probe's domain is still held
+taken_over: list[DomainLock] = []  # the domain's lock once its holder let go: kept till exit
 
 
 def init_in_held_domain() -> None:
@@ -36,12 +37,11 @@ def init_in_held_domain() -> None:
     def keep_held() -> None:
         while True:
             try:
-                taken.append(DomainLock(domain_id))  # free now: held until the probe exits
+                taken_over.append(DomainLock(domain_id))  # free now: the probe's
                 return
             except RuntimeError:
                 time.sleep(LOCK_POLL)
 
-    taken: list[DomainLock] = []
     threading.Thread(target=keep_held, name="domain-lock", daemon=True).start()
     rclpy.init()
 

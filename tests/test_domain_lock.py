@@ -11,6 +11,9 @@ import pytest
 from ato_nodes.launch import DomainLock, node_environment
 
 ROOT = Path(__file__).resolve().parents[1]
+# Beyond DOMAIN_IDS, so that no launcher takes them by itself (a domain let go in 1-101
+# is at once the next run's on a busy host)
+UNCLAIMED_DOMAINS = (231, 232)
 TAKES_ITS_DOMAIN = ("import sys; from ato_nodes.launch import DomainLock; "
                     "DomainLock(int(sys.argv[1]))")
 
@@ -35,7 +38,7 @@ def test_a_held_domain_is_refused_unless_its_lock_is_handed_down(ros_domain):
 
 
 def test_a_probe_refuses_a_domain_nobody_holds():
-    env = node_environment(232)  # beyond DOMAIN_IDS: no launcher takes it by itself
+    env = node_environment(UNCLAIMED_DOMAINS[1])
     probe = subprocess.run([sys.executable, str(ROOT / "tests" / "topic_probe.py"), "/rosout",
                             "5"], capture_output=True, text=True, timeout=60, env=env)
     assert probe.returncode == 2 and "ROS domain 232 is held by no DomainLock" in probe.stderr
@@ -43,7 +46,7 @@ def test_a_probe_refuses_a_domain_nobody_holds():
 
 @pytest.mark.integration
 def test_a_probe_whose_domain_is_let_go_takes_its_lock():
-    lock = DomainLock()
+    lock = DomainLock(UNCLAIMED_DOMAINS[0])
     probe = subprocess.Popen([sys.executable, str(ROOT / "tests" / "topic_probe.py"), "/rosout",
                               "60"], stdout=subprocess.PIPE, text=True,
                              env=node_environment(lock.domain_id))
