@@ -7,7 +7,10 @@ that died, Ctrl-C, a timeout).
 
 The node processes are forked from a server that has imported rclpy and the
 node modules once (ato_nodes.nodefork): importing them was most of a tuning
-candidate's relaunch overhead.
+candidate's relaunch overhead. With ATO_NODE_START=subprocess, and for a run
+whose fork server fails to start or dies before forking its first node (one line
+on stderr says so), each node is a plain `python -m ato_nodes.nodes.ROLE`
+subprocess instead (nodefork.start_plain).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -32,7 +36,7 @@ from ato_nodes.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.scenario import ros_parameter_file
 from ato_nodes.core.schema import NODES
 from ato_nodes.nodefork import (NODE_NAME_PREFIX, STOP_GRACE, ForkedNode, NodeStartError,
-                                fork_server)
+                                fork_server, plain_start_requested, start_plain)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
@@ -46,7 +50,8 @@ STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 def node_processes(launcher: int) -> dict[str, int]:
     """The node processes a launcher process started, {role: pid} (from /proc: named
-    ato-ROLE, children of the launcher's fork server)."""
+    ato-ROLE, children of the launcher's fork server; or, started plain, children of
+    the launcher running `python -m ato_nodes.nodes.ROLE`)."""
     def parent(pid: str) -> int:
         return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
     found = {}
@@ -57,6 +62,11 @@ def node_processes(launcher: int) -> dict[str, int]:
             name = (entry / "comm").read_text().strip()
             if name.startswith(NODE_NAME_PREFIX) and parent(str(parent(entry.name))) == launcher:
                 found[name[len(NODE_NAME_PREFIX):]] = int(entry.name)
+            elif parent(entry.name) == launcher:
+                argv = (entry / "cmdline").read_bytes().split(b"\0")
+                module = argv[2].decode() if len(argv) > 2 and argv[1] == b"-m" else ""
+                if module.startswith("ato_nodes.nodes."):
+                    found[module.rsplit(".", 1)[1]] = int(entry.name)
         except (OSError, ValueError):
             continue
     return found
@@ -241,17 +251,34 @@ class Stack:
     def _start(self) -> None:
         self.params_path.write_text(self.params_yaml)
         env = node_environment(self.lock.domain_id)
-        server = fork_server(env, REPO_ROOT)
         console = (open(os.devnull, "wb") if self.quiet else None)
         output = (console.fileno(),) * 2 if console else (1, 2)
+        server = None
+        if not plain_start_requested():
+            try:
+                server = fork_server(env, REPO_ROOT)
+            except OSError as exc:
+                print(f"node fork server not started ({exc}): starting the nodes as plain "
+                      "processes", file=sys.stderr)
         try:
             for role in NODES:
                 # the nodes log to /rosout; the console keeps the launcher's concise lines
                 argv = [f"ato_nodes.nodes.{role}", "--ros-args", "--params-file",
                         str(self.params_path), "--disable-stdout-logs"]
-                self.processes[role] = server.fork(
-                    role, argv, env, REPO_ROOT, DEATH_SIGNAL[role], output, self.lock.fileno(),
-                    self.node_ended, bag=self.bag.resolve() if role == "recorder" else None)
+                start = (role, argv, env, REPO_ROOT, DEATH_SIGNAL[role], output,
+                         self.lock.fileno(), self.node_ended)
+                if server is not None:
+                    try:
+                        self.processes[role] = server.fork(
+                            *start, bag=self.bag.resolve() if role == "recorder" else None)
+                        continue
+                    except NodeStartError as exc:
+                        if self.processes:  # forked nodes went with it: the run has failed
+                            raise
+                        print(f"{exc} before forking a node: starting the nodes as plain "
+                              "processes", file=sys.stderr)
+                        server = None
+                self.processes[role] = start_plain(*start)
         finally:
             if console:
                 console.close()

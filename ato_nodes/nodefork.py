@@ -53,6 +53,7 @@ NODE_NAME_PREFIX = "ato-"  # a forked node's process name (/proc/PID/comm): ato-
 MESSAGE_SIZE = 1 << 20     # bytes: a request carries the node's whole environment
 STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 STOP_GRACE = 5.0           # s a node has to exit once told to, before it is killed
+LIBC = ctypes.CDLL(None, use_errno=True)  # loaded before any fork: prctl in the child
 
 
 # Server side ---------------------------------------------------------------
@@ -71,9 +72,8 @@ def _become_node(connection: socket.socket, request: dict, fds: list[int]) -> No
     try:
         connection.close()
         os.setsid()
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, request["death_signal"])
-        libc.prctl(PR_SET_NAME, f"{NODE_NAME_PREFIX}{request['role']}".encode())
+        LIBC.prctl(PR_SET_PDEATHSIG, request["death_signal"])
+        LIBC.prctl(PR_SET_NAME, f"{NODE_NAME_PREFIX}{request['role']}".encode())
         stdout, stderr, _lock = fds
         os.dup2(stdout, 1)
         os.dup2(stderr, 2)
@@ -229,11 +229,11 @@ def start_plain(role: str, argv: list[str], env: dict[str, str], cwd: Path,
     death signal, the lock descriptor kept. `notify` is set when it ends."""
     def in_the_child() -> None:  # after fork, before exec; survives the exec
         signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(death_signal))
+        LIBC.prctl(PR_SET_PDEATHSIG, int(death_signal))
 
     # PR_SET_PDEATHSIG fires when the thread that started the node ends: the Stack's
     # thread, which waits for its nodes before it ends.
-    process = subprocess.Popen(  # noqa: PLW1509 (preexec_fn: no locks taken in it)
+    process = subprocess.Popen(  # preexec_fn takes no lock (safe with threads running)
         [sys.executable, "-m", *argv], env=env, cwd=cwd, stdin=subprocess.DEVNULL,
         stdout=output[0], stderr=output[1], pass_fds=(lock_fd,), start_new_session=True,
         preexec_fn=in_the_child)

@@ -29,6 +29,7 @@ from ato_nodes.core.schema import NODES
 from ato_nodes.core.scoring import score_series
 from ato_nodes.core.topics import step_topics
 from ato_nodes.launch import node_environment, node_processes
+from ato_nodes.nodefork import NODE_START
 from ato_nodes.nodes.base import STANDARD_EXECUTOR
 
 pytestmark = pytest.mark.integration
@@ -412,5 +413,69 @@ def test_the_standard_executor_fallback_records_the_fast_paths_bag(tmp_path, ros
     assert sorted_messages(fallback) == sorted_messages(fast)
     expected = in_process(5)
     recorded = read_series(fallback)
+    for name in ("target", "speed", "command", "z3"):
+        np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)
+
+
+def shares_a_socket(child, parent):
+    """`child` has, beyond its console, a socket `parent` has under the same descriptor
+    number (inherited: pass_fds keeps the number)."""
+    for fd in Path(f"/proc/{child}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+            if int(fd.name) > 2 and target.startswith("socket:") and \
+                    os.readlink(f"/proc/{parent}/fd/{fd.name}") == target:
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def test_nodes_started_as_plain_processes_record_the_fork_servers_bag(tmp_path):
+    """ATO_NODE_START=subprocess: each node is the launcher's own `python -m
+    ato_nodes.nodes.ROLE` child, in its own session, with the run's environment; the run
+    completes with the fork server's messages, bit for bit."""
+    forked, plain = tmp_path / "forked", tmp_path / "plain"
+    assert run_stack("--duration", "5", "--out", str(forked), "--quiet").returncode == 0
+    process = subprocess.Popen([*RUN_STACK, "--duration", "5", "--real-time", "--quiet", "--out",
+                                str(plain)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True, cwd=ROOT, env={**os.environ, NODE_START: "subprocess"})
+    try:
+        nodes = wait_for_children(process, roles=NODES)
+        for role, pid in nodes.items():
+            stat = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            argv = Path(f"/proc/{pid}/cmdline").read_bytes().decode().split("\0")
+            environ = Path(f"/proc/{pid}/environ").read_bytes().decode().split("\0")
+            assert int(stat[1]) == process.pid and int(stat[3]) == pid, role  # parent, session
+            assert argv[1:4] == ["-m", f"ato_nodes.nodes.{role}", "--ros-args"], argv
+            assert "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in environ
+            assert shares_a_socket(pid, process.pid), role  # the domain lock, inherited
+    finally:
+        _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 0, stderr
+    assert "plain processes" not in stderr  # asked for, not a fallback
+    assert sorted_messages(plain) == sorted_messages(forked)
+
+
+def test_a_fork_server_that_dies_before_forking_gives_a_plain_start(tmp_path, monkeypatch,
+                                                                     capfd):
+    """The run's fork server is killed before it forks a node: one line says so, and the
+    run completes with nodes started as plain processes, the in-process series."""
+    from ato_nodes import launch
+    started = launch.fork_server
+
+    def dead_fork_server(env, cwd):
+        server = started(env, cwd)
+        server.process.kill()
+        server.process.wait()
+        return server
+
+    monkeypatch.setattr(launch, "fork_server", dead_fork_server)
+    values = apply_overrides(load_scenario("seed000"), ["run.duration=5"])
+    outcome = launch.Stack(values, tmp_path / "bag", quiet=True, timeout=120).run()
+    assert outcome.ok, outcome.message
+    said = [line for line in capfd.readouterr().err.splitlines() if "plain processes" in line]
+    assert len(said) == 1 and "fork server" in said[0] and "before forking a node" in said[0]
+    recorded, expected = read_series(tmp_path / "bag"), simulate(values)
     for name in ("target", "speed", "command", "z3"):
         np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)
