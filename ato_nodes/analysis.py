@@ -27,7 +27,7 @@ import numpy as np
 
 from ato_nodes.core.components import CONTROLLERS, PROFILES
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.indices import MS_TO_KMH
+from ato_nodes.core.units import MS_TO_KMH
 from ato_nodes.core.schema import SPEC_BY_NAME
 from ato_nodes.core.scoring import (FITNESS, GROWING_INDICES, STOP_INDICES, Requirement,
                                     observer_b0, run_line, score_series, stop_not_reached,

@@ -24,7 +24,7 @@ from ato_nodes.analysis import (CHANGES_HEADER, FAIL, LIMIT_COLOUR, PASS, RUN_CO
                                 convergence_axis, live_changes, report_notes)
 from ato_nodes.core.components import CONTROLLERS
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.indices import MS_TO_KMH
+from ato_nodes.core.units import MS_TO_KMH
 from ato_nodes.core.line import Line
 from ato_nodes.core.operation import JERK_WINDOW, SWITCH_THRESHOLD, drive_modes, windowed_jerk
 from ato_nodes.core.scoring import observer_b0, run_line, total_disturbance

@@ -34,8 +34,8 @@ from ato_nodes.core import lssvm
 from ato_nodes.core.gpc import MultiModel
 from ato_nodes.core.plant import TrainParameters
 from ato_nodes.core.schema import defaults
+from ato_nodes.core.units import MS_TO_KMH
 
-KMH = 3.6
 PAPER = {"train": (-1.2627, 1.0568), "test": (-1.9182, 1.8369), "mu": 6599.8,
          "delta": 0.0597 ** 0.5}
 
@@ -80,7 +80,7 @@ def load(path: Path):
 
 
 def ranges(errors: np.ndarray) -> dict:
-    errors = errors * KMH
+    errors = errors * MS_TO_KMH
     return {"min_kmh": float(errors.min()), "max_kmh": float(errors.max()),
             "rms_kmh": float(np.sqrt(np.mean(errors ** 2)))}
 
@@ -88,8 +88,8 @@ def ranges(errors: np.ndarray) -> dict:
 def within_ctcs3(errors: np.ndarray, speeds: np.ndarray) -> float:
     """Share of samples inside the CTCS-3 speed-measurement tolerance: 2 km/h below
     30 km/h, 2 % of the speed above."""
-    tolerance = np.where(speeds * KMH < 30.0, 2.0, 0.02 * speeds * KMH)
-    return float(np.mean(np.abs(errors * KMH) <= tolerance))
+    tolerance = np.where(speeds * MS_TO_KMH < 30.0, 2.0, 0.02 * speeds * MS_TO_KMH)
+    return float(np.mean(np.abs(errors * MS_TO_KMH) <= tolerance))
 
 
 def free_run_error(model_step, layout, speeds, commands) -> dict:
@@ -175,11 +175,11 @@ def main() -> None:
         "samples": {"total": int(len(t)), "train": int(len(train_rows)),
                     "test": int(len(test_rows))},
         "search": {"mu": search.mu, "delta": search.delta, "validation_rmse_kmh":
-                   search.rmse * KMH, "evaluations": search.result.evaluations,
+                   search.rmse * MS_TO_KMH, "evaluations": search.result.evaluations,
                    "seconds": search_seconds,
-                   "convergence_kmh": (search.result.trace("best_f") * KMH).tolist(),
+                   "convergence_kmh": (search.result.trace("best_f") * MS_TO_KMH).tolist(),
                    "grid_mu": mus.tolist(), "grid_delta": deltas.tolist(),
-                   "grid_rmse_kmh": (grid * KMH).tolist(),
+                   "grid_rmse_kmh": (grid * MS_TO_KMH).tolist(),
                    "grid_is_local_optimum": bool(grid.min() >= grid[2, 2] - 1e-12),
                    "at_bound": [name for name, value, (low, high) in (
                        ("mu", math.log10(search.mu), ident.LOG_MU),
@@ -215,7 +215,7 @@ def correction(args, layout, offline, run, identified: dict) -> dict:
     x, t = layout.samples(speeds, commands, steps)
     stream, held_out = np.arange(0, len(t), 2), np.arange(1, len(t), 2)
     model = offline.with_window(args.window)
-    threshold = args.threshold / KMH
+    threshold = args.threshold / MS_TO_KMH
     costs = []
     for i in stream:
         error = float(model.increment(x[i])[0]) - t[i]
@@ -231,7 +231,7 @@ def correction(args, layout, offline, run, identified: dict) -> dict:
         fresh = forced.refit()
         drift[f"window_{window}"] = {
             "updates": forced.added, "forgotten": forced.forgotten,
-            "max_kmh": float(np.abs(fresh.increment(x) - forced.increment(x)).max()) * KMH}
+            "max_kmh": float(np.abs(fresh.increment(x) - forced.increment(x)).max()) * MS_TO_KMH}
     result = {
         "train_change": {name: [identified.get(name), value] for name, value in
                          parameters.items() if name.startswith("plant.") and name not in (
@@ -298,8 +298,8 @@ def figure(path: Path, model, x, t, test_rows, search, report) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-    predicted = (x[test_rows, 0] + model.increment(x[test_rows])) * KMH
-    measured = (x[test_rows, 0] + t[test_rows]) * KMH
+    predicted = (x[test_rows, 0] + model.increment(x[test_rows])) * MS_TO_KMH
+    measured = (x[test_rows, 0] + t[test_rows]) * MS_TO_KMH
     axes[0].plot(measured, predicted, ".", ms=2)
     axes[0].set(xlabel="measured y(k), km/h", ylabel="predicted y(k), km/h",
                 title="one-step prediction, test samples")
@@ -308,7 +308,7 @@ def figure(path: Path, model, x, t, test_rows, search, report) -> None:
     axes[1].axhline(-2.0, color="r", lw=0.8)
     axes[1].set(xlabel="measured speed, km/h", ylabel="error, km/h",
                 title="one-step error (red: +-2 km/h)")
-    axes[2].plot(search.result.trace("evaluations"), search.result.trace("best_f") * KMH)
+    axes[2].plot(search.result.trace("evaluations"), search.result.trace("best_f") * MS_TO_KMH)
     axes[2].set(xlabel="evaluations", ylabel="best validation RMSE, km/h",
                 title=f"aw-pso: mu={search.mu:.3g}, delta={search.delta:.3g}")
     fig.tight_layout()

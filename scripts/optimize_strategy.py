@@ -36,6 +36,7 @@ from ato_nodes.core.errors import ScenarioError
 from ato_nodes.core.line import load_line
 from ato_nodes.core.paths import resolve_file
 from ato_nodes.core.scenario import complete, train_preset
+from ato_nodes.core.units import MS_TO_KMH
 
 
 
@@ -113,8 +114,8 @@ def plot_strategy(path: Path, line, track, result, name: str) -> None:
     figure, (speed, grade) = plt.subplots(2, 1, figsize=(12, 6.5), sharex=True,
                                           gridspec_kw={"height_ratios": [3, 1]})
     km = result.positions / 1000.0
-    speed.plot(km, result.speeds * 3.6, lw=1.2, label=f"{name} strategy")
-    speed.step(track.positions / 1000.0, track.cap * 3.6, where="post", color="r", lw=0.8,
+    speed.plot(km, result.speeds * MS_TO_KMH, lw=1.2, label=f"{name} strategy")
+    speed.step(track.positions / 1000.0, track.cap * MS_TO_KMH, where="post", color="r", lw=0.8,
                label="limit - 7 km/h")
     for axis in (speed, grade):
         for section in line.neutral_sections:

@@ -3,7 +3,8 @@
 import pytest
 
 from ato_nodes.core.context import RunContext
-from ato_nodes.core.profiles import KMH, StepProfile, TableProfile
+from ato_nodes.core.profiles import StepProfile, TableProfile
+from ato_nodes.core.units import KMH
 from ato_nodes.core.schema import defaults
 
 

@@ -44,8 +44,8 @@ from .errors import ScenarioError
 from .limiter import CommandLimiter
 from .registry import Component, Output
 from .spec import param
+from .units import KMH
 
-KMH = 1.0 / 3.6
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
 
 PARAMETERS = (

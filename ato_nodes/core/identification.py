@@ -27,8 +27,7 @@ import numpy as np
 
 from . import lssvm
 from .optimizers import optimize
-
-KMH = 1.0 / 3.6
+from .units import KMH
 
 
 def excitation_table(seed: int, duration: float, top_speed: float) -> list[tuple[float, float]]:

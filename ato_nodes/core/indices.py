@@ -11,8 +11,7 @@ import math
 import numpy as np
 
 from .kernels import jitable
-
-MS_TO_KMH = 3.6
+from .units import MS_TO_KMH
 
 
 def _integral(t: np.ndarray, y: np.ndarray) -> float:

@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .indices import MS_TO_KMH, _integral
+from .indices import _integral
+from .units import MS_TO_KMH
 
 STANDSTILL = 0.01  # m/s
 JERK_WINDOW = 1.0  # s

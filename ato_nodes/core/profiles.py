@@ -15,8 +15,7 @@ from .errors import ScenarioError
 from .plant import TrainParameters
 from .registry import Component
 from .spec import MAX_PREVIEW, PROFILE_NODES, param
-
-KMH = 1.0 / 3.6  # m/s per km/h
+from .units import KMH
 
 
 SEED000_PARAMETERS = (

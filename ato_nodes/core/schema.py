@@ -20,7 +20,6 @@ from .spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, TextForm, 
 
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 LOOP_NODES = ("profile", "plant", "controller")
-KMH = 1.0 / 3.6
 _UNSIGNED = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _REQUIREMENT = rf"\s*\w+\s*<=\s*[-+]?{_UNSIGNED}\s*"
 _BAND = rf"\s*{_UNSIGNED}\s*"

@@ -15,10 +15,11 @@ import numpy as np
 from .components import CONTROLLERS
 from .context import RunContext
 from .errors import ScenarioError
-from .indices import MS_TO_KMH, tracking_indices
+from .indices import tracking_indices
 from .line import Line, load_line, parse_line
 from .operation import STANDSTILL, format_operation, operation_indices
 from .schema import defaults
+from .units import MS_TO_KMH
 
 # Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
 # travel as a ROS parameter (YAML) to the recorder, whose YAML round trips mangle

@@ -38,8 +38,8 @@ from . import yamlfile
 from .line import MAX_LENGTH, Line
 from .optimizers import optimize
 from .plant import TrainParameters
+from .units import KMH
 
-KMH = 1.0 / 3.6
 MARGIN = 7.0 * KMH  # seed 002's speed protection: below the limit by this
 # (kind, fraction): traction and braking as fractions of the envelope at the speed
 CONTROLS = (("traction", 1.0), ("traction", 0.75), ("traction", 0.5), ("traction", 0.25),
