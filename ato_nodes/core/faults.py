@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from .errors import ScenarioError
+from .schema import SUPERVISED_NODES
 
-FAULT_NODES = ("profile", "plant", "controller", "recorder")
+FAULT_NODES = SUPERVISED_NODES  # not the supervisor: it reports what the faults do
 FAULT_KINDS = ("crash", "hang", "kill", "diskfull")
 
 

@@ -20,6 +20,7 @@ from .spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, TextForm, 
 
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 LOOP_NODES = ("profile", "plant", "controller")
+SUPERVISED_NODES = tuple(node for node in NODES if node != "supervisor")  # it waits for them
 _UNSIGNED = r"(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _REQUIREMENT = rf"\s*\w+\s*<=\s*[-+]?{_UNSIGNED}\s*"
 _BAND = rf"\s*{_UNSIGNED}\s*"

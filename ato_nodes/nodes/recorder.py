@@ -36,7 +36,7 @@ from rosbags.typesys import Stores, get_typestore
 from ato_nodes.bagio import PARAMETERS_KEY
 from ato_nodes.bagwrite import close_writer, open_writer, qos
 from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.schema import recording_steps
+from ato_nodes.core.schema import LOOP_NODES, recording_steps
 from ato_nodes.core.topics import Topic, step_topics
 from ato_nodes.nodes.base import QOS, AtoNode, LockstepInputs, run_node
 
@@ -48,7 +48,7 @@ def offered_qos(topic: Topic) -> list[Qos]:
                 profile.durability.name)]
 
 
-RUN_NODES = ("profile", "plant", "controller")  # whose parameters describe the run
+RUN_NODES = LOOP_NODES  # whose parameters describe the run
 DRAIN_QUIET = 0.5   # s: after a signal, record until nothing has arrived for this long
 DRAIN_LIMIT = 4.0   # s at most (the launcher escalates to SIGTERM after 5 s)
 SIDECAR = "parameters.json"

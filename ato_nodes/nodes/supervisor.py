@@ -23,13 +23,12 @@ from std_msgs.msg import Float64
 
 from ato_nodes import jsontext
 from ato_nodes.core.indices import RunningIndex
-from ato_nodes.core.schema import steps
+from ato_nodes.core.schema import SUPERVISED_NODES, steps
 from ato_nodes.core.scoring import format_indices
 from ato_nodes.nodes.base import (ANNOUNCED_EVENTS, HEARD_EVENTS, AtoNode, parameter_files,
                                  run_node)
 from ato_nodes.summary import bag_contents, write_summary
 
-PARTICIPANTS = ("profile", "plant", "controller", "recorder")
 PROGRESS_PERIOD = 0.5  # s of wall time
 SHUTDOWN_ACK_TIMEOUT = 2.0  # s the supervisor waits for every node to have 'shutdown'
 FOLLOW_GRACE = 2.0  # s after 'recorded' for the running fitness to take the last steps
@@ -41,7 +40,7 @@ class SupervisorNode(AtoNode):
 
     def __init__(self):
         super().__init__()
-        self.waiting = set(PARTICIPANTS)
+        self.waiting = set(SUPERVISED_NODES)
         self.total_steps = steps(self.values)
         self.period = self.values["run.period"]
         self.created = time.monotonic()
@@ -140,7 +139,7 @@ class SupervisorNode(AtoNode):
         self.failed = True
 
     def shut_down_when_heard(self) -> None:
-        if (self.events_out.get_subscription_count() >= len(PARTICIPANTS) + 1 or
+        if (self.events_out.get_subscription_count() >= len(SUPERVISED_NODES) + 1 or
                 time.monotonic() - self.created > self.values["supervisor.ready_timeout"]):
             self.shut_down_all()
 
