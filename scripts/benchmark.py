@@ -34,10 +34,10 @@ def ping_pong(round_trips: int) -> float:
     """Round trips per second between two fresh rclpy processes."""
     lock = DomainLock()
     env = node_environment(lock.domain_id)
-    module = [sys.executable, "-m", "ato_nodes.nodes.pingpong"]
-    echo = subprocess.Popen([*module, "echo"], env=env, stdout=subprocess.DEVNULL)
+    script = [sys.executable, str(Path(__file__).with_name("pingpong.py"))]
+    echo = subprocess.Popen([*script, "echo"], env=env, stdout=subprocess.DEVNULL)
     try:
-        result = subprocess.run([*module, "ping", str(round_trips)], env=env, capture_output=True,
+        result = subprocess.run([*script, "ping", str(round_trips)], env=env, capture_output=True,
                                 text=True, timeout=600, check=True)
     finally:
         echo.terminate()

@@ -1,7 +1,9 @@
 """Two-process rclpy ping-pong, the reference the benchmark compares the stack to.
 
-    python -m ato_nodes.nodes.pingpong echo            # answers every /ping on /pong
-    python -m ato_nodes.nodes.pingpong ping N          # sends N pings, prints round trips/s
+    python scripts/pingpong.py echo            # answers every /ping on /pong
+    python scripts/pingpong.py ping N          # sends N pings, prints round trips/s
+
+benchmark.py starts both, in the environment of the stack's nodes.
 
 Plain rclpy: a SingleThreadedExecutor, std_msgs/Float64, the stack's data QoS.
 """
