@@ -166,8 +166,8 @@ def test_short_run_records_every_step_and_scores_like_the_in_process_simulation(
             ("reliable", "keep_all", "volatile"), entry["topic_metadata"]["name"]
 
 
-END_OF_RUN_LINES = {"plant": ("finished",), "recorder": ("recorded",),
-                    "supervisor": ("finished", "recorded"), "profile": (), "controller": ()}
+END_OF_RUN_LINES = {"plant": ("finished",), "recorder": ("recorded",), "supervisor": (),
+                    "profile": (), "controller": ()}
 
 
 def test_rosout_carries_every_nodes_end_of_run_lines(tmp_path, ros_domain):

@@ -56,8 +56,9 @@ HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
 # Run events logged (INFO, /rosout): each node logs the start it hears and its own
 # shutdown; the end of the run once, by the node that announces it (the plant's
-# 'finished', the recorder's 'recorded') and by the supervisor, which waits for both
-# (a node hears events of different nodes in no fixed order, so others might not).
+# 'finished', the recorder's 'recorded'): a node hears events of different nodes in no
+# fixed order, so another might not have heard it before the shutdown, and the fewer
+# records come at once at the end, the fewer a keep-last-10 `ros2 topic echo` drops.
 HEARD_EVENTS = ("start",)
 ANNOUNCED_EVENTS = ("finished", "recorded")
 # What rclpy.node.Node declares itself (start_type_description_service read-only already)
@@ -144,7 +145,6 @@ class AtoNode(Node):
     publishers and subscriptions exist, and override `on_event()`."""
 
     role: str = ""
-    heard_events = HEARD_EVENTS  # the run events this node logs as it hears them
     exit_status = 0  # set by a node that ends the run for a reason of its own
     stop_requested = False  # SIGINT or SIGTERM: leave the spin loop, then on_stop()
 
@@ -315,7 +315,7 @@ class AtoNode(Node):
         if word == "shutdown":
             self.shut_down()
             return
-        if word in self.heard_events:
+        if word in HEARD_EVENTS:
             self.log.info(f"run event: {word} {argument}".rstrip())
         self.on_event(word, argument)
 

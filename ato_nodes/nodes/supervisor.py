@@ -25,8 +25,7 @@ from ato_nodes import jsontext
 from ato_nodes.core.indices import RunningIndex
 from ato_nodes.core.schema import SUPERVISED_NODES, steps
 from ato_nodes.core.scoring import format_indices
-from ato_nodes.nodes.base import (ANNOUNCED_EVENTS, HEARD_EVENTS, AtoNode, parameter_files,
-                                 run_node)
+from ato_nodes.nodes.base import AtoNode, parameter_files, run_node
 from ato_nodes.summary import bag_contents, write_summary
 
 PROGRESS_PERIOD = 0.5  # s of wall time
@@ -36,7 +35,6 @@ FOLLOW_GRACE = 2.0  # s after 'recorded' for the running fitness to take the las
 
 class SupervisorNode(AtoNode):
     role = "supervisor"
-    heard_events = (*HEARD_EVENTS, *ANNOUNCED_EVENTS)  # every run event
 
     def __init__(self):
         super().__init__()
