@@ -3,7 +3,7 @@
 
     python scripts/benchmark_gpc.py [--scenario seed001-crh380al] [--duration 600]
 
-1. Controller cost per step (median, p99, max), the controller stage's `ready()` timed
+1. Controller cost per step (median, p99, max), the controller stage's `run_ready_steps()` timed
    around every call of a whole in-process run: the code the controller node runs
    per step, without the messages. For each GPC prediction model and, beside them,
    the ADRC and PID kinds of the comparison (their scenario files' gains).
@@ -24,6 +24,7 @@ import numpy as np
 
 from ato_nodes.core import loop
 from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.stages import ControllerStage
 
 VARIANTS = {  # name: (scenario, overrides)
     "gpc lssvm (adaptive)": ("seed001-crh380al", []),
@@ -37,9 +38,9 @@ VARIANTS = {  # name: (scenario, overrides)
 
 
 def step_costs(values) -> np.ndarray:
-    """Seconds of every ControllerStage.ready() call of one in-process run."""
+    """Seconds of every ControllerStage.run_ready_steps() call of one in-process run."""
     costs = []
-    original = loop.ControllerStage.ready
+    original = ControllerStage.run_ready_steps
 
     def timed(self):
         started = time.perf_counter()
@@ -47,11 +48,11 @@ def step_costs(values) -> np.ndarray:
         costs.append(time.perf_counter() - started)
         return result
 
-    loop.ControllerStage.ready = timed
+    ControllerStage.run_ready_steps = timed
     try:
         loop.simulate(values)
     finally:
-        loop.ControllerStage.ready = original
+        ControllerStage.run_ready_steps = original
     return np.array(costs)
 
 

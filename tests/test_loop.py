@@ -39,10 +39,10 @@ def test_profile_stops_at_the_last_step():
 def test_controller_pairs_each_speed_with_a_horizon_and_tracks_its_preview_entry():
     stage = ControllerStage(values("controller.preview=1"))  # 4 steps
     stage.speeds.append(0.0)
-    assert stage.ready() == []  # the horizon of step 0 not there yet
+    assert stage.run_ready_steps() == []  # the horizon of step 0 not there yet
     stage.horizons.extend([[1.0, 2.0], [2.0, 3.0]])
     stage.speeds.append(0.0)
-    outputs = stage.ready()
+    outputs = stage.run_ready_steps()
     assert len(outputs) == 2 and stage.step_index == 2
     v1 = stage.output_names.index("v1")
     assert outputs[0].extras[v1] == pytest.approx(2.0)  # the TD was started on r_1
@@ -52,7 +52,7 @@ def test_without_preview_each_step_needs_only_its_own_target():
     stage = ControllerStage(values())
     stage.speeds.append(0.0)
     stage.horizons.append([1.0])
-    assert len(stage.ready()) == 1
+    assert len(stage.run_ready_steps()) == 1
 
 
 def test_simulation_records_the_target_of_each_step_whatever_the_preview():

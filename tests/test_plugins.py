@@ -30,7 +30,7 @@ def test_every_registered_kind_builds_and_steps_with_its_declared_outputs():
             *NEEDS.get(kind, ()))))
         stage.horizons.append([1.0, 1.1, 1.2])
         stage.speeds.append(0.5)
-        (out,) = stage.ready()
+        (out,) = stage.run_ready_steps()
         assert np.isfinite(out.u) and len(out.extras) == len(component.outputs), kind
         assert not set(component.output_names) & set(SERIES), kind  # no clash with the loop's
 

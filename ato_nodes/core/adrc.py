@@ -439,7 +439,7 @@ def linear_adrc(values, context, limiter: CommandLimiter) -> LinearADRC:
     return LinearADRC(gains, context.period, limiter, model)
 
 
-HAN_STATE = ("td.v1", "td.v2", "eso.z1", "eso.z2", "eso.z3", "u_applied")
+HAN_STATE_PATHS = ("td.v1", "td.v2", "eso.z1", "eso.z2", "eso.z3", "u_applied")
 
 HAN_ADRC = Component(
     "han_adrc", "seed 000: Han's nonlinear ADRC", HAN_ADRC_PARAMETERS,
@@ -449,7 +449,7 @@ HAN_ADRC = Component(
     search_space=(("adrc.mu1", 600.0, 60000.0), ("adrc.mu2", 550.0, 55000.0),
                   ("adrc.beta1", 120.0, 12000.0), ("adrc.beta2", 170.0, 17000.0),
                   ("adrc.beta3", 450.0, 45000.0)),
-    state=HAN_STATE)
+    state_paths=HAN_STATE_PATHS)
 
 NLADRC = Component(
     "nladrc", "seed 003: NLADRC, bandwidth-parametrised observer", NLADRC_PARAMETERS,
@@ -459,7 +459,7 @@ NLADRC = Component(
     OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"],
     search_space=(("nladrc.kp", 0.05, 20.0), ("nladrc.kd", 0.05, 20.0),
                   ("nladrc.omega", 0.5, 40.0), ("nladrc.b", 0.002, 0.5)),
-    state=HAN_STATE)
+    state_paths=HAN_STATE_PATHS)
 
 DISCRETE_ADRC = Component(
     "discrete_adrc", "seed 004: discrete ADRC", DISCRETE_ADRC_PARAMETERS,
@@ -469,7 +469,7 @@ DISCRETE_ADRC = Component(
     observer_gain=lambda values: values["dadrc.b0"] / values["run.period"] ** 2,  # per step^2
     search_space=(("dadrc.b01", 0.1, 2.5), ("dadrc.b02", 0.001, 1.0),
                   ("dadrc.b03", 0.00001, 0.1), ("dadrc.b1", 1.0, 300.0), ("dadrc.b2", 1.0, 1000.0)),
-    state=("td.v1", "td.v2", "z1", "z2", "z3", "u_applied"))
+    state_paths=("td.v1", "td.v2", "z1", "z2", "z3", "u_applied"))
 
 LINEAR_ADRC = Component(
     "linear_adrc", "first-order linear ADRC", LINEAR_ADRC_PARAMETERS,
@@ -478,4 +478,4 @@ LINEAR_ADRC = Component(
      Output("z2", "m/s^2", "ESO total-disturbance estimate")),
     search_space=(("ladrc.omega_o", 2.0, 40.0), ("ladrc.omega_c", 0.3, 6.0),
                   ("ladrc.b0", 0.006, 0.013)),
-    state=("z1", "z2", "model", "observer_input", "u_applied"))
+    state_paths=("z1", "z2", "model", "observer_input", "u_applied"))

@@ -55,7 +55,7 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
         controller.speeds.append(out.measured_speed)
         if changes and k in changes:
             controller.pending = dict(changes[k])
-        (c,) = controller.ready()
+        (c,) = controller.run_ready_steps()
         plant.apply(c.u)
         rows.append((k * period, horizon[0], out.position, out.measured_speed, out.speed,
                      out.acceleration, out.disturbance, out.force, out.resistance,

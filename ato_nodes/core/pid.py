@@ -78,4 +78,4 @@ PID_CONTROLLER = Component(
      Output("derivative", "N/kN", "derivative term on the filtered measurement")),
     search_space=(("pid.kp", 1.0, 1000.0), ("pid.ki", 0.0, 500.0), ("pid.kd", 0.0, 500.0),
                   ("pid.tf", 0.01, 2.0), ("pid.kt", 0.0, 20.0), ("pid.feedforward", 0.0, 1.5)),
-    state=("integral", "filtered"))
+    state_paths=("integral", "filtered"))

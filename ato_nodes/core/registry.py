@@ -36,7 +36,7 @@ class Component:
     observer whose outputs z1, z2, z3 estimate speed, acceleration and total
     disturbance: the observer's input gain b0 in m/s^3 per N/kN, which the
     scorer needs to rebuild the disturbance z3 estimates. search_space: the
-    (parameter, low, high) that tune.py tunes when given no --params. state, for
+    (parameter, low, high) that tune.py tunes when given no --params. state_paths, for
     controllers: the attribute paths of what the controller carries from step to step
     (observer, filters, integrators); with it, the kind's own float parameters are live
     during a run: a change rebuilds the controller with the new values and carries
@@ -50,13 +50,13 @@ class Component:
     outputs: tuple[Output, ...] = ()
     observer_gain: Callable[[Any], float] | None = None
     search_space: tuple[tuple[str, float, float], ...] = ()  # what tune.py tunes by default
-    state: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
+    state_paths: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
 
     @property
     def live_parameters(self) -> tuple[str, ...]:
-        """Its own parameters that may change during a run (see `state`)."""
+        """Its own parameters that may change during a run (see `state_paths`)."""
         return tuple(spec.name for spec in self.parameters
-                     if self.state and spec.value_type is float)
+                     if self.state_paths and spec.value_type is float)
 
     @property
     def output_names(self) -> tuple[str, ...]:

@@ -180,7 +180,7 @@ class ControllerStage:
 
     def retune(self, changes: dict[str, float]) -> None:
         """Rebuild the controller with `changes` to its live parameters, carrying its
-        state (the kind's `state` paths) and the limiter's over: the run goes on as if
+        state (the kind's `state_paths`) and the limiter's over: the run goes on as if
         the new values had been set between two steps."""
         live = self.component.live_parameters
         refused = sorted(set(changes) - set(live))
@@ -190,7 +190,7 @@ class ControllerStage:
         values = type(self.values)(self.values.node, {**self.values, **changes}) \
             if isinstance(self.values, NodeValues) else {**self.values, **changes}
         rebuilt = self.component.factory(values, self.context, self.limiter)
-        for path in self.component.state:
+        for path in self.component.state_paths:
             *owners, name = path.split(".")
             old, new = self.controller, rebuilt
             for owner in owners:
@@ -198,7 +198,7 @@ class ControllerStage:
             setattr(new, name, getattr(old, name))
         self.controller, self.values = rebuilt, values
 
-    def ready(self) -> list:
+    def run_ready_steps(self) -> list:
         """Run every step whose inputs have both arrived; their outputs in order."""
         outputs = []
         while self.speeds and self.horizons:

@@ -2,7 +2,7 @@
 horizon (by arrival order; Float64 carries no stamp) and publishes the command and
 the controller's named outputs.
 
-The controller kind's gains are live (core.registry.Component.state): a `ros2 param
+The controller kind's gains are live (core.registry.Component.state_paths): a `ros2 param
 set` is checked against the schema, takes effect at the next step boundary
 (stages.ControllerStage.pending), and is published on the parameter_changes topic with
 the step it took effect at, for the bag."""
@@ -60,11 +60,11 @@ class ControllerNode(AtoNode):
 
     def on_horizon(self, msg: Float64MultiArray) -> None:
         self.stage.horizons.append(msg.data)
-        self.publish(self.stage.ready())
+        self.publish(self.stage.run_ready_steps())
 
     def on_speed(self, msg: Float64) -> None:
         self.stage.speeds.append(msg.data)
-        self.publish(self.stage.ready())
+        self.publish(self.stage.run_ready_steps())
 
     def publish(self, outputs) -> None:
         for step, changes in self.stage.applied:
