@@ -62,6 +62,24 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
     base = document.pop("base", None)
     if base is not None and not isinstance(base, str):
         raise ScenarioError(f"{path}: base must be a scenario name or file, not {base!r}")
+    given = _given_values(path, document)
+    if base is None:
+        return validate(complete(given, [path.parent], str(path)), str(path))
+    relative = path.parent / base
+    base_values = load_scenario(str(relative) if relative.suffix in (".yaml", ".yml")
+                                else base)
+    for name in FILE_PARAMETERS:
+        if given.get(name):
+            given[name] = resolve_file(given[name], [path.parent])
+    try:
+        return apply_overrides(base_values, given)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
+
+
+def _given_values(path: Path, document: dict) -> dict[str, Any]:
+    """The parameters a scenario file gives (`document`, without its base), each checked
+    against its spec and against the node it is given under."""
     given = {}
     for node, section in document.items():
         if node != "/**" and node not in NODES:
@@ -83,18 +101,7 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
                 raise ScenarioError(f"{path}: {name} is given twice, as {given[name]!r} and "
                                     f"{value!r}")
             given[name] = value
-    if base is None:
-        return validate(complete(given, [path.parent], str(path)), str(path))
-    relative = path.parent / base
-    base_values = load_scenario(str(relative) if relative.suffix in (".yaml", ".yml")
-                                else base)
-    for name in FILE_PARAMETERS:
-        if given.get(name):
-            given[name] = resolve_file(given[name], [path.parent])
-    try:
-        return apply_overrides(base_values, given)
-    except ScenarioError as exc:
-        raise ScenarioError(f"{path}: {exc}") from None
+    return given
 
 
 def complete(given: dict[str, Any], bases: list[Path], where: str = "") -> dict[str, Any]:
