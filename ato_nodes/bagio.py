@@ -243,6 +243,11 @@ def run_status(path: Path) -> str | None:
 def _assemble(path, found, stamps, raws, types) -> Run:
     missing = [role for role in ROLES if role not in found or not raws[role]]
     usable = {role for role in found if raws[role]}
+    silent = sorted(found[role] for role in ("target_speed", "state", "measured_speed")
+                    if role in found and role not in usable)
+    if silent and "target_speed" in found and found.keys() & {"state", "measured_speed"}:
+        raise BagError(f"{path}: no complete step: {', '.join(silent)} recorded no message "
+                       "(the run ended before its first step)")
     if "target_speed" not in usable or not usable & {"state", "measured_speed"}:
         names = ", ".join(sorted(types)) or "none"
         raise BagError(f"{path}: needs a target speed and a speed topic; topics in the bag: "

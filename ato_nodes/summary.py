@@ -25,6 +25,11 @@ def bag_contents(bag: Path) -> dict[str, Any]:
         if not any(contents["recorded"].values()):
             contents["notes"] = ["the run ended before its first step: the bag is empty"]
             return contents
+        if not all(contents["recorded"].values()):  # some topic never got its first step
+            silent = sorted(name for name, count in contents["recorded"].items() if not count)
+            contents["notes"] = [f"the run ended before its first complete step: "
+                                 f"{', '.join(silent)} recorded no message"]
+            return contents
         run = read_run(bag)
     except BagError as exc:
         return {"bag_error": str(exc)}

@@ -47,7 +47,7 @@ def check(bag: Path) -> tuple[bool, str]:
         with mcap_file.open("rb") as handle:
             in_mcap = sum(1 for _ in make_reader(handle).iter_messages())
         summary = json.loads((bag / "summary.json").read_text())
-        scored = len(read_run(bag).series["t"]) if any(counts.values()) else 0
+        scored = len(read_run(bag).series["t"]) if all(counts.values()) else 0
     except (BagError, OSError, ValueError, KeyError) as exc:
         return False, f"unreadable: {exc}"
     kept = (in_rosbags == in_mcap == sum(counts.values()) and summary.get("recorded") == counts
@@ -95,7 +95,11 @@ def one_run(bag: Path, rng: random.Random, kind: str) -> tuple[bool, str]:
         return False, f"{what}: exit {process.returncode}, TRACEBACK"
     if outlived:
         return False, f"{what}: exit {process.returncode}, {', '.join(outlived)} outlived it"
-    if kind != "sigkill" and "(run already over)" not in what and process.returncode != 130:
+    summary = bag / "summary.json"
+    completed = process.returncode == 0 and summary.exists() and json.loads(
+        summary.read_text()).get("status") == "completed"
+    if kind != "sigkill" and process.returncode != 130 and not completed:
+        # 130, or 0 when the signal came once the run had completed (its outcome decided)
         return False, f"{what}: exit {process.returncode}, not 130"
     if not bag.exists():
         return True, (f"{what}: exit {process.returncode}, no bag "

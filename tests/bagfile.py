@@ -50,9 +50,11 @@ def _message(role: str, series: dict, k: int, outputs: list[str]):
 
 def write_run_bag(bag: Path, series: dict, parameters: dict | None, steps: int | None = None,
                   changes: dict[int, dict[str, float]] | None = None,
-                  status: str | None = None) -> Path:
+                  status: str | None = None, silent: tuple[str, ...] = ()) -> Path:
     """The first `steps` steps (all by default) of a simulated run as its bag, the
-    controller's outputs on its state topic; with `status`, a summary.json saying it.
+    controller's outputs on its state topic; with `status`, a summary.json saying it;
+    the `silent` roles' topics are in the bag without a message (a run stopped before
+    they published their first step).
     Parameters naming a line file keep its text, as the recorder's do."""
     names = {key: topic.name for key, topic in topic_map().items()}
     steps = len(series["t"]) if steps is None else steps
@@ -70,7 +72,7 @@ def write_run_bag(bag: Path, series: dict, parameters: dict | None, steps: int |
     connections = {role: writer.add_connection(names[role], ROLES[role][0], typestore=TYPESTORE)
                    for role in roles}
     for k in range(steps):
-        for role in roles:
+        for role in (role for role in roles if role not in silent):
             message = _message(role, series, k, kept)
             writer.write(connections[role], round(k * period_ns),
                          TYPESTORE.serialize_cdr(message, ROLES[role][0]))

@@ -20,6 +20,7 @@ from ato_nodes.bagio import PARAMETERS_KEY, read_frame, read_parameters, read_ru
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.loop import simulate
 from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.summary import bag_contents
 from bagfile import write_run_bag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -159,6 +160,19 @@ def test_a_bag_with_no_message_says_so(metro_run, tmp_path):
     assert result.returncode == 2
     assert result.stderr == f"error: {bag}: 0 messages recorded (interrupted before its first " \
                             "step); nothing to score\n"
+
+
+def test_a_bag_stopped_before_its_first_complete_step_says_so(metro_run, tmp_path):
+    """The plant's step 0 recorded, nothing from the profile or the controller yet."""
+    series, values = metro_run
+    bag = write_run_bag(tmp_path / "first", series, values, steps=1, silent=(
+        "target_speed", "command", "controller_state"))
+    result = score_bag(bag)
+    assert result.returncode == 2 and len(result.stderr.splitlines()) == 1
+    assert "no complete step: /ato/target_speed recorded no message" in result.stderr
+    contents = bag_contents(bag)  # what run_stack.py's summary.json then says
+    assert contents["scored_steps"] == 0 and "bag_error" not in contents
+    assert "/ato/target_speed" in contents["notes"][0]
 
 
 def test_an_open_track_run_reads_into_a_frame_without_an_infinite_column(tmp_path):

@@ -70,3 +70,18 @@ def test_the_installed_command_scores_a_bag_as_the_script_does(tmp_path):
     assert (command_ok.stdout, command_ok.stderr) == (script_ok.stdout, script_ok.stderr)
     assert command_bad.returncode == script_bad.returncode == 2
     assert command_bad.stderr == script_bad.stderr == f"error: {missing} does not exist\n"
+
+
+def test_once_a_command_has_its_outcome_a_signal_cannot_change_its_exit_status():
+    """interrupted_quietly() leaves SIGINT and SIGTERM ignored, process-wide: blocking them
+    in the main thread alone let a late Ctrl-C reach another thread once the interpreter
+    had put the default handler back (the process then died of the signal: exit -2)."""
+    code = ("import os, signal, threading, time; from ato_nodes import cli\n"
+            "threading.Thread(target=time.sleep, args=(5,), daemon=True).start()\n"
+            "cli.interrupted_quietly(lambda: None)\n"
+            "os.kill(os.getpid(), signal.SIGINT)  # taken by the thread that does not block it\n"
+            "sum(range(10**6))  # bytecodes, at which Python runs a handler\n"
+            "raise SystemExit(7)\n")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 7, result.stderr

@@ -95,5 +95,9 @@ def interrupted_quietly(main):
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         sys.exit(130)
-    finally:  # its outcome is decided: a Ctrl-C while the interpreter exits changes nothing
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    finally:  # its outcome is decided: a Ctrl-C while the interpreter exits changes nothing.
+        # Ignored, not only blocked: the mask is this thread's, and the interpreter's exit
+        # puts Python's handlers back to the default (death by the signal) while another
+        # thread (the fork server's reader) could still take one.
+        for number in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(number, signal.SIG_IGN)
