@@ -1,4 +1,4 @@
-"""What an ATO knows, used for tracking (issue 12): the nominal train model, the linear
+"""What an ATO knows, used for tracking: the nominal train model, the linear
 ADRC's feedforward and delay-aware observer, envelope-feasible and jerk-rounded target
 curves, the holding target (ROS-free)."""
 

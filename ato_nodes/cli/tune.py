@@ -57,7 +57,7 @@ def parse_args() -> argparse.Namespace:
                         help="continue the tuning in --out from its evaluation log")
     parser.add_argument("--cluster", default="", metavar="local:N|tcp://HOST:PORT",
                         help="evaluate on a Dask cluster: local:N starts N worker processes "
-                        "here, tcp://HOST:PORT uses a running scheduler (README, Tuning); "
+                        "here, tcp://HOST:PORT uses a running scheduler (docs/reference.md); "
                         "the same candidates give the same fitness as without")
     parser.add_argument("--no-prune", action="store_true",
                         help="run every in-process candidate to the end (pruning ends those "

@@ -148,7 +148,7 @@ HAN_ADRC_PARAMETERS = (
     param("adrc.beta2", 1700.0, "ESO gain beta2", "controller", 0.0, 1e9),
     param("adrc.beta3", 4500.0, "ESO gain beta3", "controller", 0.0, 1e9),
     param("adrc.b0", 0.1766, "compensation factor b0 (not in the paper; ~xi / 50 ms, see "
-          "README)", "controller", 1e-9, 1e9),
+          "docs/internals.md)", "controller", 1e-9, 1e9),
     param("adrc.delta", 0.01, "fal linear-zone half width", "controller", 1e-9, 100.0),
     param("adrc.implicit_nlsef", True, "implicit NLSEF discretisation (false: literal law)",
           "controller"),
