@@ -212,7 +212,6 @@ def node_environment(domain_id: int) -> dict[str, str]:
 class RunOutcome:
     status: str  # "completed", "diverged", "pruned", "failed", "interrupted", "timeout"
     message: str = ""
-    failed_node: str | None = None
     report: dict[str, Any] = field(default_factory=dict)
     domain_id: int = 0
     wall_time: float = 0.0
@@ -315,18 +314,16 @@ class Stack:
                     if time.monotonic() - stopped_since.setdefault(role, time.monotonic()) \
                             > STOP_GRACE:
                         return RunOutcome("failed", f"node '{role}' is stopped (SIGSTOP or a "
-                                          "debugger) and the run cannot go on", failed_node=role)
+                                          "debugger) and the run cannot go on")
                 else:
                     stopped_since.pop(role, None)
             for role, code in codes.items():
                 if code not in (None, 0):
-                    return RunOutcome("failed", f"node '{role}' exited with status {code}",
-                                      failed_node=role)
+                    return RunOutcome("failed", f"node '{role}' exited with status {code}")
                 # A clean exit is normal only once the supervisor has ended the run.
                 if code == 0 and time.monotonic() - early_exit.setdefault(role, time.monotonic()) \
                         > STOP_GRACE:
-                    return RunOutcome("failed", f"node '{role}' exited before the run ended",
-                                      failed_node=role)
+                    return RunOutcome("failed", f"node '{role}' exited before the run ended")
             if self.timeout is not None and time.monotonic() - started > self.timeout:
                 return RunOutcome("timeout", f"run did not finish within {self.timeout:g} s")
             if self.cancel is not None and self.cancel.is_set():
@@ -370,7 +367,7 @@ class Stack:
         """The supervisor ended the run; the other nodes are exiting on 'shutdown'."""
         if not self.report_path.exists():
             return RunOutcome("failed", "the supervisor stopped the run before it completed "
-                              "(a node never became ready)", failed_node="supervisor")
+                              "(a node never became ready)")
         report = json.loads(self.report_path.read_text())
         if report.get("pruned"):
             return RunOutcome("pruned", f"pruned at step {report['steps']}: the running "
