@@ -282,9 +282,18 @@ class Stack:
             if console:
                 console.close()
 
-    def stop(self) -> None:
+    def stop(self, ended: bool = False) -> None:
         """SIGINT every live node (the recorder drains and closes its bag), SIGCONT so a
-        frozen one handles it too, then escalate."""
+        frozen one handles it too, then escalate. After a run the supervisor `ended`, the
+        nodes first get STOP_GRACE to exit on its 'shutdown' (a signal would cut their
+        last /rosout records short)."""
+        if ended:
+            deadline = time.monotonic() + STOP_GRACE
+            for process in self.processes.values():
+                try:
+                    process.wait(max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    break
         for process in self.processes.values():
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
@@ -395,8 +404,9 @@ class Stack:
                 outcome = RunOutcome("failed", str(exc))
             finally:
                 blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if main else None
+                supervisor = self.processes.get("supervisor")
                 try:
-                    self.stop()
+                    self.stop(ended=supervisor is not None and supervisor.poll() == 0)
                     self.lock.release()
                     outcome.message = "; ".join(filter(None, [outcome.message, self._repair()]))
                     if outcome.status == "timeout":

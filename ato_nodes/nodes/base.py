@@ -526,6 +526,7 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
         spin_lockstep(node, executor)
         if node.stop_requested and rclpy.ok():
             node.on_stop()
+            node.log.flush()  # stopped by a signal: its last records still reach /rosout
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ScenarioError, rclpy.exceptions.ParameterException, ValueError) as exc:
