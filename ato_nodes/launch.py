@@ -288,26 +288,27 @@ class Stack:
         nodes first get STOP_GRACE to exit on its 'shutdown' (a signal would cut their
         last /rosout records short)."""
         if ended:
-            deadline = time.monotonic() + STOP_GRACE
-            for process in self.processes.values():
-                try:
-                    process.wait(max(0.0, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    break
+            self._still_running(STOP_GRACE)
         for process in self.processes.values():
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
                 process.send_signal(signal.SIGCONT)
-        deadline = time.monotonic() + STOP_GRACE
-        for sig in (signal.SIGTERM, signal.SIGKILL):
-            for process in self.processes.values():
-                try:
-                    process.wait(max(0.0, deadline - time.monotonic()))
-                except subprocess.TimeoutExpired:
-                    process.send_signal(sig)
-            deadline = time.monotonic() + 2.0
+        for sig, within in ((signal.SIGTERM, STOP_GRACE), (signal.SIGKILL, 2.0)):
+            for process in self._still_running(within):
+                process.send_signal(sig)
         for process in self.processes.values():
             process.wait()
+
+    def _still_running(self, within: float) -> list[ForkedNode]:
+        """The nodes that have not exited within `within` s (one deadline for all)."""
+        deadline = time.monotonic() + within
+        running = []
+        for process in self.processes.values():
+            try:
+                process.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                running.append(process)
+        return running
 
     def _watch(self) -> RunOutcome:
         started = time.monotonic()

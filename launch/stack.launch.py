@@ -24,8 +24,7 @@ from launch_ros.actions import Node
 
 from ato_nodes.core.scenario import resolve_scenario
 from ato_nodes.core.schema import NODES
-
-STOP_GRACE = 5.0  # s the other nodes have to exit after the supervisor (as in run_stack.py)
+from ato_nodes.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
 
 def nodes(context):
