@@ -25,13 +25,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ato_nodes.core.components import CONTROLLERS, PROFILES
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.units import MS_TO_KMH
-from ato_nodes.core.schema import SPEC_BY_NAME
-from ato_nodes.core.scoring import (FITNESS, GROWING_INDICES, STOP_INDICES, Requirement,
-                                    observer_b0, run_line, score_series, stop_not_reached,
-                                    total_disturbance)
+from ato_nodes.core.config.components import CONTROLLERS, PROFILES
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.units import MS_TO_KMH
+from ato_nodes.core.config.schema import SPEC_BY_NAME
+from ato_nodes.core.scoring.catalogue import FITNESS, GROWING_INDICES, STOP_INDICES, Requirement
+from ato_nodes.core.run.scoring import (observer_b0, run_line, score_series, stop_not_reached,
+                                        total_disturbance)
 
 if TYPE_CHECKING:  # annotations only: in-process tuning plots without the bag reader
     from ato_nodes.bagio import Run

@@ -32,10 +32,10 @@ import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.schema import SPEC_BY_NAME, steps
-from ato_nodes.core.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
-from ato_nodes.core.topics import topic_map
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.schema import SPEC_BY_NAME, steps
+from ato_nodes.core.run.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
+from ato_nodes.core.base.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
 SUMMARY = "summary.json"  # the run's outcome, beside the bag's files: {"status": ..., ...}
@@ -403,7 +403,7 @@ def run_columns(run: Run) -> dict[str, np.ndarray]:
     Units as in the topic map (SI: s, m, m/s, m/s^2, N/kN); t is the step's simulated
     time, s from the run's start. speed_limit is NaN where no limit applies, and left
     out for a run without any (the open track)."""
-    from ato_nodes.core.loop import SERIES
+    from ato_nodes.core.run.loop import SERIES
     first = [name for name in SERIES if name in run.series]  # the simulation's order
     columns = {}
     others = [name for name in run.series if name not in first]  # outputs in their order
@@ -435,7 +435,7 @@ def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
     keeps (line, tables, model) and its live parameter changes. Returns the series and
     the names of the recorded series that differ from it over the steps the bag holds
     (empty: bit for bit; an interrupted run's bag is compared over what it holds)."""
-    from ato_nodes.core.loop import simulate
+    from ato_nodes.core.run.loop import simulate
     if not run.parameters:
         raise BagError(f"{run.path}: the bag keeps no run parameters to simulate from")
     values = dict(run.parameters)

@@ -33,8 +33,8 @@ import numpy as np
 import yaml
 
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
-from ato_nodes.core.scenario import ros_parameter_file
-from ato_nodes.core.schema import NODES
+from ato_nodes.core.config.scenario import ros_parameter_file
+from ato_nodes.core.config.schema import NODES
 from ato_nodes.nodefork import (NODE_NAME_PREFIX, STOP_GRACE, ForkedNode, NodeStartError,
                                 fork_server, plain_start_requested, start_plain)
 
@@ -347,7 +347,7 @@ class Stack:
         names the node the loop waited for (the recorder, when every topic is level:
         the plant waits for it, run.record_lag)."""
         from ato_nodes.bagio import BagError, message_counts
-        from ato_nodes.core.topics import step_topics
+        from ato_nodes.core.base.topics import step_topics
         publishers = {topic.name: topic.publishers[0] for topic in step_topics()}
         try:  # per-step topics only (live parameter changes are few, or none)
             counts = {name: count for name, count in message_counts(self.bag).items()
@@ -435,8 +435,8 @@ def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0
     (the bag's indices, whether the two agree bit for bit). A failed run raises
     RuntimeError with the launcher's one-line message."""
     from ato_nodes.bagio import read_run
-    from ato_nodes.core.loop import simulate
-    from ato_nodes.core.scoring import score_series
+    from ato_nodes.core.run.loop import simulate
+    from ato_nodes.core.run.scoring import score_series
     outcome = Stack(values, bag, quiet=True, timeout=timeout).run()
     if not outcome.ok:
         raise RuntimeError(f"{bag}: {outcome.message}")

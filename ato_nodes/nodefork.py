@@ -45,7 +45,7 @@ import time
 import traceback
 from pathlib import Path
 
-from ato_nodes.core.schema import NODES
+from ato_nodes.core.config.schema import NODES
 
 PR_SET_PDEATHSIG = 1
 PR_SET_NAME = 15
@@ -195,7 +195,7 @@ def warm_up() -> None:
     numpy.random), so that no forked node pays for it."""
     import numpy.random  # noqa: F401  (the plant's sensor noise)
     from rclpy.type_support import check_for_type_support
-    from ato_nodes.core.topics import topic_map
+    from ato_nodes.core.base.topics import topic_map
     for role in NODES:
         try:
             importlib.import_module(f"ato_nodes.nodes.{role}")

@@ -22,12 +22,13 @@ import numpy as np
 from ato_nodes.analysis import (CHANGES_HEADER, FAIL, LIMIT_COLOUR, PASS, RUN_COLOURS,
                                 UNMEASURED, RunReport, Tuning, VerdictRow, change_rows,
                                 convergence_axis, live_changes, report_notes)
-from ato_nodes.core.components import CONTROLLERS
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.units import MS_TO_KMH
-from ato_nodes.core.line import Line
-from ato_nodes.core.operation import JERK_WINDOW, SWITCH_THRESHOLD, drive_modes, windowed_jerk
-from ato_nodes.core.scoring import observer_b0, run_line, total_disturbance
+from ato_nodes.core.config.components import CONTROLLERS
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.units import MS_TO_KMH
+from ato_nodes.core.train.line import Line
+from ato_nodes.core.scoring.operation import (JERK_WINDOW, SWITCH_THRESHOLD, drive_modes,
+                                              windowed_jerk)
+from ato_nodes.core.run.scoring import observer_b0, run_line, total_disturbance
 
 # The scorer's traction/brake threshold (N/kN), so the mode timeline shows the switches
 # that switch_count counts.

@@ -12,7 +12,7 @@ from typing import Any
 
 from ato_nodes import jsontext
 from ato_nodes.bagio import BagError, message_counts, read_run
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.run.scoring import score_series
 
 FILE_NAME = "summary.json"
 

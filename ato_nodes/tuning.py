@@ -38,17 +38,18 @@ import yaml
 
 from ato_nodes import jsontext
 from ato_nodes.analysis import plot_convergence
-from ato_nodes.core import kernels
-from ato_nodes.core.loop import simulate, warm
+from ato_nodes.core.base import kernels
+from ato_nodes.core.run.loop import simulate, warm
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
-from ato_nodes.core.components import CONTROLLERS
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.indices import RunningIndex
-from ato_nodes.core.paths import config_dir
-from ato_nodes.core.scenario import (apply_overrides, check_used, load_scenario,
-                                     resolve_scenario, ros_parameter_file)
-from ato_nodes.core.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
-from ato_nodes.core.scoring import FITNESS, Requirement, score_series
+from ato_nodes.core.config.components import CONTROLLERS
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.scoring.indices import RunningIndex
+from ato_nodes.core.base.paths import config_dir
+from ato_nodes.core.config.scenario import (apply_overrides, check_used, load_scenario,
+                                            resolve_scenario, ros_parameter_file)
+from ato_nodes.core.config.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
+from ato_nodes.core.scoring.catalogue import FITNESS, Requirement
+from ato_nodes.core.run.scoring import score_series
 
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
 COMPILING = "compiling the simulation kernels (once per checkout)"

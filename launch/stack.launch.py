@@ -22,8 +22,8 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from ato_nodes.core.scenario import resolve_scenario
-from ato_nodes.core.schema import NODES
+from ato_nodes.core.config.scenario import resolve_scenario
+from ato_nodes.core.config.schema import NODES
 from ato_nodes.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
 

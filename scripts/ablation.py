@@ -29,10 +29,10 @@ import _cli
 
 from ato_nodes import jsontext
 from ato_nodes.analysis import markdown_table
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.core.run.scoring import score_series
 
 ADDITIONS = (
     ("feedforward", ["ladrc.feedforward=false"]),

@@ -23,10 +23,10 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.schema import steps
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.schema import steps
+from ato_nodes.core.run.scoring import score_series
 from ato_nodes.launch import DomainLock, Stack, node_environment
 
 

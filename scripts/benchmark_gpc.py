@@ -22,9 +22,9 @@ from pathlib import Path
 import _cli
 import numpy as np
 
-from ato_nodes.core import loop
-from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.stages import ControllerStage
+from ato_nodes.core.run import loop
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.stages import ControllerStage
 
 VARIANTS = {  # name: (scenario, overrides)
     "gpc lssvm (adaptive)": ("seed001-crh380al", []),

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import _cli  # noqa: F401  (repo on sys.path)
 
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import Stack
 from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings, evaluate_in_process
 

@@ -20,8 +20,8 @@ import _cli
 
 from ato_nodes import jsontext
 from ato_nodes.analysis import markdown_table
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import run_checked
 
 def main() -> None:

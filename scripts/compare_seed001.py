@@ -23,7 +23,7 @@ import numpy as np
 
 from ato_nodes import jsontext
 from ato_nodes.bagio import read_run
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import run_checked
 
 VARIANTS = {  # name: (scenario, overrides)

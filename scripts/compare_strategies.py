@@ -22,10 +22,10 @@ from pathlib import Path
 import _cli
 
 from ato_nodes import jsontext
-from ato_nodes.core import strategy
-from ato_nodes.core.line import load_line
-from ato_nodes.core.paths import resolve_file
-from ato_nodes.core.scenario import complete
+from ato_nodes.core.targets import strategy
+from ato_nodes.core.train.line import load_line
+from ato_nodes.core.base.paths import resolve_file
+from ato_nodes.core.config.scenario import complete
 
 SUPPLEMENTS = (0.03, 0.05, 0.10)
 

@@ -27,10 +27,10 @@ import _cli
 
 from ato_nodes.analysis import plot_convergence
 from ato_nodes.bagio import read_run
-from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.optimizers import create
-from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.scoring import score_series
 from ato_nodes.launch import Stack
 from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
 

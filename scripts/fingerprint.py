@@ -24,9 +24,9 @@ from pathlib import Path
 import _cli
 import numpy as np
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario, scenario_names
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
 
 
 def digests(series: dict[str, np.ndarray]) -> dict[str, str]:

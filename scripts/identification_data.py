@@ -4,7 +4,7 @@
     python scripts/identification_data.py --out bags/seed001-data
 
 Three runs of the seed001-excitation scenario, each with its own seeded random
-staircase target (core/identification.py: why this excitation) and sensor seed,
+staircase target (core/control/identification.py: why this excitation) and sensor seed,
 recorded to ordinary bags under OUT:
   identification/  3,000 s: the 1,500 samples (900 training, 600 test)
   validation/      3,000 s: a run the model never saw (free-run prediction)
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.core.identification import excitation_table
+from ato_nodes.core.control.identification import excitation_table
 
 TOP_SPEED = 320.0 / 3.6  # m/s, the excitation's highest level
 RUNS = (  # name, staircase seed, duration s, extra overrides

@@ -29,12 +29,12 @@ import numpy as np
 
 from ato_nodes import jsontext
 from ato_nodes.bagio import BagError, read_run
-from ato_nodes.core import identification as ident
-from ato_nodes.core import lssvm
-from ato_nodes.core.gpc import MultiModel
-from ato_nodes.core.plant import TrainParameters
-from ato_nodes.core.schema import defaults
-from ato_nodes.core.units import MS_TO_KMH
+from ato_nodes.core.control import identification as ident
+from ato_nodes.core.control import lssvm
+from ato_nodes.core.control.gpc import MultiModel
+from ato_nodes.core.train.plant import TrainParameters
+from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.base.units import MS_TO_KMH
 
 PAPER = {"train": (-1.2627, 1.0568), "test": (-1.9182, 1.8369), "mu": 6599.8,
          "delta": 0.0597 ** 0.5}

@@ -6,7 +6,7 @@ coast and brake), and compare it with the flat-out run and the DP energy-optimal
         --algorithm kh --supplement 0.05 --out bags/strategy-kh
 
 Algorithms: kh and pso search seed 002's switching points (per segment between neutral
-sections: cruise speed and coasting point) on G (core/strategy.py: indices, weights),
+sections: cruise speed and coasting point) on G (core/targets/strategy.py: indices, weights),
 with --evaluations and --seed; dp is the energy-optimal limit (dynamic programming over
 position and speed, the running time enforced by a bisected price of time); mareco is
 a cruise-and-coast strategy (one cruise speed, bisected to meet the time, coasting over
@@ -31,12 +31,12 @@ import _cli
 import numpy as np
 
 from ato_nodes import jsontext
-from ato_nodes.core import strategy
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.line import load_line
-from ato_nodes.core.paths import resolve_file
-from ato_nodes.core.scenario import complete, train_preset
-from ato_nodes.core.units import MS_TO_KMH
+from ato_nodes.core.targets import strategy
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.train.line import load_line
+from ato_nodes.core.base.paths import resolve_file
+from ato_nodes.core.config.scenario import complete, train_preset
+from ato_nodes.core.base.units import MS_TO_KMH
 
 
 

@@ -22,10 +22,10 @@ import _cli
 import numpy as np
 
 from ato_nodes import jsontext
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, check_given_once, load_scenario
-from ato_nodes.core.scoring import score_series
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, check_given_once, load_scenario
+from ato_nodes.core.run.scoring import score_series
 
 INDICES = (  # key, heading, worst is the largest of
     ("max_abs_error_kmh", "max abs(e) km/h"),

@@ -29,7 +29,7 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.bagio import BagError, message_counts, read_run
-from ato_nodes.core.schema import NODES
+from ato_nodes.core.config.schema import NODES
 from ato_nodes.launch import node_processes
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,9 +11,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.bagio import LABELLED, PARAMETERS_KEY, ROLES
-from ato_nodes.core.loop import SERIES
-from ato_nodes.core.scoring import LINE_BASE64, encode_line
-from ato_nodes.core.topics import topic_map
+from ato_nodes.core.run.loop import SERIES
+from ato_nodes.core.run.scoring import LINE_BASE64, encode_line
+from ato_nodes.core.base.topics import topic_map
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 TYPES = TYPESTORE.types

@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import rclpy  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
-from ato_nodes.core.topics import topic_map  # noqa: E402
+from ato_nodes.core.base.topics import topic_map  # noqa: E402
 from ato_nodes.nodes.base import message_class  # noqa: E402
 from probes import init_in_held_domain  # noqa: E402
 

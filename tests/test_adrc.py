@@ -5,11 +5,11 @@ from dataclasses import replace
 
 import pytest
 
-from ato_nodes.core.adrc import (HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
-                                 NonlinearESO, TrackingDifferentiator, fal, fal_gain, fhan)
-from ato_nodes.core.limiter import CommandLimiter
-from ato_nodes.core.schema import defaults
-from ato_nodes.core.spec import settings
+from ato_nodes.core.control.adrc import (HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
+                                         NonlinearESO, TrackingDifferentiator, fal, fal_gain, fhan)
+from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.base.spec import settings
 
 
 def han_gains() -> HanADRCGains:

@@ -18,8 +18,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.bagio import PARAMETERS_KEY, read_frame, read_parameters, read_run
 from ato_nodes.bagrepair import RepairError, needs_repair, repair
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.summary import bag_contents
 from bagfile import write_run_bag
 

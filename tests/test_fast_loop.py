@@ -1,4 +1,4 @@
-"""The compiled loop (core/fast_loop.py) against the Python loop, bit for bit, and
+"""The compiled loop (core/run/fast_loop.py) against the Python loop, bit for bit, and
 against itself run in chunks of steps."""
 
 import itertools
@@ -7,10 +7,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ato_nodes.core import fast_loop, kernels, loop
-from ato_nodes.core.indices import RunningIndex
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run import fast_loop, loop
+from ato_nodes.core.base import kernels
+from ato_nodes.core.scoring.indices import RunningIndex
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
@@ -130,7 +131,7 @@ def test_runs_it_does_not_cover_take_the_python_loop():
 
 
 def stages(values):
-    from ato_nodes.core.stages import ControllerStage, PlantStage, ProfileStage
-    from ato_nodes.core.schema import NodeValues
+    from ato_nodes.core.run.stages import ControllerStage, PlantStage, ProfileStage
+    from ato_nodes.core.config.schema import NodeValues
     return (ProfileStage(NodeValues("profile", values)), PlantStage(NodeValues("plant", values)),
             ControllerStage(NodeValues("controller", values)), None)

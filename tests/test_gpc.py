@@ -4,11 +4,11 @@ tracking, online correction, and its one-line start-up errors."""
 import numpy as np
 import pytest
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.gpc import GPC, Arx, GPCSettings
-from ato_nodes.core.limiter import CommandLimiter
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.control.gpc import GPC, Arx, GPCSettings
+from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 
 
 class FixedModel:

@@ -232,8 +232,8 @@ def test_tune_refuses_what_the_launcher_sets_and_other_kinds_parameters(tmp_path
 def metro_bag(tmp_path: Path, name: str = "bag", overrides=(), **kept) -> Path:
     """A 5 s metro run's bag (with --set-like `overrides`); `kept` replaces parameters in
     its metadata as given ("whole": all of them)."""
-    from ato_nodes.core.loop import simulate
-    from ato_nodes.core.scenario import apply_overrides, load_scenario
+    from ato_nodes.core.run.loop import simulate
+    from ato_nodes.core.config.scenario import apply_overrides, load_scenario
     from bagfile import write_run_bag
     values = apply_overrides(load_scenario("seed004-metro"), ["run.duration=5", *overrides])
     bag = write_run_bag(tmp_path / name, simulate(values), values)

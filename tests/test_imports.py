@@ -77,7 +77,7 @@ def test_the_graph_sees_every_kind_of_import():
         "p.a", "p.b", "p.sub", "p.sub.e", "p.c", "p.d"}
     assert imported_modules("from . import e", "p.sub", True, modules) == {"p.sub.e"}
     graph = import_graph()
-    assert "ato_nodes.core.schema" in graph["ato_nodes.core.loop"]
+    assert "ato_nodes.core.config.schema" in graph["ato_nodes.core.run.loop"]
     assert "ato_nodes.jsontext" in graph["ato_nodes.report"]
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set()}) == []
@@ -93,3 +93,49 @@ def test_in_process_tuning_does_not_load_the_bag_reader():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+# The rooms of ato_nodes/core and the rooms each may import besides itself, from the
+# bottom up (docs/architecture.md): configuration names the kinds, so it sits on the
+# algorithms it assembles; the run (stages, loops, the scorer of a run) on everything.
+ROOMS_BELOW = {
+    "base": set(),
+    "optimizers": {"base"},
+    "train": {"base"},
+    "scoring": {"base"},
+    "control": {"base", "optimizers", "train"},
+    "targets": {"base", "optimizers", "train"},
+    "config": {"base", "optimizers", "train", "scoring", "control", "targets"},
+    "run": {"base", "optimizers", "train", "scoring", "control", "targets", "config"},
+}
+OUTSIDE_THE_CORE = ("rclpy", "rosbags", "mcap", "std_msgs", "geometry_msgs", "rosgraph_msgs")
+
+
+def room(module: str) -> str | None:
+    """The room of a core module (or of a room's package itself), else None."""
+    parts = module.split(".")
+    return parts[2] if len(parts) > 2 and parts[:2] == ["ato_nodes", "core"] else None
+
+
+def test_every_core_module_sits_in_a_room_and_imports_only_the_rooms_below_it():
+    graph = import_graph()
+    core = [m for m in graph if room(m) is not None]
+    assert {room(m) for m in core} == set(ROOMS_BELOW), "a module outside the rooms"
+    wrong = [f"{m} imports {t}" for m in core for t in graph[m]
+             if room(t) != room(m) and room(t) not in ROOMS_BELOW[room(m)]]
+    assert not wrong, "; ".join(wrong)
+
+
+def test_the_core_knows_nothing_of_ros_bags_or_the_rest_of_the_package():
+    for path in sorted((PACKAGE / "core").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = ([alias.name for alias in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom)
+                     and not node.level else [])
+            for name in names:
+                assert not name.startswith(OUTSIDE_THE_CORE), f"{path} imports {name}"
+                assert not name.startswith("ato_nodes.") or name.startswith("ato_nodes.core"), \
+                    f"{path} imports {name}"
+            if isinstance(node, ast.ImportFrom) and node.level:
+                depth = len(path.relative_to(PACKAGE / "core").parts) - 1
+                assert node.level <= depth + 1, f"{path} imports from beyond the core"

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ato_nodes.core.indices import iae, ise, itae, seed004_j, tracking_indices
+from ato_nodes.core.scoring.indices import iae, ise, itae, seed004_j, tracking_indices
 
 
 T = np.linspace(0.0, 10.0, 1001)

@@ -12,8 +12,8 @@ import pytest
 from ato_nodes.report import write_report
 from ato_nodes.bagio import read_run
 from ato_nodes.cli import score_bag
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from bagfile import write_run_bag
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.core.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.paths import config_dir
+from ato_nodes.core.train.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.paths import config_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -6,12 +6,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ato_nodes.core import loop
-from ato_nodes.core.components import CONTROLLERS
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.stages import ControllerStage, ProfileStage
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run import loop
+from ato_nodes.core.config.components import CONTROLLERS
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.stages import ControllerStage, ProfileStage
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 
 
 def values(*overrides):

@@ -8,9 +8,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from ato_nodes.core import identification as ident
-from ato_nodes.core import lssvm
-from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.control import identification as ident
+from ato_nodes.core.control import lssvm
+from ato_nodes.core.base.errors import ScenarioError
 
 LAYOUT = lssvm.Layout(2, 1, 1)
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from ato_nodes.core.operation import format_operation, operation_indices
+from ato_nodes.core.scoring.operation import format_operation, operation_indices
 
 
 def run(t, speed=None, force=None, acceleration=None, position=None, **extra):

@@ -16,7 +16,7 @@ from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
 from ato_nodes.cli import console
-from ato_nodes.core.schema import NODES
+from ato_nodes.core.config.schema import NODES
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "ato_nodes"
@@ -53,7 +53,7 @@ def manifest():
 
 
 def test_the_library_imports_outside_the_repository(tmp_path):
-    result = subprocess.run([sys.executable, "-c", "import ato_nodes.core.loop, ato_nodes; "
+    result = subprocess.run([sys.executable, "-c", "import ato_nodes.core.run.loop, ato_nodes; "
                              "print(ato_nodes.__file__)"], capture_output=True, text=True,
                             cwd=tmp_path, timeout=60)
     assert result.returncode == 0, result.stderr

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import (apply_overrides, check_launcher_free, load_scenario,
-                                     ros_parameter_file, scenario_names)
-from ato_nodes.core.schema import SPECS, NodeValues, for_node, steps, unused
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import (apply_overrides, check_launcher_free, load_scenario,
+                                            ros_parameter_file, scenario_names)
+from ato_nodes.core.config.schema import SPECS, NodeValues, for_node, steps, unused
 from ato_nodes.launch import DomainLock, node_environment
 
 ROOT = Path(__file__).resolve().parents[1]

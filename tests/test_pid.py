@@ -5,11 +5,11 @@ from dataclasses import replace
 
 import pytest
 
-from ato_nodes.core.limiter import CommandLimiter
-from ato_nodes.core.pid import PID, PIDGains
-from ato_nodes.core.plant import PointMassTrain, TrainParameters
-from ato_nodes.core.schema import defaults
-from ato_nodes.core.spec import settings
+from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.control.pid import PID, PIDGains
+from ato_nodes.core.train.plant import PointMassTrain, TrainParameters
+from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.base.spec import settings
 
 PERIOD = 0.05
 

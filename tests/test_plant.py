@@ -6,14 +6,14 @@ import pytest
 
 from dataclasses import replace
 
-from ato_nodes.core.plant import PointMassTrain, TrainState
-from ato_nodes.core.schema import defaults
+from ato_nodes.core.train.plant import PointMassTrain, TrainState
+from ato_nodes.core.config.schema import defaults
 
 QUIET = dict(disturbance_amplitude=0.0)
 
 
 def TrainParameters(**changes):  # noqa: N802 -- the schema's defaults, changed
-    from ato_nodes.core.plant import TrainParameters as parameters
+    from ato_nodes.core.train.plant import TrainParameters as parameters
     return replace(parameters.from_values(defaults()), **changes)
 
 

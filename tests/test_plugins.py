@@ -5,13 +5,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ato_nodes.core.components import CONTROLLERS, PROFILES
-from ato_nodes.core.context import RunContext
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import SERIES, simulate
-from ato_nodes.core.stages import ControllerStage, ProfileStage
-from ato_nodes.core.scenario import apply_overrides, load_scenario, validate
-from ato_nodes.core.schema import SPECS, NodeValues, defaults
+from ato_nodes.core.config.components import CONTROLLERS, PROFILES
+from ato_nodes.core.config.context import RunContext
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import SERIES, simulate
+from ato_nodes.core.run.stages import ControllerStage, ProfileStage
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, validate
+from ato_nodes.core.config.schema import SPECS, NodeValues, defaults
 
 
 def values(scenario="seed000", *overrides):
@@ -44,11 +44,11 @@ def test_a_parameter_default_is_written_once_in_the_schema():
 
 
 def test_configuration_objects_have_no_defaults_of_their_own():
-    from ato_nodes.core.adrc import DiscreteADRCGains, HanADRCGains, LinearADRCGains
-    from ato_nodes.core.gpc import GPCSettings
-    from ato_nodes.core.pid import PIDGains
-    from ato_nodes.core.plant import TrainParameters
-    from ato_nodes.core.profiles import Seed000Profile
+    from ato_nodes.core.control.adrc import DiscreteADRCGains, HanADRCGains, LinearADRCGains
+    from ato_nodes.core.control.gpc import GPCSettings
+    from ato_nodes.core.control.pid import PIDGains
+    from ato_nodes.core.train.plant import TrainParameters
+    from ato_nodes.core.targets.profiles import Seed000Profile
     for cls in (HanADRCGains, DiscreteADRCGains, LinearADRCGains, PIDGains, GPCSettings,
                 TrainParameters, Seed000Profile):
         assert all(f.default is dataclasses.MISSING for f in dataclasses.fields(cls)), cls

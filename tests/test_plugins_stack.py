@@ -16,11 +16,12 @@ import pytest
 from ato_nodes import jsontext
 from ato_nodes.report import write_report
 from ato_nodes.bagio import message_counts, read_parameters, read_run, read_series
-from ato_nodes.core.line import load_line
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.scoring import format_indices, kept_file, score_series
-from ato_nodes.core.schema import NODES
+from ato_nodes.core.train.line import load_line
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.scoring.catalogue import format_indices
+from ato_nodes.core.run.scoring import kept_file, score_series
+from ato_nodes.core.config.schema import NODES
 from ato_nodes.launch import DomainLock, Stack, node_environment
 from ato_nodes.tuning import evaluate_in_process, evaluate_in_stack
 

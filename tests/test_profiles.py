@@ -2,10 +2,10 @@
 
 import pytest
 
-from ato_nodes.core.context import RunContext
-from ato_nodes.core.profiles import StepProfile, TableProfile
-from ato_nodes.core.units import KMH
-from ato_nodes.core.schema import defaults
+from ato_nodes.core.config.context import RunContext
+from ato_nodes.core.targets.profiles import StepProfile, TableProfile
+from ato_nodes.core.base.units import KMH
+from ato_nodes.core.config.schema import defaults
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.core.topics import step_topics
+from ato_nodes.core.base.topics import step_topics
 from ato_nodes.launch import node_environment
 
 pytestmark = pytest.mark.integration

@@ -13,10 +13,10 @@ from ato_nodes.analysis import (FAIL, INDEX_COLUMNS, LIMIT_COLOUR, PASS, RUN_COL
                                 read_tuning, verdict_rows)
 from ato_nodes.bagio import Run
 from ato_nodes.report import write_report
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario, scenario_names
-from ato_nodes.core.operation import drive_modes, windowed_jerk
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
+from ato_nodes.core.scoring.operation import drive_modes, windowed_jerk
 from ato_nodes.report_html import mode_segments, time_figure
 
 

@@ -10,8 +10,8 @@ import pytest
 
 from ato_nodes.report import write_report
 from ato_nodes.bagio import Run
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.stages import ControllerStage, PlantStage
-from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.schema import NodeValues
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.stages import ControllerStage, PlantStage
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.schema import NodeValues
 
 ROOT = Path(__file__).resolve().parents[1]
 FACTORS = ("plant.mass_factor", "plant.resistance_factor", "plant.lag_factor")

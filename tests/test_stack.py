@@ -23,11 +23,11 @@ from rosbags.highlevel import AnyReader
 
 from ato_nodes import jsontext
 from ato_nodes.bagio import read_run, read_series, resimulate
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scenario import apply_overrides, load_scenario
-from ato_nodes.core.schema import NODES
-from ato_nodes.core.scoring import score_series
-from ato_nodes.core.topics import step_topics
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.schema import NODES
+from ato_nodes.core.run.scoring import score_series
+from ato_nodes.core.base.topics import step_topics
 from ato_nodes.launch import node_environment, node_processes
 from ato_nodes.nodefork import NODE_START
 from ato_nodes.nodes.base import STANDARD_EXECUTOR
@@ -369,8 +369,8 @@ def test_ros2_param_set_refuses_fixed_parameters_and_applies_live_gains_reproduc
 
 def test_a_compiled_in_process_run_equals_the_nodes_run_bit_for_bit(tmp_path):
     """seed000-realistic (lag, envelope, noisy quantised sensor) runs compiled in-process
-    (core/fast_loop.py) and as Python in the nodes: every series is the same."""
-    from ato_nodes.core import fast_loop
+    (core/run/fast_loop.py) and as Python in the nodes: every series is the same."""
+    from ato_nodes.core.run import fast_loop
     from ato_nodes.launch import run_checked
     if not fast_loop.AVAILABLE:
         pytest.skip("numba is not installed: in-process runs are Python too")

@@ -5,13 +5,13 @@ import hashlib
 import numpy as np
 import pytest
 
-from ato_nodes.core import strategy
-from ato_nodes.core.context import RunContext
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.line import parse_line
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.plant import TrainParameters
-from ato_nodes.core.scenario import apply_overrides, complete, load_scenario
+from ato_nodes.core.targets import strategy
+from ato_nodes.core.config.context import RunContext
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.train.line import parse_line
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.train.plant import TrainParameters
+from ato_nodes.core.config.scenario import apply_overrides, complete, load_scenario
 
 CRH5 = TrainParameters.from_values(complete({"plant.train": "crh5"}, []))
 

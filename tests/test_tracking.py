@@ -12,17 +12,17 @@ import numpy as np
 import pytest
 
 from ato_nodes.analysis import markdown_table
-from ato_nodes.core.adrc import LinearADRC, LinearADRCGains
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.limiter import CommandLimiter
-from ato_nodes.core.line import load_line
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
-from ato_nodes.core.profiles import AtoCurve, FeasiblePlan, Seed000Profile
-from ato_nodes.core.scenario import apply_overrides, load_scenario, train_preset
-from ato_nodes.core.schema import defaults
-from ato_nodes.core.scoring import score_series
-from ato_nodes.core.train_model import NominalTrain
+from ato_nodes.core.control.adrc import LinearADRC, LinearADRCGains
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.train.line import load_line
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
+from ato_nodes.core.targets.profiles import AtoCurve, FeasiblePlan, Seed000Profile
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
+from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.run.scoring import score_series
+from ato_nodes.core.control.train_model import NominalTrain
 
 PERIOD = 0.1
 ROOT = Path(__file__).resolve().parents[1]

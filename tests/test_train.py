@@ -7,17 +7,17 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ato_nodes.core.adrc import DiscreteADRC, DiscreteADRCGains, fal, nladrc_gains
-from ato_nodes.core.limiter import CommandLimiter
-from ato_nodes.core.line import parse_line
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.stages import PlantStage, ProfileStage
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, load_scenario, train_names, train_preset
-from ato_nodes.core.schema import defaults
-from ato_nodes.core.spec import settings
-from ato_nodes.core.plant import PointMassTrain, TrainParameters, TrainState
-from ato_nodes.core.profiles import AtoCurve
+from ato_nodes.core.control.adrc import DiscreteADRC, DiscreteADRCGains, fal, nladrc_gains
+from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.train.line import parse_line
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.stages import PlantStage, ProfileStage
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_names, train_preset
+from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.base.spec import settings
+from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
+from ato_nodes.core.targets.profiles import AtoCurve
 
 
 def line(body: str, length: float = 100000.0, limit: float = 100.0):
@@ -262,7 +262,7 @@ def test_untuned_line_scenarios_run_to_the_station_under_the_limit(scenario):
 
 
 def test_the_scorer_takes_the_line_from_the_bag_and_j_uses_the_notch_level():
-    from ato_nodes.core.scoring import LINE_BASE64, encode_line, notch_level, score_series
+    from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, notch_level, score_series
     t = np.arange(0.0, 10.0, 1.0)
     series = {"t": t, "target": np.zeros_like(t), "speed": np.zeros_like(t),
               "position": np.full_like(t, 2899.5), "acceleration": np.zeros_like(t),
@@ -280,7 +280,7 @@ def test_the_scorer_takes_the_line_from_the_bag_and_j_uses_the_notch_level():
 
 
 def test_the_scorer_finds_the_stepped_approach_and_the_error_outside_it():
-    from ato_nodes.core.scoring import score_series
+    from ato_nodes.core.run.scoring import score_series
     values = apply_overrides(load_scenario("seed003-maglev"), ["run.duration=80"])
     series = simulate(values)
     indices = score_series(series, values)
@@ -294,7 +294,7 @@ def test_the_scorer_finds_the_stepped_approach_and_the_error_outside_it():
 def test_the_tuned_metro_meets_the_operational_targets():
     """The shipped seed-004 tuning: stop within 0.3 m, jerk under 0.75 m/s^3 (1 s),
     never above the limit, and a lower J than the untuned gains."""
-    from ato_nodes.core.scoring import score_series
+    from ato_nodes.core.run.scoring import score_series
     results = {}
     for scenario in ("seed004-metro", "seed004-metro-tuned"):
         values = load_scenario(scenario)
@@ -308,7 +308,7 @@ def test_the_tuned_metro_meets_the_operational_targets():
 
 
 def test_the_tuned_maglev_tracks_better_than_the_untuned_one():
-    from ato_nodes.core.scoring import score_series
+    from ato_nodes.core.run.scoring import score_series
     itae = {}
     for scenario in ("seed003-maglev", "seed003-maglev-tuned"):
         values = load_scenario(scenario)

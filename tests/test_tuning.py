@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import node_processes as launched_nodes
 from ato_nodes.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings, evaluate_in_process,
                               evaluate_in_stack)

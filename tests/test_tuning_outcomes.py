@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.core import kernels
+from ato_nodes.core.base import kernels
 from ato_nodes.tuning import COMPILING
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.core.components import CONTROLLERS
-from ato_nodes.core.indices import RunningIndex
-from ato_nodes.core.loop import simulate
-from ato_nodes.core.scoring import score_series
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.components import CONTROLLERS
+from ato_nodes.core.scoring.indices import RunningIndex
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.scoring import score_series
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,7 +17,7 @@ import rclpy  # noqa: E402
 from rcl_interfaces.msg import Log  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
-from ato_nodes.core.topics import topic_map  # noqa: E402
+from ato_nodes.core.base.topics import topic_map  # noqa: E402
 from ato_nodes.nodes.base import QOS, message_class  # noqa: E402
 from probes import init_in_held_domain, spin_then_print  # noqa: E402
 

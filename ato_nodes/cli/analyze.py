@@ -19,7 +19,7 @@ from pathlib import Path
 from ato_nodes import cli
 from ato_nodes.analysis import ReportError
 from ato_nodes.bagio import BagError, parse_mapping, read_run
-from ato_nodes.core.errors import ScenarioError
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.report import write_report
 
 

@@ -14,11 +14,11 @@ import time
 from pathlib import Path
 
 from ato_nodes import cli
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import (apply_overrides, check_given_once, check_launcher_free,
-                                     load_scenario)
-from ato_nodes.core.schema import steps
-from ato_nodes.core.scoring import format_indices
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import (apply_overrides, check_given_once, check_launcher_free,
+                                            load_scenario)
+from ato_nodes.core.config.schema import steps
+from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.summary import bag_contents, write_summary
 
 EXIT_FAILED, EXIT_INTERRUPTED = 1, 130

@@ -17,7 +17,8 @@ import sys
 from ato_nodes import jsontext
 from ato_nodes import cli
 from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
-from ato_nodes.core.scoring import format_indices, score_series, stop_not_reached
+from ato_nodes.core.scoring.catalogue import format_indices
+from ato_nodes.core.run.scoring import score_series, stop_not_reached
 
 
 def main() -> None:

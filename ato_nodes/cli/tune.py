@@ -22,9 +22,9 @@ from pathlib import Path
 
 from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.scenario import (apply_overrides, check_given_once, check_launcher_free,
-                                     load_scenario)
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import (apply_overrides, check_given_once, check_launcher_free,
+                                            load_scenario)
 from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
                               TuningSettings)
 

@@ -25,12 +25,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.faults import parse_fault
-from ato_nodes.core.scenario import complete, train_preset
-from ato_nodes.core.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
-from ato_nodes.core.scoring import LINE_BASE64, encode_line, kept_files
-from ato_nodes.core.topics import Topic, topic_map
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.faults import parse_fault
+from ato_nodes.core.config.scenario import complete, train_preset
+from ato_nodes.core.config.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
+from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
+from ato_nodes.core.base.topics import Topic, topic_map
 
 QOS = {
     "data": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,

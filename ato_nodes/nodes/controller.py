@@ -14,10 +14,10 @@ import json
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
-from ato_nodes.core.components import CONTROLLERS
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.stages import ControllerStage
-from ato_nodes.core.schema import SPEC_BY_NAME
+from ato_nodes.core.config.components import CONTROLLERS
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.stages import ControllerStage
+from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.nodes.base import AtoNode, run_node
 
 

@@ -13,8 +13,8 @@ from geometry_msgs.msg import Twist
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
-from ato_nodes.core.stages import PlantStage
-from ato_nodes.core.schema import recording_steps, steps
+from ato_nodes.core.run.stages import PlantStage
+from ato_nodes.core.config.schema import recording_steps, steps
 from ato_nodes.nodes.base import AtoNode, run_node
 
 

@@ -1,11 +1,11 @@
 """Target-speed profile node: on step k's position, the target horizon of step k+2
-(see ato_nodes.core.stages for why two steps ahead) and the speed limit of step k."""
+(see ato_nodes.core.run.stages for why two steps ahead) and the speed limit of step k."""
 
 from __future__ import annotations
 
 from std_msgs.msg import Float64, Float64MultiArray
 
-from ato_nodes.core.stages import ProfileStage
+from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.nodes.base import AtoNode, run_node
 
 

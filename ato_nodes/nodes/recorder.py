@@ -35,9 +35,9 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.bagio import PARAMETERS_KEY
 from ato_nodes.bagwrite import close_writer, open_writer, qos
-from ato_nodes.core.errors import ScenarioError
-from ato_nodes.core.schema import LOOP_NODES, recording_steps
-from ato_nodes.core.topics import Topic, step_topics
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.schema import LOOP_NODES, recording_steps
+from ato_nodes.core.base.topics import Topic, step_topics
 from ato_nodes.nodes.base import QOS, AtoNode, LockstepInputs, run_node
 
 

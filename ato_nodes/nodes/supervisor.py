@@ -22,9 +22,9 @@ from rclpy.duration import Duration
 from std_msgs.msg import Float64
 
 from ato_nodes import jsontext
-from ato_nodes.core.indices import RunningIndex
-from ato_nodes.core.schema import SUPERVISED_NODES, steps
-from ato_nodes.core.scoring import format_indices
+from ato_nodes.core.scoring.indices import RunningIndex
+from ato_nodes.core.config.schema import SUPERVISED_NODES, steps
+from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.nodes.base import AtoNode, parameter_files, run_node
 from ato_nodes.summary import bag_contents, write_summary
 

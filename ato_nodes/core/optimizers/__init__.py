@@ -27,8 +27,8 @@ from typing import Any
 
 from .apso import AdaptivePSO
 from .awpso import AdaptiveWeightPSO
-from .base import Fitness, IterationRecord, Optimizer, Result, Seed, StopReason
 from .bas import BeetleAntennaeSearch, BeetleSwarm
+from .base import Fitness, IterationRecord, Optimizer, Result, Seed, StopReason
 from .gapso import GeneticPSO
 from .krill_herd import KrillHerd
 from .pso import ParticleSwarm

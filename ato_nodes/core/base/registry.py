@@ -1,0 +1,115 @@
+"""Plug-in registries: the one place that maps a component's `kind` to its factory,
+its parameter group and, for controllers, its named outputs.
+
+A component kind is registered once (core/config/components.py lists them); the
+schema takes its parameters from here, the loop its factory, the nodes and
+the recorder its outputs, the scorer what it says of its observer. Nothing
+else compares kind names.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from .errors import ScenarioError
+from .spec import ParamSpec, param
+
+
+@dataclass(frozen=True)
+class Output:
+    """A named value a controller reports every step besides its command."""
+
+    name: str
+    unit: str
+    description: str
+
+
+@dataclass(frozen=True)
+class Component:
+    """One registered kind.
+
+    factory(values, context, **extra) builds it from the run's values (a mapping
+    that holds exactly what the node declares) and the read-only RunContext.
+    observer_gain(values), for controllers with a third-order extended state
+    observer whose outputs z1, z2, z3 estimate speed, acceleration and total
+    disturbance: the observer's input gain b0 in m/s^3 per N/kN, which the
+    scorer needs to rebuild the disturbance z3 estimates. search_space: the
+    (parameter, low, high) that tune.py tunes when given no --params. state_paths, for
+    controllers: the attribute paths of what the controller carries from step to step
+    (observer, filters, integrators); with it, the kind's own float parameters are live
+    during a run: a change rebuilds the controller with the new values and carries
+    the state over (stages.ControllerStage.retune). Without it none are.
+    """
+
+    kind: str
+    description: str
+    parameters: tuple[ParamSpec, ...]
+    factory: Callable[..., Any]
+    outputs: tuple[Output, ...] = ()
+    observer_gain: Callable[[Any], float] | None = None
+    search_space: tuple[tuple[str, float, float], ...] = ()  # what tune.py tunes by default
+    state_paths: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
+
+    @property
+    def live_parameters(self) -> tuple[str, ...]:
+        """Its own parameters that may change during a run (see `state_paths`)."""
+        return tuple(spec.name for spec in self.parameters
+                     if self.state_paths and spec.value_type is float)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(output.name for output in self.outputs)
+
+    @property
+    def own_parameters(self) -> str:
+        """Its parameter group, as a person reads it: 'dadrc.*'."""
+        if not self.parameters:
+            return "it has no parameters of its own"
+        return f"its parameters are {self.parameters[0].name.rsplit('.', 1)[0]}.*"
+
+
+class Registry:
+    """The kinds of one component role; `role.kind` chooses among them."""
+
+    def __init__(self, role: str, default: str, nodes: tuple[str, ...],
+                 components: tuple[Component, ...]):
+        self.role, self.nodes = role, nodes
+        self.components = {component.kind: component for component in components}
+        if len(self.components) != len(components) or default not in self.components:
+            raise ValueError(f"{role} registry: duplicate kinds or unknown default {default!r}")
+        self.kind_parameter = param(
+            f"{role}.kind", default, f"{role} kind: " + "; ".join(
+                f"{c.kind} ({c.description})" for c in components), nodes,
+            choices=tuple(self.components))
+
+    def __getitem__(self, kind: str) -> Component:
+        try:
+            return self.components[kind]
+        except KeyError:
+            close = difflib.get_close_matches(kind, self.components, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ScenarioError(f"unknown {self.role}.kind {kind!r}{hint}; known: "
+                                f"{', '.join(self.components)}") from None
+
+    def chosen(self, values) -> Component:
+        return self[values[self.kind_parameter.name]]
+
+    def unused(self, values) -> dict[str, str]:
+        """The parameters of the kinds `values` does not choose, each with the line that
+        says whose they are: a run declares none of them, and a scenario or an override
+        that gives one is refused (it would change nothing). Empty when `values` does not
+        say which kind runs (a node that does not declare `role.kind` has none of them)."""
+        name = self.kind_parameter.name
+        if name not in values:
+            return {}
+        chosen = self[values[name]]
+        return {spec.name: f"{spec.name} belongs to {self.role} kind {component.kind}; this "
+                           f"run uses {chosen.kind} ({chosen.own_parameters})"
+                for component in self.components.values() if component is not chosen
+                for spec in component.parameters}
+
+    def parameters(self) -> tuple[ParamSpec, ...]:
+        return (self.kind_parameter,
+                *(spec for component in self.components.values() for spec in component.parameters))

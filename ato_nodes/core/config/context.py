@@ -1,0 +1,72 @@
+"""The read-only run context every component receives at construction.
+
+It holds what an ATO knows before the run starts: the control period, the
+nominal train (the preset's parameters, core.plant.TrainParameters), the line,
+and the planned target (the chosen profile kind's plan), with the preview of
+that plan over any horizon. Built from the same values in every runner, so a
+component sees the same context in a node and in simulate().
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+from ..base.errors import ScenarioError
+from ..targets.profiles import FeasiblePlan
+from ..train.line import Line, load_line
+from ..train.plant import TrainParameters
+from .components import PROFILES
+from .schema import steps
+
+
+class RunContext:
+    def __init__(self, values, line: Line | None = None):
+        self.values = values
+        self.period = values["run.period"]
+        self.steps = steps(values)
+        self.train = TrainParameters.from_values(values)
+        if line is None and values["line.file"]:
+            line = load_line(values["line.file"])
+        self.line = line
+
+    @functools.cached_property
+    def plan(self):
+        """The planned target: speed(t, position) in m/s, and position_indexed; made
+        drivable by the nominal train when profile.envelope_share or profile.jerk asks."""
+        values = self.values
+        plan = PROFILES.chosen(values).factory(values, self)
+        share, jerk = values["profile.envelope_share"], values["profile.jerk"]
+        if not (share or jerk) or getattr(plan, "shapes_itself", False):
+            return plan
+        if plan.position_indexed:
+            raise ScenarioError(f"profile.envelope_share and profile.jerk apply to time-indexed "
+                                f"profiles and the ato curve, not to profile.kind "
+                                f"{values['profile.kind']}")
+        return FeasiblePlan(plan, self.train, share, jerk, self.period, self.steps)
+
+    def speed_limit(self, position: float) -> float:
+        """The limit that applies with the head at `position`, m/s (inf without a line):
+        the plan's own belt limit where it has one (the ATO curve's tail rule)."""
+        limit = getattr(self.plan, "limit", None)
+        if limit is not None:
+            return limit(position)
+        return self.line.speed_limit(position) if self.line is not None else math.inf
+
+    def horizon(self, step: int, position: float, count: int) -> list[float]:
+        """The plan's targets of steps step .. step + count, from `position` at step:
+        exact for time-indexed plans; for position-indexed plans along the planned
+        trajectory ds/dt = v(s) from `position` (Heun's method, one step per period)."""
+        plan, h = self.plan, self.period
+        speeds = [plan.speed(step * h, position)]
+        if not count:  # the papers' setting, every step of every run: kept cheap
+            return speeds
+        if not plan.position_indexed:
+            speeds.extend(plan.speed((step + i) * h, position) for i in range(1, count + 1))
+            return speeds
+        for i in range(1, count + 1):
+            t, v = (step + i) * h, speeds[-1]
+            ahead = plan.speed(t, position + h * v)
+            position += 0.5 * h * (v + ahead)
+            speeds.append(plan.speed(t, position))
+        return speeds

@@ -1,0 +1,291 @@
+"""Scenario files, train presets and --set overrides: from what a user gives to the
+complete, checked values of a run.
+
+Scenario files are ROS 2 parameter files (node name -> ros__parameters, with
+`/**` for the parameters several nodes share), so the same file feeds
+`--params-file` and the in-process simulation. Everything is checked here,
+before any process starts; every problem is one ScenarioError line.
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..base import yamlfile
+from ..base.errors import ScenarioError
+from ..base.paths import config_dir, resolve_file
+from ..control.limiter import CommandLimiter
+from ..scoring.catalogue import Requirement
+from ..train.line import load_line
+from .components import CONTROLLERS
+from .context import RunContext
+from .faults import parse_fault
+from .schema import (
+    FILE_PARAMETERS,
+    NODES,
+    SPEC_BY_NAME,
+    SPECS,
+    NodeValues,
+    defaults,
+    shared,
+    unused,
+)
+
+
+def _unknown(name: str, where: str) -> ScenarioError:
+    close = difflib.get_close_matches(name, SPEC_BY_NAME, n=1)
+    hint = f" (did you mean {close[0]}?)" if close else ""
+    return ScenarioError(f"{where}: unknown parameter {name!r}{hint}")
+
+
+def scenario_names() -> list[str]:
+    return sorted(p.stem for p in (config_dir() / "scenarios").glob("*.yaml"))
+
+
+def resolve_scenario(name_or_file: str) -> Path:
+    path = Path(name_or_file)
+    if path.is_dir():
+        raise ScenarioError(f"scenario {name_or_file} is a directory, not a scenario file")
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        if not path.exists():
+            raise ScenarioError(f"scenario file {name_or_file} does not exist")
+        return path  # read as yamlfile reads it: a regular file, bounded
+    candidate = config_dir() / "scenarios" / f"{name_or_file}.yaml"
+    if candidate.is_file():
+        return candidate
+    raise ScenarioError(f"unknown scenario {name_or_file!r}; known: {', '.join(scenario_names())}")
+
+
+def load_scenario(name_or_file: str) -> dict[str, Any]:
+    """All parameters of a scenario: defaults overlaid with the file's values, checked.
+    A file with a top-level `base: SCENARIO` (a name, or a file relative to this one)
+    holds only what differs from that scenario (tune.py's best.yaml)."""
+    path = resolve_scenario(name_or_file)
+    document = yamlfile.load(path, "scenario")
+    if not isinstance(document, dict):
+        raise ScenarioError(f"{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)")
+    document = dict(document)
+    base = document.pop("base", None)
+    if base is not None and not isinstance(base, str):
+        raise ScenarioError(f"{path}: base must be a scenario name or file, not {base!r}")
+    given = _given_values(path, document)
+    if base is None:
+        return validate(complete(given, [path.parent], str(path)), str(path))
+    relative = path.parent / base
+    base_values = load_scenario(str(relative) if relative.suffix in (".yaml", ".yml")
+                                else base)
+    for name in FILE_PARAMETERS:
+        if given.get(name):
+            given[name] = resolve_file(given[name], [path.parent])
+    try:
+        return apply_overrides(base_values, given)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
+
+
+def _given_values(path: Path, document: dict) -> dict[str, Any]:
+    """The parameters a scenario file gives (`document`, without its base), each checked
+    against its spec and against the node it is given under."""
+    given = {}
+    for node, section in document.items():
+        if node != "/**" and node not in NODES:
+            raise ScenarioError(f"{path}: unknown node {node!r}; nodes are /**, {', '.join(NODES)}")
+        if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
+            raise ScenarioError(f"{path}: {node} needs a 'ros__parameters:' mapping")
+        for name, value in _flatten(section["ros__parameters"]).items():
+            spec = SPEC_BY_NAME.get(name)
+            if spec is None:
+                raise _unknown(name, str(path))
+            if node != "/**" and node not in spec.nodes:
+                raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, "
+                                    f"not {node}")
+            if node != "/**" and shared(spec):  # the other nodes would never see it
+                raise ScenarioError(f"{path}: {name} is shared by {', '.join(spec.nodes)}: "
+                                    f"give it under /**, not under {node}")
+            value = spec.check(value, str(path))
+            if name in given and given[name] != value:
+                raise ScenarioError(f"{path}: {name} is given twice, as {given[name]!r} and "
+                                    f"{value!r}")
+            given[name] = value
+    return given
+
+
+def complete(given: dict[str, Any], bases: list[Path], where: str = "") -> dict[str, Any]:
+    """Every value of a run from the given ones: the defaults, then the train preset's
+    plant.* values (plant.train), then the given values; relative file parameters
+    made absolute, from the first of `bases` that holds them, else from msg_config/.
+    A given parameter of a kind the run does not use is refused (`where` names the
+    source). The nodes complete what their parameter file gives them the same way."""
+    values = defaults()
+    if given.get("plant.train"):
+        values.update(train_preset(given["plant.train"]))
+    values.update(given)
+    check_used(given, values, where)
+    for name in FILE_PARAMETERS:
+        if given.get(name):
+            values[name] = resolve_file(given[name], bases)
+    return values
+
+
+def check_used(given, values: dict[str, Any], where: str = "") -> None:
+    """Refuse a given parameter of a controller or profile kind the run (`values`) does
+    not use: it would change nothing, and no node declares it."""
+    idle = unused(values)
+    for name in given:
+        if name in idle:
+            raise ScenarioError(f"{where}: {idle[name]}" if where else idle[name])
+
+
+def train_names() -> list[str]:
+    return sorted(p.stem for p in (config_dir() / "trains").glob("*.yaml"))
+
+
+def train_preset(name: str) -> dict[str, Any]:
+    """The plant.* values of msg_config/trains/NAME.yaml (a flat mapping), checked."""
+    path = config_dir() / "trains" / f"{name}.yaml"
+    if not path.is_file():
+        raise ScenarioError(f"unknown train {name!r}; known: {', '.join(train_names())}")
+    document = yamlfile.load(path, "train preset")
+    if not isinstance(document, dict):
+        raise ScenarioError(f"{path}: a train preset is a mapping of plant.* values")
+    values = {}
+    for key, value in document.items():
+        spec = SPEC_BY_NAME.get(key)
+        if spec is None or not key.startswith("plant.") or key == "plant.train":
+            raise ScenarioError(f"{path}: {key!r} is not a plant parameter")
+        values[key] = spec.check(value, str(path))
+    return {**values, "plant.train": name}
+
+
+def _flatten(mapping: dict, prefix: str = "") -> dict[str, Any]:
+    """ROS parameter files may nest dotted names; flatten them back."""
+    flat = {}
+    for key, value in mapping.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """`name=value` with the value read as YAML (numbers, true/false, strings)."""
+    name, sep, raw = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise ScenarioError(f"--set expects name=value, got {text!r}")
+    spec = SPEC_BY_NAME.get(name)
+    if spec is None:
+        raise _unknown(name, "--set")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError:
+        value = raw
+    if spec.value_type is str and value is not None and not isinstance(value, str):
+        value = raw.strip()
+    elif spec.value_type is float and isinstance(value, str):  # YAML 1.1 reads 1e-9 as text
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    return name, spec.check(value, "--set")
+
+
+def check_given_once(texts: list[str]) -> None:
+    """A user's --set list names each parameter once (which should win is not clear)."""
+    seen = set()
+    for text in texts:
+        name = text.partition("=")[0].strip()
+        if name in seen:
+            raise ScenarioError(f"--set: {name} is given twice")
+        seen.add(name)
+
+
+def apply_overrides(values: dict[str, Any],
+                    overrides: list[str] | dict[str, Any]) -> dict[str, Any]:
+    """The run's `values` with `overrides` (--set texts, or a mapping) applied, checked as
+    a whole; an override of a kind the run does not use (after the overrides: a new
+    controller.kind's gains may come with it) is refused."""
+    if isinstance(overrides, dict):
+        checked = {}
+        for name, value in overrides.items():
+            spec = SPEC_BY_NAME.get(name)
+            if spec is None:
+                raise _unknown(name, "override")
+            checked[name] = spec.check(value, "override")
+        overrides, where = checked, ""
+    else:
+        overrides = dict(parse_override(text) for text in overrides)  # the last one wins
+        where = "--set"
+    check_used(overrides, {**values, **overrides}, where)
+    for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
+        if overrides.get(name):
+            overrides[name] = resolve_file(overrides[name], [Path.cwd()])
+    merged = {**values, **overrides}
+    if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
+        merged.update(train_preset(overrides["plant.train"]))
+        merged.update(overrides)
+    return validate(merged, "parameters")
+
+
+# Set by the launcher (ato_nodes.launch.Stack) for every run it starts, from the command's
+# --out: a value given to run_stack.py or tune.py would be overridden without a word.
+LAUNCHER_PARAMETERS = ("recorder.output", "supervisor.report")
+
+
+def check_launcher_free(values: dict[str, Any]) -> None:
+    """Refuse a launcher's parameter given by the user (one line naming --out)."""
+    for name in LAUNCHER_PARAMETERS:
+        if values[name]:
+            raise ScenarioError(f"{name} is set by the launcher for each run it starts; give "
+                                f"--out instead")
+
+
+def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
+    """Check a run's values as a whole before anything starts, by building what the
+    nodes will build (each from the values its node declares, as the run's stages
+    do): the line (errors name file and line), the context's plan and the controller
+    (errors name the parameter)."""
+    if values["run.duration"] < values["run.period"]:
+        raise ScenarioError(f"{where}: run.duration must be at least one run.period")
+    try:
+        parse_fault(values["run.fault"])
+        Requirement.parse_list(values["report.require"], "report.require")
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    line = load_line(values["line.file"]) if values["line.file"] else None
+    try:
+        _ = RunContext(NodeValues("profile", values), line).plan
+        controller_values = NodeValues("controller", values)
+        CONTROLLERS.chosen(controller_values).factory(
+            controller_values, RunContext(controller_values, line),
+            CommandLimiter.from_values(controller_values))
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    return values
+
+
+def ros_parameter_file(values: dict[str, Any], names=None) -> dict[str, Any]:
+    """The values (those of `names`, default all the run uses: none of the kinds it does
+    not use) as a ROS 2 parameter file: shared parameters under /**, the others under
+    the one node that declares each; sections left empty are left out when `names` is
+    given."""
+    document: dict[str, Any] = {"/**": {"ros__parameters": {}}}
+    for node in NODES:
+        document[node] = {"ros__parameters": {}}
+    idle = unused(values)
+    for spec in SPECS:
+        if (names is not None and spec.name not in names) or spec.name in idle:
+            continue
+        if spec.nodes:
+            section = "/**" if shared(spec) else spec.nodes[0]
+            document[section]["ros__parameters"][spec.name] = values[spec.name]
+    if names is not None:
+        document = {node: section for node, section in document.items()
+                    if section["ros__parameters"]}
+    return document

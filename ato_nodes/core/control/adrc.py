@@ -1,0 +1,481 @@
+"""Active disturbance rejection controllers (ROS-free).
+
+Han's second-order nonlinear ADRC (seed 000, eq. 6-13; with a bandwidth-
+parametrised observer it is seed 003's NLADRC), seed 004's discrete ADRC and a
+linear, bandwidth-parametrised ADRC (Gao). Each maps (target speed, measured
+speed) to a specific traction/braking force u in N/kN, one call per control
+period, through a CommandLimiter.
+
+Discretisation (the papers give continuous-time equations):
+
+* TD: Han's discrete form, v1 += h v2, v2 += h fhan(v1 - r, v2, r0, h0),
+  with h the control period.
+* ESO: linearly-implicit (backward) Euler with step h. Each fal() term is
+  written as g(e) * e with g frozen at the predicted error of the step, and
+  the resulting 3x3 linear system is solved in closed form. Backward Euler
+  maps every stable pole into the unit disc, so the observer is stable for
+  any step, while explicit Euler needs h < ~1/beta1 (0.8 ms for the seed's
+  beta1 = 1200) and would force a control period 60x shorter than the
+  default 50 ms. The observer is fed the command actually applied, i.e.
+  after the saturation of this controller.
+* NLSEF: the law u0 = mu1 fal(e1) + mu2 fal(e2) asks the observer's model
+  (z1' = z2, z2' = u0) for poles near -mu2 (thousands of rad/s), which no
+  sampled loop slower than ~0.3 ms can realise: taken literally it diverges
+  at any practical period (measured: also at 1 ms). The default is its
+  implicit discretisation: u0 is chosen so that the model's next state
+  satisfies the law, with fal gains frozen at the current errors,
+      u0 = (k1 (e1 - h z2) + k2 e2) / (1 + h^2 k1 + h k2),  ki = mu_i fal(ei)/ei,
+  which tends to the literal law as h -> 0 and is stable for any h
+  (`implicit_nlsef = False` gives the literal law).
+* b0 is not given by the paper. With an ideal observer the closed loop does
+  not depend on it; in the sampled loop b0 = xi / h makes the observer's
+  input model match the one-period effect of u on the acceleration, so the
+  seed scenarios use xi / 0.05 s = 0.1766.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import astuple, dataclass
+
+from ..base.kernels import jitable
+from ..base.registry import Component, Output
+from ..base.spec import param, settings
+from .limiter import CommandLimiter, limit_command
+from .train_model import NominalTrain
+
+
+@jitable
+def sign(x: float) -> float:
+    return (x > 0.0) - (x < 0.0)
+
+
+@jitable
+def fal(e: float, alpha: float, delta: float) -> float:
+    """Han's fal(): linear inside |e| <= delta, |e|^alpha outside."""
+    if abs(e) <= delta:
+        return e / delta ** (1.0 - alpha)
+    return sign(e) * abs(e) ** alpha
+
+
+@jitable
+def fal_gain(e: float, alpha: float, delta: float) -> float:
+    """fal(e)/e, the local gain of fal (its limit delta^(alpha-1) at e = 0)."""
+    a = abs(e)
+    if a <= delta:
+        return delta ** (alpha - 1.0)
+    return a ** (alpha - 1.0)
+
+
+@jitable
+def fhan(x1: float, x2: float, r: float, h0: float) -> float:
+    """Han's time-optimal synthesis function (seed 000 eq. 7); sign() is written
+    out as comparisons because this runs every step of every candidate."""
+    d = r * h0 * h0
+    a0 = h0 * x2
+    y = x1 + a0
+    a1 = math.sqrt(d * (d + 8.0 * abs(y)))
+    a2 = a0 + ((y > 0.0) - (y < 0.0)) * (a1 - d) / 2.0
+    sy = (((y + d) > 0.0) - ((y + d) < 0.0) - ((y - d) > 0.0) + ((y - d) < 0.0)) / 2.0
+    a = (a0 + y - a2) * sy + a2
+    sa = (((a + d) > 0.0) - ((a + d) < 0.0) - ((a - d) > 0.0) + ((a - d) < 0.0)) / 2.0
+    sign_a = (a > 0.0) - (a < 0.0)
+    return -r * (a / d - sign_a) * sa - r * sign_a
+
+
+@jitable
+def td_update(v1: float, v2: float, target: float, r0: float, h0: float, h: float
+              ) -> tuple[float, float]:
+    """One step of Han's discrete TD."""
+    fh = fhan(v1 - target, v2, r0, h0)
+    return v1 + h * v2, v2 + h * fh
+
+
+class TrackingDifferentiator:
+    """Han's discrete TD: v1 follows the input, v2 its derivative."""
+
+    def __init__(self, r0: float, h0: float, period: float, v1: float = 0.0, v2: float = 0.0):
+        self.r0, self.h0, self.h = r0, h0, period
+        self.v1, self.v2 = v1, v2
+
+    def update(self, target: float) -> tuple[float, float]:
+        self.v1, self.v2 = td_update(self.v1, self.v2, target, self.r0, self.h0, self.h)
+        return self.v1, self.v2
+
+
+class NonlinearESO:
+    """Third-order nonlinear extended state observer (seed 000 eq. 10).
+
+    z1 -> output y (speed), z2 -> its derivative, z3 -> total disturbance.
+    Integrated by linearly-implicit Euler (see module docstring).
+    """
+
+    def __init__(self, beta1: float, beta2: float, beta3: float, b0: float,
+                 delta: float, period: float, z1: float = 0.0):
+        self.beta1, self.beta2, self.beta3 = beta1, beta2, beta3
+        self.b0, self.delta, self.h = b0, delta, period
+        self.z1, self.z2, self.z3 = z1, 0.0, 0.0
+
+    def update(self, y: float, u: float) -> tuple[float, float, float]:
+        self.z1, self.z2, self.z3 = eso_update(self.z1, self.z2, self.z3, y, u, self.beta1,
+                                               self.beta2, self.beta3, self.b0, self.delta, self.h)
+        return self.z1, self.z2, self.z3
+
+
+@jitable
+def eso_update(z1: float, z2: float, z3: float, y: float, u: float, beta1: float, beta2: float,
+               beta3: float, b0: float, delta: float, h: float) -> tuple[float, float, float]:
+    """One linearly-implicit Euler step of the nonlinear ESO (see the module docstring)."""
+    predicted = z1 + h * z2 - y
+    k1 = h * beta1
+    k2 = h * beta2 * fal_gain(predicted, 0.5, delta)
+    k3 = h * beta3 * fal_gain(predicted, 0.25, delta)
+    # Closed-form solution of (I - hA) z+ = z + h c for the error E = z1+ - y.
+    e = (z1 - y + h * z2 + h * h * (z3 + b0 * u)) / (1.0 + k1 + h * k2 + h * h * k3)
+    z3 = z3 - k3 * e
+    z2 = z2 + h * z3 - k2 * e + h * b0 * u
+    return y + e, z2, z3
+
+
+HAN_ADRC_PARAMETERS = (
+    param("adrc.mu1", 6000.0, "NLSEF gain on e1", "controller", 0.0, 1e9),
+    param("adrc.mu2", 5500.0, "NLSEF gain on e2", "controller", 0.0, 1e9),
+    param("adrc.alpha1", 0.75, "NLSEF exponent on e1", "controller", 0.0, 3.0),
+    param("adrc.alpha2", 1.5, "NLSEF exponent on e2", "controller", 0.0, 3.0),
+    param("adrc.r0", 5.0, "TD speed factor, m/s^2", "controller", 1e-6, 1e6),
+    param("adrc.h0", 0.001, "TD filter factor, s", "controller", 1e-6, 10.0),
+    param("adrc.beta1", 1200.0, "ESO gain beta1", "controller", 0.0, 1e9),
+    param("adrc.beta2", 1700.0, "ESO gain beta2", "controller", 0.0, 1e9),
+    param("adrc.beta3", 4500.0, "ESO gain beta3", "controller", 0.0, 1e9),
+    param("adrc.b0", 0.1766, "compensation factor b0 (not in the paper; ~xi / 50 ms, see "
+          "docs/internals.md)", "controller", 1e-9, 1e9),
+    param("adrc.delta", 0.01, "fal linear-zone half width", "controller", 1e-9, 100.0),
+    param("adrc.implicit_nlsef", True, "implicit NLSEF discretisation (false: literal law)",
+          "controller"),
+)
+
+
+@dataclass(frozen=True)
+class HanADRCGains:
+    """Seed 000's parameters (adrc.*; the paper's initial values are the defaults in
+    HAN_ADRC_PARAMETERS); b0 and delta are not in the paper."""
+
+    mu1: float
+    mu2: float
+    alpha1: float
+    alpha2: float
+    r0: float
+    h0: float
+    beta1: float
+    beta2: float
+    beta3: float
+    b0: float
+    delta: float
+    implicit_nlsef: bool
+
+
+@dataclass(slots=True)
+class ControllerOutput:
+    """One control step: the command (N/kN) and the values of the controller's
+    declared outputs, in the order of its registry entry."""
+
+    u: float
+    extras: tuple[float, ...]
+
+
+OBSERVER_OUTPUTS = (
+    Output("z1", "m/s", "ESO speed estimate"),
+    Output("z2", "m/s^2", "ESO acceleration estimate"),
+    Output("z3", "m/s^3", "ESO total-disturbance estimate"),
+    Output("v1", "m/s", "TD target"),
+    Output("v2", "m/s^2", "TD target derivative"),
+)
+
+
+class HanADRC:
+    """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
+
+    def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter):
+        self.gains = gains
+        self.limiter = limiter
+        self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
+        self.eso = NonlinearESO(gains.beta1, gains.beta2, gains.beta3, gains.b0,
+                                gains.delta, period)
+        self.gains_tuple = astuple(gains)  # the compiled step's argument (HanADRCGains order)
+        self.u_applied = 0.0
+
+    def start(self, target: float, measured: float) -> None:
+        """The TD starts at the first target, the observer at the first measurement."""
+        self.td.v1, self.eso.z1 = target, measured
+
+    def control_law(self, e1: float, e2: float, z2: float) -> float:
+        """NLSEF (eq. 12): u0 from the errors e1 = v1 - z1, e2 = v2 - z2."""
+        return nlsef(e1, e2, z2, self.gains_tuple, self.td.h)
+
+    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
+        td, eso, limiter = self.td, self.eso, self.limiter
+        u, eso.z1, eso.z2, eso.z3, td.v1, td.v2 = han_adrc_step(
+            eso.z1, eso.z2, eso.z3, td.v1, td.v2, self.u_applied, target, measured,
+            self.gains_tuple, td.h, limiter.last, limiter.settings)
+        self.u_applied = limiter.last = u
+        return ControllerOutput(u, (eso.z1, eso.z2, eso.z3, td.v1, td.v2))
+
+
+@jitable
+def nlsef(e1: float, e2: float, z2: float, gains, h: float) -> float:
+    """NLSEF (eq. 12), implicit or literal (see module docstring): u0 from the
+    errors e1 = v1 - z1, e2 = v2 - z2; `gains` HanADRC.gains_tuple."""
+    mu1, mu2, alpha1, alpha2, _, _, _, _, _, _, delta, implicit = gains
+    if not implicit:
+        return mu1 * fal(e1, alpha1, delta) + mu2 * fal(e2, alpha2, delta)
+    k1 = mu1 * fal_gain(e1, alpha1, delta)
+    k2 = mu2 * fal_gain(e2, alpha2, delta)
+    return (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
+
+
+@jitable
+def han_adrc_step(z1: float, z2: float, z3: float, v1: float, v2: float, u_applied: float,
+                  target: float, measured: float, gains, h: float, last: float,
+                  limits) -> tuple[float, float, float, float, float, float]:
+    """One step of Han's ADRC: (u, z1, z2, z3, v1, v2) after it; `gains`
+    HanADRC.gains_tuple, `last` and `limits` the limiter's (CommandLimiter)."""
+    _, _, _, _, r0, h0, beta1, beta2, beta3, b0, delta, _ = gains
+    z1, z2, z3 = eso_update(z1, z2, z3, measured, u_applied, beta1, beta2, beta3, b0, delta, h)
+    v1, v2 = td_update(v1, v2, target, r0, h0, h)
+    u0 = nlsef(v1 - z1, v2 - z2, z2, gains, h)
+    u = limit_command((u0 - z3) / b0, target, measured, last, limits)
+    return u, z1, z2, z3, v1, v2
+
+
+NLADRC_PARAMETERS = (
+    param("nladrc.kp", 2.0, "seed 003 NLADRC: proportional gain of the nonlinear PD",
+          "controller", 0.0, 1e6),
+    param("nladrc.kd", 1.0, "seed 003 NLADRC: derivative gain of the nonlinear PD",
+          "controller", 0.0, 1e6),
+    param("nladrc.omega", 10.0, "seed 003 NLADRC: observer bandwidth w (b01 = 3w, b02 = 3w^2, "
+          "b03 = w^3), rad/s", "controller", 1e-3, 1e4),
+    param("nladrc.b", 0.5, "seed 003 NLADRC: compensation factor b", "controller", 1e-9, 1e9),
+    param("nladrc.alpha1", 0.75, "seed 003 NLADRC: fal exponent on e1", "controller", 0.0, 3.0),
+    param("nladrc.alpha2", 1.25, "seed 003 NLADRC: fal exponent on e2", "controller", 0.0, 3.0),
+    param("nladrc.delta", 0.01, "seed 003 NLADRC: fal linear zone", "controller", 1e-9, 100.0),
+    param("nladrc.r0", 15.0, "seed 003 NLADRC: TD speed factor r", "controller", 1e-6, 1e6),
+    param("nladrc.h0", 0.01, "seed 003 NLADRC: TD filter factor h0, s", "controller",
+          1e-6, 10.0),
+)
+
+
+def nladrc_gains(kp: float, kd: float, omega: float, b: float, alpha1: float, alpha2: float,
+                 r0: float, h0: float, delta: float) -> HanADRCGains:
+    """Seed 003's NLADRC is Han's structure with a bandwidth-parametrised observer
+    (b01 = 3w, b02 = 3w^2, b03 = w^3) and the nonlinear PD u0 = kp fal(e1) + kd fal(e2),
+    u = (u0 - z3) / b: the same controller with four tuned parameters kp, kd, w, b."""
+    return HanADRCGains(mu1=kp, mu2=kd, alpha1=alpha1, alpha2=alpha2, r0=r0, h0=h0,
+                        beta1=3.0 * omega, beta2=3.0 * omega ** 2, beta3=omega ** 3, b0=b,
+                        delta=delta, implicit_nlsef=True)
+
+
+DISCRETE_ADRC_PARAMETERS = (
+    param("dadrc.b01", 0.9, "seed 004 discrete ESO gain b01 (per step)", "controller", 0.0, 3.0),
+    param("dadrc.b02", 0.03, "seed 004 discrete ESO gain b02 (per step)", "controller", 0.0, 3.0),
+    param("dadrc.b03", 0.001, "seed 004 discrete ESO gain b03 (per step)", "controller",
+          0.0, 3.0),
+    param("dadrc.b1", 40.0, "seed 004 NLSEF gain on e1, N/kN per (m/s)^a1", "controller",
+          0.0, 1e6),
+    param("dadrc.b2", 100.0, "seed 004 NLSEF gain on e2, N/kN per (m/s per step)^a2",
+          "controller", 0.0, 1e6),
+    param("dadrc.alpha1", 0.75, "seed 004 NLSEF exponent a1 in (0, 1)", "controller", 0.01, 1.0),
+    param("dadrc.alpha2", 0.5, "seed 004 NLSEF exponent a2 in (0, 1)", "controller", 0.01, 1.0),
+    param("dadrc.b0", 1e-4, "seed 004 input gain b0 per step^2 (xi h^2 / lag)", "controller",
+          1e-12, 1e3),
+    param("dadrc.delta", 0.01, "seed 004 fal linear zone (below 0.0025 chatters)", "controller",
+          1e-6, 10.0),
+    param("dadrc.r0", 2.0, "seed 004 TD speed factor, m/s^2", "controller", 1e-6, 1e6),
+    param("dadrc.h0", 0.1, "seed 004 TD filter factor, s", "controller", 1e-6, 10.0),
+)
+
+
+@dataclass(frozen=True)
+class DiscreteADRCGains:
+    """Seed 004's gains (dadrc.*), per step (the control period folded in)."""
+
+    b01: float
+    b02: float
+    b03: float
+    b1: float
+    b2: float
+    alpha1: float
+    alpha2: float
+    b0: float
+    delta: float
+    r0: float
+    h0: float
+
+
+class DiscreteADRC:
+    """Seed 004's discrete second-order ADRC, the ESO exactly as printed:
+
+        e = z1 - y;  z1 += z2 - b01 e;  z2 += z3 - b02 fal(e, 0.5) + b0 u;
+        z3 += -b03 fal(e, 0.25);  u = b1 fal(e1, a1) + b2 fal(e2, a2) - z3 / b0
+
+    With the step folded into the gains, z2 is the speed change per step and z3
+    its change per step, so the TD's v2 (m/s^2) enters e2 = v2 h - z2 in the same
+    per-step unit (the paper leaves this implicit: our reading). The recorded z2
+    and z3 are converted back to m/s^2 and m/s^3.
+    """
+
+    def __init__(self, gains: DiscreteADRCGains, period: float, limiter: CommandLimiter):
+        self.gains, self.h, self.limiter = gains, period, limiter
+        self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
+        self.z1, self.z2, self.z3 = 0.0, 0.0, 0.0
+        self.u_applied = 0.0
+
+    def start(self, target: float, measured: float) -> None:
+        self.td.v1, self.z1 = target, measured
+
+    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
+        g, h = self.gains, self.h
+        e = self.z1 - measured
+        z1 = self.z1 + self.z2 - g.b01 * e
+        z2 = self.z2 + self.z3 - g.b02 * fal(e, 0.5, g.delta) + g.b0 * self.u_applied
+        z3 = self.z3 - g.b03 * fal(e, 0.25, g.delta)
+        self.z1, self.z2, self.z3 = z1, z2, z3
+        v1, v2 = self.td.update(target)
+        u0 = g.b1 * fal(v1 - z1, g.alpha1, g.delta) + g.b2 * fal(v2 * h - z2, g.alpha2, g.delta)
+        u = self.limiter.apply(u0 - z3 / g.b0, target, measured)
+        self.u_applied = u
+        return ControllerOutput(u, (z1, z2 / h, z3 / (h * h), v1, v2))
+
+
+LINEAR_ADRC_PARAMETERS = (
+    param("ladrc.omega_o", 20.0, "linear ADRC observer bandwidth, rad/s", "controller",
+          1e-6, 1e6),
+    param("ladrc.omega_c", 2.0, "linear ADRC controller bandwidth, rad/s", "controller",
+          1e-6, 1e6),
+    param("ladrc.b0", 0.0098 / 1.11, "linear ADRC input gain, m/s^2 per N/kN", "controller",
+          1e-9, 1e9),
+    param("ladrc.feedforward", False, "linear ADRC: add the plan's acceleration at the tracked "
+          "target (needs controller.preview >= 1) and the nominal train's basic and line "
+          "resistance (at the dead-reckoned position) to the law, and tell the observer the "
+          "resistance, so it estimates only what the model does not know", "controller"),
+    param("ladrc.delay_aware", False, "linear ADRC: feed the observer the force the nominal "
+          "actuator applies (dead time, lag, envelope, neutral sections) instead of the "
+          "command, and act on the speed predicted controller.preview steps ahead from the "
+          "commands already sent (a Smith predictor)", "controller"),
+)
+
+
+@dataclass(frozen=True)
+class LinearADRCGains:
+    """Bandwidth parametrisation (ladrc.*): observer bandwidth omega_o, controller omega_c;
+    the two model-based additions, off in the papers' settings."""
+
+    omega_o: float
+    omega_c: float
+    b0: float
+    feedforward: bool
+    delay_aware: bool
+
+
+class LinearADRC:
+    """First-order linear ADRC for the speed loop (the plant's true relative degree).
+
+    ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by the input
+    b0 (F - w)), gains 2 omega_o and omega_o^2; with r the tracked target r_k+N and
+    v the speed estimate,
+        u = (omega_c (r - v) + a_r - z2) / b0 + w_r.
+    In the papers' setting F is the command, w = w_r = a_r = 0 and v = z1. With
+    `feedforward`, a_r is the plan's acceleration at r, w the known resistance now
+    and w_r at r's planned position (core/control/train_model.py); with `delay_aware`, F is
+    the force the nominal actuator applies and v the speed predicted N steps ahead
+    (the commands inside the dead time and lag act first), so the law's error is
+    the one its command can still change. The ESO is integrated by backward Euler in
+    closed form, stable for any step.
+    """
+
+    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter,
+                 model: NominalTrain | None = None):
+        self.gains, self.h = gains, period
+        self.limiter = limiter
+        self.l1, self.l2 = 2.0 * gains.omega_o, gains.omega_o ** 2
+        self.z1, self.z2 = 0.0, 0.0
+        self.model = model
+        self.observer_input = 0.0  # F - w over the last period, N/kN
+        self.u_applied = 0.0
+
+    def start(self, target: float, measured: float) -> None:
+        self.z1 = measured
+
+    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
+        g, h, model = self.gains, self.h, self.model
+        e = (self.z1 - measured + h * (self.z2 + g.b0 * self.observer_input)) / (
+            1.0 + h * self.l1 + h * h * self.l2)
+        self.z2 -= h * self.l2 * e
+        self.z1 = measured + e
+        ahead = len(horizon) - 1 if horizon is not None else 0
+        speed = self.z1
+        if g.delay_aware and ahead:
+            speed = model.predict(self.z1, self.z2, g.b0, ahead, self.u_applied,
+                                  g.feedforward)
+        law = (g.omega_c * (target - speed) - self.z2) / g.b0
+        resistance = 0.0  # known to the observer over the coming period
+        if g.feedforward:
+            planned = (horizon[-1] - horizon[-2]) / h if ahead else 0.0
+            law += planned / g.b0 + model.known_resistance(
+                target, model.position + h * sum(horizon[:-1]))
+            resistance = model.known_resistance(measured, model.position)
+        u = self.limiter.apply(law, target, measured)
+        self.u_applied = u
+        force = model.advance(u, measured) if model is not None else u
+        self.observer_input = (force if g.delay_aware else u) - resistance
+        return ControllerOutput(u, (self.z1, self.z2))
+
+
+def linear_adrc(values, context, limiter: CommandLimiter) -> LinearADRC:
+    gains = settings(LinearADRCGains, "ladrc", values)
+    model = None
+    if gains.feedforward or gains.delay_aware:
+        model = NominalTrain(context.train, context.period, values["plant.initial_position"],
+                             context.line)
+    return LinearADRC(gains, context.period, limiter, model)
+
+
+HAN_STATE_PATHS = ("td.v1", "td.v2", "eso.z1", "eso.z2", "eso.z3", "u_applied")
+
+HAN_ADRC = Component(
+    "han_adrc", "seed 000: Han's nonlinear ADRC", HAN_ADRC_PARAMETERS,
+    lambda values, context, limiter: HanADRC(settings(HanADRCGains, "adrc", values),
+                                             context.period, limiter),
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["adrc.b0"],
+    search_space=(("adrc.mu1", 600.0, 60000.0), ("adrc.mu2", 550.0, 55000.0),
+                  ("adrc.beta1", 120.0, 12000.0), ("adrc.beta2", 170.0, 17000.0),
+                  ("adrc.beta3", 450.0, 45000.0)),
+    state_paths=HAN_STATE_PATHS)
+
+NLADRC = Component(
+    "nladrc", "seed 003: NLADRC, bandwidth-parametrised observer", NLADRC_PARAMETERS,
+    lambda values, context, limiter: HanADRC(nladrc_gains(**{
+        spec.name.split(".", 1)[1]: values[spec.name] for spec in NLADRC_PARAMETERS}),
+        context.period, limiter),
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"],
+    search_space=(("nladrc.kp", 0.05, 20.0), ("nladrc.kd", 0.05, 20.0),
+                  ("nladrc.omega", 0.5, 40.0), ("nladrc.b", 0.002, 0.5)),
+    state_paths=HAN_STATE_PATHS)
+
+DISCRETE_ADRC = Component(
+    "discrete_adrc", "seed 004: discrete ADRC", DISCRETE_ADRC_PARAMETERS,
+    lambda values, context, limiter: DiscreteADRC(settings(DiscreteADRCGains, "dadrc", values),
+                                                  context.period, limiter),
+    OBSERVER_OUTPUTS,
+    observer_gain=lambda values: values["dadrc.b0"] / values["run.period"] ** 2,  # per step^2
+    search_space=(("dadrc.b01", 0.1, 2.5), ("dadrc.b02", 0.001, 1.0),
+                  ("dadrc.b03", 0.00001, 0.1), ("dadrc.b1", 1.0, 300.0), ("dadrc.b2", 1.0, 1000.0)),
+    state_paths=("td.v1", "td.v2", "z1", "z2", "z3", "u_applied"))
+
+LINEAR_ADRC = Component(
+    "linear_adrc", "first-order linear ADRC", LINEAR_ADRC_PARAMETERS,
+    linear_adrc,
+    (Output("z1", "m/s", "ESO speed estimate"),
+     Output("z2", "m/s^2", "ESO total-disturbance estimate")),
+    search_space=(("ladrc.omega_o", 2.0, 40.0), ("ladrc.omega_c", 0.3, 6.0),
+                  ("ladrc.b0", 0.006, 0.013)),
+    state_paths=("z1", "z2", "model", "observer_input", "u_applied"))

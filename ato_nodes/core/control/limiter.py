@@ -1,0 +1,83 @@
+"""What stands between every control law and the train (ROS-free)."""
+
+from __future__ import annotations
+
+from ..base.kernels import jitable
+from ..base.spec import param
+
+LIMITER_PARAMETERS = (
+    param("controller.u_min", -1e6, "lowest command (braking), N/kN", "controller", -1e9, 0.0),
+    param("controller.u_max", 1e6, "highest command (traction), N/kN", "controller", 0.0, 1e9),
+    param("controller.max_rate", 0.0, "jerk limit: largest change of the command per second, "
+          "N/kN/s (0 = none)", "controller", 0.0, 1e9),
+    param("controller.mode_band", 0.0, "speed-limit module (seed 003): no traction while the "
+          "speed is more than this above the target, no braking while more than this below, "
+          "m/s (0 = off)", "controller", 0.0, 100.0),
+    param("controller.holding_brake", 0.0, "braking held with a zero target once the train is "
+          "stopped (station berth), N/kN (0 = none)", "controller", 0.0, 1e6),
+    param("controller.holding_target", 0.0, "the holding brake applies once the target is at "
+          "most this, m/s (0 = only a zero target; a distance-indexed target is a few mm/s in "
+          "the last centimetres before the mark, where a train would otherwise creep for "
+          "seconds; keep it below the departure target)", "controller", 0.0, 1.0),
+)
+
+
+STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
+
+
+@jitable
+def clamp(x: float, low: float, high: float) -> float:
+    return low if x < low else high if x > high else x
+
+
+@jitable
+def limit_command(u: float, target: float, speed: float, last: float, settings) -> float:
+    """The command the limiter lets through (see CommandLimiter); `last` the previous
+    one, `settings` CommandLimiter.settings."""
+    u_min, u_max, max_change, mode_band, holding_brake, holding_target = settings
+    if holding_brake > 0.0 and target <= holding_target and speed < STOPPED:
+        u = min(u, -holding_brake)
+    if mode_band > 0.0:
+        if speed > target + mode_band:
+            u = min(u, 0.0)
+        elif speed < target - mode_band:
+            u = max(u, 0.0)
+    if max_change > 0.0:
+        u = clamp(u, last - max_change, last + max_change)
+    return clamp(u, u_min, u_max)
+
+
+class CommandLimiter:
+    """What stands between a control law and the train, shared by every controller;
+    the observer is fed its output, the command actually applied.
+
+    * speed-limit module (seed 003), `mode_band` > 0: no traction while the speed is
+      more than mode_band above the target, no braking while more than mode_band below
+      (it picks traction or braking by comparing actual and target speed);
+    * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
+      (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
+    * saturation to [u_min, u_max] (acceleration limit);
+    * holding brake, `holding_brake` > 0: with a zero target (at most `holding_target`)
+      and the train (nearly) stopped, at least this much braking, as an ATO holds a train
+      berthed at a station; without it a controller dithers about zero speed and creeps.
+    """
+
+    def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
+                 mode_band: float = 0.0, holding_brake: float = 0.0,
+                 holding_target: float = 0.0):
+        self.u_min, self.u_max = u_min, u_max
+        self.max_change = max_rate * period
+        self.mode_band = mode_band
+        self.holding_brake, self.holding_target = holding_brake, holding_target
+        self.settings = (u_min, u_max, self.max_change, mode_band, holding_brake, holding_target)
+        self.last = 0.0
+
+    def apply(self, u: float, target: float, speed: float) -> float:
+        self.last = limit_command(u, target, speed, self.last, self.settings)
+        return self.last
+
+    @classmethod
+    def from_values(cls, values) -> CommandLimiter:
+        return cls(values["controller.u_min"], values["controller.u_max"], values["run.period"],
+                   values["controller.max_rate"], values["controller.mode_band"],
+                   values["controller.holding_brake"], values["controller.holding_target"])

@@ -1,0 +1,403 @@
+"""Least-squares support vector regression of a train's NARX speed map (seed 001), ROS-free.
+
+The map, one control period h ahead, with speeds y (m/s, measured) and commands u (N/kN):
+
+    y(k) = y(k-1) + g(x(k)),   x(k) = [y(k-1) .. y(k-na), u(k-1-nk) .. u(k-nb-nk)]
+
+na speed lags, nb command lags, nk whole periods of input delay (the train's dead
+time). The paper writes y(k) = f(y(k-1), u(k-1)) (na = nb = 1, nk = 0); learning the
+increment g = f - y(k-1) is the same map, with a target a thousand times smaller
+than the speed range, so the kernel's length scale serves the dynamics, not the
+identity. Regressors are scaled to [0, 1] over the identification data (speed
+columns together, command columns together) before the kernel sees them.
+
+LSSVM (Suykens): with the RBF kernel K(x, x') = exp(-|x - x'|^2 / (2 delta^2)) and
+regularisation mu, the coefficients solve
+
+    [0   1^T          ] [b    ]   [0]
+    [1   Omega + I/mu ] [alpha] = [t],      Omega_ij = K(x_i, x_j)
+
+solved here through the Cholesky factor L of H = Omega + I/mu (H eta = 1,
+H nu = t, b = 1^T nu / 1^T eta, alpha = nu - b eta): no inverse, no pinv.
+
+Online correction (`add`): a new sample is appended to the factor (one
+triangular solve, O(n^2)), never refactorised. The Schur complement of the new
+row, d^2 = 1/mu + 1 - |L^-1 beta|^2, is guarded: below GUARD (relative) the
+sample is numerically a copy of the dictionary and is rejected. The dictionary
+is bounded: the identification samples stay, corrections fill a window of
+`window` samples, and when it is full the oldest correction leaves (a rank-1
+update of the factor's trailing block, the corrections' part, O(window^2)).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import os
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.linalg import cho_solve, solve_triangular
+
+from ..base import yamlfile
+from ..base.errors import ScenarioError
+
+GUARD = 1e-10  # relative Schur complement below which a new sample is rejected
+FORMAT = "ato-lssvm-1"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The regressor: speed lags, command lags, input delay (whole periods)."""
+
+    speed_lags: int = 1
+    command_lags: int = 1
+    delay: int = 0
+
+    def __post_init__(self):
+        if self.speed_lags < 1 or self.command_lags < 1 or self.delay < 0:
+            raise ValueError("a regressor needs >= 1 speed lag, >= 1 command lag and a delay "
+                             ">= 0")
+
+    @property
+    def size(self) -> int:
+        return self.speed_lags + self.command_lags
+
+    @property
+    def history(self) -> int:
+        """Past commands a regressor needs (the newest is u(k-1))."""
+        return self.delay + self.command_lags
+
+    def samples(self, speeds: np.ndarray, commands: np.ndarray,
+                steps: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(regressors x(k), increments y(k) - y(k-1)) of a recorded run, for the steps k
+        given (default: every step with a full history)."""
+        first = max(self.speed_lags, self.history)
+        if steps is None:
+            steps = np.arange(first, len(speeds))
+        steps = np.asarray(steps)
+        if len(steps) and (steps.min() < first or steps.max() >= len(speeds)):
+            raise ValueError("a sample step lacks its history")
+        columns = [speeds[steps - j] for j in range(1, self.speed_lags + 1)]
+        columns += [commands[steps - self.delay - j] for j in range(1, self.command_lags + 1)]
+        return np.column_stack(columns), speeds[steps] - speeds[steps - 1]
+
+    def regressor(self, speeds, commands) -> np.ndarray:
+        """x(k) from histories, newest last: speeds ending with y(k-1), commands with
+        u(k-1)."""
+        ys = [speeds[-j] for j in range(1, self.speed_lags + 1)]
+        us = [commands[-self.delay - j] for j in range(1, self.command_lags + 1)]
+        return np.array(ys + us)
+
+
+class LSSVM:
+    """The fitted regression g(x) with its factor, ready for prediction, its gradient
+    (the GPC's linearisation) and online correction."""
+
+    def __init__(self, layout: Layout, mu: float, delta: float, offset: np.ndarray,
+                 scale: np.ndarray, regressors: np.ndarray, targets: np.ndarray,
+                 window: int = 0):
+        if not (mu > 0 and math.isfinite(mu) and delta > 0 and math.isfinite(delta)):
+            raise ValueError("mu and delta must be positive and finite")
+        self.layout, self.mu, self.delta = layout, float(mu), float(delta)
+        self.offset, self.scale = np.asarray(offset, float), np.asarray(scale, float)
+        self.fixed = len(targets)  # identification samples: they stay
+        self.window = window
+        capacity = self.fixed + window
+        self._z = np.zeros((capacity, layout.size))  # scaled regressors
+        self._t = np.zeros(capacity)                 # increments, m/s (0 beyond size)
+        # The lower Cholesky factor of H, padded with the identity beyond `size`: the
+        # solves then run on the whole (contiguous) buffer, never on a copied slice.
+        self._factor = np.eye(capacity)
+        self.size = self.fixed
+        self._z[:self.fixed] = self.to_unit(np.asarray(regressors, float))
+        self._t[:self.fixed] = targets
+        z = self._z[:self.fixed]
+        gram = self._kernel(z, z) + np.eye(self.fixed) / self.mu
+        try:
+            self._factor[:self.fixed, :self.fixed] = np.linalg.cholesky(gram)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"the kernel matrix is numerically singular for mu = {mu:g}, "
+                             f"delta = {delta:g}") from None
+        if not np.all(np.diag(self._factor)[:self.fixed] ** 2 > GUARD / self.mu):
+            raise ValueError(f"the kernel matrix is numerically singular for mu = {mu:g}, "
+                             f"delta = {delta:g}")
+        self.added = self.rejected = self.forgotten = 0
+        self._solve()
+
+    # The kernel in scaled coordinates ------------------------------------------
+    def to_unit(self, x: np.ndarray) -> np.ndarray:
+        return (x - self.offset) / self.scale
+
+    def _kernel(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        distance = (np.sum(a * a, axis=1)[:, None] + np.sum(b * b, axis=1)[None, :]
+                    - 2.0 * a @ b.T)
+        return np.exp(-np.maximum(distance, 0.0) / (2.0 * self.delta ** 2))
+
+    def _solve(self) -> None:
+        rhs = np.zeros((len(self._t), 2))
+        rhs[:self.size, 0], rhs[:, 1] = 1.0, self._t
+        # the buffer is C-ordered: its transpose is the Fortran-ordered upper factor
+        eta, nu = cho_solve((self._factor.T, False), rhs, check_finite=False).T
+        self.bias = float(nu.sum() / eta.sum())
+        self.alpha = (nu - self.bias * eta)[:self.size]
+
+    # Prediction ---------------------------------------------------------------
+    @property
+    def support(self) -> np.ndarray:
+        """The dictionary's regressors, scaled."""
+        return self._z[:self.size]
+
+    def increment(self, x: np.ndarray) -> np.ndarray:
+        """g at each row of x (unscaled regressors), m/s."""
+        z = self.to_unit(np.atleast_2d(x))
+        return self._kernel(z, self.support) @ self.alpha + self.bias
+
+    def linearise(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """(g(x), dg/dx) at one unscaled regressor: the RBF expansion's analytic gradient."""
+        z = self.to_unit(x)
+        difference = z - self.support
+        weights = self.alpha * np.exp(-np.einsum("ij,ij->i", difference, difference)
+                                      / (2.0 * self.delta ** 2))
+        value = float(weights.sum()) + self.bias
+        gradient = -(weights @ difference) / self.delta ** 2 / self.scale
+        return value, gradient
+
+    # Online correction ----------------------------------------------------------
+    def add(self, x: np.ndarray, target: float) -> bool:
+        """Take one more sample (unscaled regressor x, increment target): True if it
+        joined the dictionary, False if the Schur-complement guard rejected it."""
+        if self.window == 0:
+            return False
+        if self.size == len(self._t):
+            self._forget_oldest_correction()
+        n = self.size
+        z = self.to_unit(np.asarray(x, float))
+        beta = np.zeros(len(self._t))
+        beta[:n] = self._kernel(z[None, :], self.support)[0]
+        row = solve_triangular(self._factor, beta, lower=True, check_finite=False)[:n]
+        pivot = 1.0 + 1.0 / self.mu
+        schur = pivot - row @ row
+        if not schur > GUARD * pivot:
+            self.rejected += 1
+            return False
+        self._factor[n, :n], self._factor[n, n] = row, math.sqrt(schur)
+        self._z[n], self._t[n] = z, target
+        self.size += 1
+        self.added += 1
+        self._solve()
+        return True
+
+    def _forget_oldest_correction(self) -> None:
+        """Drop row/column `fixed` of H: the trailing block's factor becomes
+        chol(L22 L22^T + l l^T), l the dropped column below it (rank-1 update)."""
+        i, n = self.fixed, self.size
+        column = self._factor[i + 1:n, i].copy()
+        block = self._factor[i + 1:n, i + 1:n].copy()
+        for j in range(len(column)):  # the classic rank-1 Cholesky update
+            r = math.hypot(block[j, j], column[j])
+            c, s = r / block[j, j], column[j] / block[j, j]
+            block[j, j] = r
+            block[j + 1:, j] = (block[j + 1:, j] + s * column[j + 1:]) / c
+            column[j + 1:] = c * column[j + 1:] - s * block[j + 1:, j]
+        self._factor[i:n - 1, :i] = self._factor[i + 1:n, :i]
+        self._factor[i:n - 1, i:n - 1] = block
+        self._factor[n - 1, :] = 0.0
+        self._factor[n - 1, n - 1] = 1.0
+        self._z[i:n - 1], self._t[i:n - 1] = self._z[i + 1:n], self._t[i + 1:n]
+        self._z[n - 1], self._t[n - 1] = 0.0, 0.0
+        self.size -= 1
+        self.forgotten += 1
+
+    @property
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """(unscaled regressors, increments) of the dictionary."""
+        return self.support * self.scale + self.offset, self._t[:self.size].copy()
+
+    def with_window(self, window: int) -> LSSVM:
+        """A fresh solve on the current dictionary, its samples all fixed, with room
+        for `window` corrections (window 0: the reference the online updates are
+        checked against)."""
+        return LSSVM(self.layout, self.mu, self.delta, self.offset, self.scale, *self.samples,
+                     window)
+
+    def refit(self) -> LSSVM:
+        return self.with_window(0)
+
+
+def unit_scaling(layout: Layout, regressors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(offset, scale) mapping the identification data's speeds, and its commands, to
+    [0, 1] (one range per kind of column, so lags keep their relation)."""
+    na = layout.speed_lags
+    offset, scale = np.empty(layout.size), np.empty(layout.size)
+    for columns in (slice(0, na), slice(na, layout.size)):
+        low, high = float(regressors[:, columns].min()), float(regressors[:, columns].max())
+        offset[columns], scale[columns] = low, max(high - low, 1e-9)
+    return offset, scale
+
+
+def fit(layout: Layout, regressors: np.ndarray, targets: np.ndarray, mu: float,
+        delta: float, window: int = 0) -> LSSVM:
+    offset, scale = unit_scaling(layout, regressors)
+    return LSSVM(layout, mu, delta, offset, scale, regressors, targets, window)
+
+
+# The model file ---------------------------------------------------------------
+@dataclass(frozen=True)
+class ModelFile:
+    """What a `.npz` model file holds (FORMAT, one array per field):
+
+    format           "ato-lssvm-1"
+    layout           [na, nb, nk]
+    mu, delta        hyperparameters (scaled coordinates)
+    offset, scale    regressor scaling, one per regressor column
+    regressors       identification samples x(k), unscaled (m/s, N/kN), n x (na + nb)
+    targets          their increments y(k) - y(k-1), m/s
+    alpha, bias      the solved coefficients (checked against a fresh solve on load)
+    period           the control period the samples were taken at, s
+    train            JSON: the plant.train preset name and its plant.* values
+    arx              optional linear multi-model: centres (m/s), width (m/s) and one row
+                     per centre [c, a_1..a_na, b_1..b_nb] of y(k) = c + sum a y + sum b u
+    """
+
+    lssvm: LSSVM
+    period: float
+    train: dict
+    arx_centres: np.ndarray
+    arx_width: float
+    arx_coefficients: np.ndarray
+
+    def save(self, path) -> None:
+        """Written to a temporary file, then renamed over `path`: a reader sees the old
+        model or the new one, never half of one."""
+        model = self.lssvm
+        path = Path(path)
+        partial = path.with_name(f".{path.name}.partial")
+        regressors, targets = model.samples
+        with open(partial, "wb") as handle:
+            np.savez(handle, format=FORMAT,
+                     layout=np.array([model.layout.speed_lags, model.layout.command_lags,
+                                      model.layout.delay]),
+                     mu=model.mu, delta=model.delta, offset=model.offset, scale=model.scale,
+                     regressors=regressors, targets=targets, alpha=model.alpha,
+                     bias=model.bias, period=self.period,
+                     train=json.dumps(self.train, sort_keys=True),
+                     arx_centres=self.arx_centres, arx_width=self.arx_width,
+                     arx_coefficients=self.arx_coefficients)
+        os.replace(partial, path)
+
+
+def file_digest(path) -> str:
+    with open(path, "rb") as handle:
+        return hashlib.sha256(handle.read()).hexdigest()
+
+
+# What a model file may hold. The file and what its members expand to are bounded before
+# anything is decompressed (a deflated member of zeros expands a thousandfold), and the
+# dictionary (identification samples + the correction window) before the kernel matrix and
+# its factor, (samples + window)^2 floats each, are allocated: 8192 is 0.5 GiB apiece,
+# several times the shipped model's 900 + 500.
+MAX_FILE_BYTES = 64 << 20
+MAX_EXPANDED_BYTES = 64 << 20
+MAX_DICTIONARY = 8192
+# The members FORMAT names, with their dtype kind (f: float64, i: integer, U: text) and
+# number of dimensions; nothing else in the archive is read.
+MEMBERS = {"format": ("U", 0), "layout": ("i", 1), "mu": ("f", 0), "delta": ("f", 0),
+           "offset": ("f", 1), "scale": ("f", 1), "regressors": ("f", 2), "targets": ("f", 1),
+           "alpha": ("f", 1), "bias": ("f", 0), "period": ("f", 0), "train": ("U", 0),
+           "arx_centres": ("f", 1), "arx_width": ("f", 0), "arx_coefficients": ("f", 2)}
+KINDS = {"f": "float64", "i": "integer", "U": "text"}
+
+
+def _read_members(path, data: bytes) -> dict[str, np.ndarray]:
+    """The members MEMBERS names, each checked for its dtype, its dimensions and (floats)
+    finiteness, their sizes bounded from the zip directory and each array's header
+    before any data is read."""
+    try:
+        archive = zipfile.ZipFile(io.BytesIO(data))
+        infos = {}
+        for name in MEMBERS:
+            try:
+                infos[name] = archive.getinfo(f"{name}.npy")
+            except KeyError:
+                raise ScenarioError(f"model file {path} lacks the field {name}") from None
+        expanded = sum(info.file_size for info in infos.values())
+        if expanded > MAX_EXPANDED_BYTES:
+            raise ScenarioError(f"model file {path}: its arrays expand to {expanded / 2**20:.0f}"
+                                f" MiB, more than {MAX_EXPANDED_BYTES >> 20} MiB")
+        fields = {}
+        for name, (kind, dimensions) in MEMBERS.items():
+            with archive.open(infos[name]) as member:
+                version = np.lib.format.read_magic(member)
+                shape, _, dtype = (np.lib.format.read_array_header_1_0(member)
+                                   if version == (1, 0)
+                                   else np.lib.format.read_array_header_2_0(member))
+            if dtype.kind != kind or (kind == "f" and dtype != np.float64) \
+                    or len(shape) != dimensions:
+                raise ScenarioError(f"model file {path}: {name} is a {len(shape)}-dimensional "
+                                    f"{dtype} array, not a {dimensions}-dimensional "
+                                    f"{KINDS[kind]} one")
+            if math.prod(shape) * dtype.itemsize > infos[name].file_size:
+                raise ScenarioError(f"model file {path}: {name} claims more data than it holds")
+            with archive.open(infos[name]) as member:
+                fields[name] = np.lib.format.read_array(member, allow_pickle=False)
+            if kind == "f" and not np.all(np.isfinite(fields[name])):
+                raise ScenarioError(f"model file {path}: {name} holds non-finite numbers")
+    except ScenarioError:
+        raise
+    except (OSError, ValueError, EOFError, RuntimeError, NotImplementedError,
+            zipfile.BadZipFile) as exc:  # RuntimeError: an encrypted member
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ScenarioError(f"model file {path} is not a readable .npz archive ({reason})"
+                            ) from None
+    return fields
+
+
+def load_model(path, window: int = 0) -> ModelFile:
+    """Read and check a model file: one-line ScenarioError for a missing, corrupt,
+    truncated, oversized or inconsistent one (see MEMBERS, MAX_*)."""
+    fields = _read_members(path, yamlfile.read_bytes(path, "model file", MAX_FILE_BYTES))
+    if str(fields["format"]) != FORMAT:
+        raise ScenarioError(f"model file {path}: format {str(fields['format'])!r}, "
+                            f"expected {FORMAT!r}")
+    if fields["layout"].shape != (3,):
+        raise ScenarioError(f"model file {path}: layout must be [na, nb, nk]")
+    try:
+        layout = Layout(*(int(v) for v in fields["layout"]))
+    except ValueError as exc:
+        raise ScenarioError(f"model file {path}: {exc}") from None
+    regressors, targets = fields["regressors"], fields["targets"]
+    centres, coefficients = fields["arx_centres"], fields["arx_coefficients"]
+    if (regressors.shape[1] != layout.size or targets.shape != (len(regressors),)
+            or len(targets) < 2 or fields["alpha"].shape != targets.shape
+            or fields["offset"].shape != (layout.size,)
+            or fields["scale"].shape != (layout.size,)):
+        raise ScenarioError(f"model file {path}: arrays of inconsistent shapes")
+    if not np.all(fields["scale"] > 0):
+        raise ScenarioError(f"model file {path}: a zero or negative scale")
+    if len(targets) + window > MAX_DICTIONARY:
+        raise ScenarioError(f"model file {path}: its {len(targets)} samples and gpc.window "
+                            f"{window} exceed the {MAX_DICTIONARY} samples a model may hold")
+    if len(centres) < 1 or coefficients.shape != (len(centres), 1 + layout.size):
+        raise ScenarioError(f"model file {path}: the multi-model's arrays do not match its "
+                            f"layout")
+    if not (fields["arx_width"] > 0 and fields["period"] > 0):
+        raise ScenarioError(f"model file {path}: arx_width and period must be positive")
+    try:
+        model = LSSVM(layout, float(fields["mu"]), float(fields["delta"]), fields["offset"],
+                      fields["scale"], regressors, targets, window)
+        train = json.loads(str(fields["train"]))
+    except ValueError as exc:
+        raise ScenarioError(f"model file {path}: {exc}") from None
+    if not isinstance(train, dict):
+        raise ScenarioError(f"model file {path}: train must be a JSON object")
+    if not np.allclose(model.alpha, fields["alpha"], rtol=1e-6,
+                       atol=1e-9 * max(1.0, float(np.abs(fields["alpha"]).max()))):
+        raise ScenarioError(f"model file {path}: its coefficients do not solve its samples "
+                            f"(a changed or corrupt file)")
+    return ModelFile(model, float(fields["period"]), train, centres,
+                     float(fields["arx_width"]), coefficients)

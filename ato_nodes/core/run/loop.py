@@ -1,0 +1,92 @@
+"""The lockstep loop in one process: simulate() makes the calls of the ROS nodes'
+steps (core/run/stages.py gives the order) on their three stages, so both give identical
+numbers; the runs core/run/fast_loop.py covers run compiled, to the same bits.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..config.scenario import apply_overrides, load_scenario
+from ..config.schema import SPEC_BY_NAME, NodeValues, steps
+from ..scoring.indices import RunningIndex
+from ..train.line import load_line
+from . import fast_loop
+from .stages import ControllerStage, PlantStage, ProfileStage
+
+SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
+          "force", "resistance", "line_resistance", "speed_limit", "command")
+
+
+def simulate(values: dict[str, Any], deadline: float | None = None,
+             prune: tuple[RunningIndex, float] | None = None,
+             changes: dict[int, dict[str, float]] | None = None
+             ) -> dict[str, np.ndarray]:
+    """Run the loop in this process: one array per SERIES name, per controller output
+    and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
+    gets exactly what its node declares. A diverged run (see PlantStage.diverged)
+    ends early, as it does in the stack. Past `deadline` (time.monotonic()) it raises
+    TimeoutError (checked before every step, or chunk of compiled steps, each a small
+    part of a second). prune (running, limit): a tuner's pruning,
+    `running` takes every step's (t, target - true speed) and the run ends once its
+    value passes `limit`. changes {step: {name: value}}: live controller parameters
+    changed before that step, as a run's bag records them (bagio.Run.parameter_changes).
+    The runs core/run/fast_loop.py covers run compiled (when numba is installed), to the
+    same bits."""
+    period = values["run.period"]
+    line = load_line(values["line.file"]) if values["line.file"] else None
+    profile = ProfileStage(NodeValues("profile", values), line)
+    plant = PlantStage(NodeValues("plant", values), line)
+    controller = ControllerStage(NodeValues("controller", values), line)
+    if fast_loop.covers(profile, plant, controller, changes):
+        rows, extras, horizons = fast_loop.run(profile, plant, controller, len(SERIES), prune,
+                                               lambda step: _check_deadline(deadline, step))
+        return _series(rows, extras, horizons, controller.output_names)
+    rows, extras, horizons = [], [], []
+    for k in range(steps(values)):
+        _check_deadline(deadline, k)  # a step takes up to ~0.03 s (10000 RK4 sub-steps)
+        out = plant.outputs()
+        controller.horizons.extend(profile.on_position(out.position))
+        horizon = controller.horizons[0]
+        controller.speeds.append(out.measured_speed)
+        if changes and k in changes:
+            controller.pending = dict(changes[k])
+        (c,) = controller.run_ready_steps()
+        plant.apply(c.u)
+        rows.append((k * period, horizon[0], out.position, out.measured_speed, out.speed,
+                     out.acceleration, out.disturbance, out.force, out.resistance,
+                     out.line_resistance, profile.speed_limit(out.position), c.u))
+        extras.append(c.extras)
+        horizons.append(horizon)
+        if plant.diverged or (prune is not None
+                              and prune[0].add(k * period, horizon[0] - out.speed) > prune[1]):
+            break
+    return _series(rows, extras, horizons, controller.output_names)
+
+
+def _check_deadline(deadline: float | None, step: int) -> None:
+    if deadline is not None and time.monotonic() > deadline:
+        raise TimeoutError(f"the simulation passed its deadline at step {step}")
+
+
+def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    table = np.array(rows, dtype=float).reshape(-1, len(SERIES))
+    series = {name: table[:, i] for i, name in enumerate(SERIES)}
+    extra_table = np.array(extras, dtype=float).reshape(-1, len(names))
+    series.update({name: extra_table[:, i] for i, name in enumerate(names)})
+    series["preview"] = np.array(horizons, dtype=float).reshape(len(rows), -1)
+    return series
+
+
+def warm(values: dict | None = None) -> None:
+    """Compile the loop of core/run/fast_loop.py now, or load it from its cache beside that
+    file, by a two-step run of `values` (default: the shipped seed000), if it is a run
+    that loop covers. Every run it covers calls it with the same argument types
+    (LoopInputs, LoopState), so this one compilation serves them all, in every process
+    of this checkout."""
+    values = load_scenario("seed000") if values is None else values
+    shortest = SPEC_BY_NAME["run.duration"].low
+    simulate(apply_overrides(values, {"run.duration": max(2 * values["run.period"], shortest)}))

@@ -1,0 +1,215 @@
+"""The lockstep loop's three stages, built from parameters, ROS-free.
+
+Step k (t_k = k * period), in every runner:
+  plant.outputs()            -> position s_k, measured and true speed, ... at t_k
+  profile.on_position(s_k)   -> the horizon of step k+2: r_k+2 .. r_k+2+N, N = controller.preview
+                                (and the horizons of steps 0, 1, 2 at k = 0)
+  controller.step(horizon_k, y_k) -> command u_k (N/kN), tracking r_k+N
+  plant.apply(u_k)           -> integrate [t_k, t_k+1] with u_k held
+The target topic carries r_k as its k-th message, whatever the runner, so the
+recorded target of step k is always r(t_k). The profile sends targets two
+steps ahead, from the position extrapolated to t_k+2 (s_k + 2 (s_k - s_k-1);
+error ~ a (2 dt)^2, centimetres; exact for time-indexed curves), so it runs
+beside the controller instead of in front of it: the critical path of a step
+is two message hops (plant -> controller -> plant). Beyond r_k+2 the horizon is
+the plan (the run context's preview): exact for time-indexed targets, along
+the planned trajectory for position-indexed ones.
+
+Each stage is built when its node starts, from exactly the values the node
+declares (schema.NodeValues) and the run context; the ROS nodes run one stage
+each and pass the values as float64 messages, bit for bit; `simulate()` makes
+the same calls in one process, so both give identical numbers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..base.errors import ScenarioError
+from ..config.components import CONTROLLERS
+from ..config.context import RunContext
+from ..config.schema import NodeValues, steps
+from ..control.limiter import CommandLimiter
+from ..train.line import Line, load_line
+from ..train.plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
+
+LOOKAHEAD = 2  # steps the profile runs ahead of the plant
+
+
+class ProfileStage:
+    """Target horizons (LOOKAHEAD steps ahead) and the speed limit from each step's
+    position."""
+
+    def __init__(self, values: dict[str, Any], line: Line | None = None):
+        self.context = RunContext(values, line)
+        _ = self.context.plan  # built (and cached) now: a bad table or line fails at start-up
+        self.period = values["run.period"]
+        self.total_steps = steps(values)
+        self.preview = values["controller.preview"]
+        self.received = 0
+        self.last_position = 0.0
+        self.approach_step = values["profile.approach_step"]
+        self.stair: float | None = None
+
+    def on_position(self, position: float) -> list[list[float]]:
+        """Position s_k of step k in; the horizons to publish now out, in step order.
+        A horizon's first entry is its step's target (with seed 003's stepped
+        approach), the rest the plan."""
+        k = self.received
+        self.received += 1
+        travel = position - self.last_position if k else 0.0  # over the last step
+        if k == 0:
+            wanted = [(step, position) for step in range(LOOKAHEAD + 1)]
+        else:
+            wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * travel)]
+        speed = travel / self.period
+        self.last_position = position
+        horizons = []
+        for step, predicted in wanted:
+            if step < self.total_steps:
+                horizon = self.context.horizon(step, predicted, self.preview)
+                horizon[0] = self.approach(horizon[0], speed)
+                horizons.append(horizon)
+        return horizons
+
+    def approach(self, target: float, speed: float) -> float:
+        """Seed 003's stepped approach: while the target is more than one step above
+        the speed, the published target is a stair one step above the speed, held
+        until the train is within a quarter step of it. Only upwards: a target below
+        the speed is a braking curve protecting a limit or the stop, never softened."""
+        step = self.approach_step
+        if step <= 0.0 or target - speed <= step:
+            self.stair = None
+            return target
+        if self.stair is None or abs(self.stair - speed) < step / 4:
+            self.stair = speed + step
+        return min(self.stair, target)  # a stair held while the target fell stays under it
+
+    def speed_limit(self, position: float) -> float:
+        """The limit that applies at step k's position, m/s (inf without a line)."""
+        return self.context.speed_limit(position)
+
+
+@dataclass(slots=True)
+class PlantOutputs:
+    position: float      # m
+    measured_speed: float  # m/s, what the speed sensor reports
+    speed: float         # m/s, true
+    acceleration: float  # m/s^2, true, at t_k- (under the previous command)
+    disturbance: float   # m/s^2, phi(t_k)
+    force: float         # N/kN applied
+    resistance: float    # N/kN basic resistance w0
+    line_resistance: float  # N/kN gradient + curve + tunnel resistance of the belt
+
+
+class PlantStage:
+    """The train, its line and its speed sensor (noise and quantisation, seeded)."""
+
+    def __init__(self, values: dict[str, Any], line: Line | None = None):
+        nominal = TrainParameters.from_values(values)  # what the ATO knows; the real train:
+        factor = values["plant.resistance_factor"]
+        self.params = dataclasses.replace(
+            nominal, mass=values["plant.mass_factor"] * nominal.mass,
+            actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
+            **{name: factor * getattr(nominal, name) for name in ("davis_a", "davis_b",
+                                                                   "davis_c")})
+        if line is None and values["line.file"]:
+            line = load_line(values["line.file"])
+        self.train = PointMassTrain(
+            self.params, values["run.period"], values["plant.substeps"],
+            TrainState(position=values["plant.initial_position"],
+                       speed=values["plant.initial_speed"]), line)
+        self.max_speed = values["plant.max_speed"]
+        self.noise = values["plant.speed_noise"]
+        self.quantum = values["plant.speed_quantum"]
+        self.rng = np.random.default_rng(values["plant.noise_seed"])
+
+    @property
+    def diverged(self) -> bool:
+        """Speed not finite or beyond plant.max_speed: a run that can only get worse."""
+        speed = self.train.state.speed
+        return not (abs(speed) <= self.max_speed)  # also true for NaN
+
+    def measure(self, speed: float) -> float:
+        """What the speed sensor reports: speed plus noise, to its resolution."""
+        draw = self.rng.standard_normal() if self.noise > 0.0 else 0.0
+        return sensor_reading(speed, draw, self.noise, self.quantum)
+
+    def outputs(self) -> PlantOutputs:
+        s, p, train = self.train.state, self.params, self.train
+        return PlantOutputs(s.position, self.measure(s.speed), s.speed, train.acceleration(),
+                            p.disturbance(s.time), s.force, p.resistance(s.speed),
+                            train.line_resistance())
+
+    def apply(self, command: float) -> None:
+        self.train.step(command)
+
+
+class ControllerStage:
+    """The controller (built at once from the registry) and its pairing rule: step k
+    needs the measured speed y_k and the horizon r_k .. r_k+N; it tracks r_k+N.
+
+    Live parameters (the controller kind's `live_parameters`): changes put in
+    `pending` take effect at the next step boundary, before the next step is
+    computed; `applied` lists them as (step, changes), step being the first one
+    computed with them. The node fills `pending` from `ros2 param set`, simulate()
+    from a run's recorded changes, so both give the same numbers."""
+
+    def __init__(self, values: dict[str, Any], line: Line | None = None):
+        self.values = values
+        self.component = CONTROLLERS.chosen(values)
+        self.context = RunContext(values, line)
+        self.limiter = CommandLimiter.from_values(values)
+        self.controller = self.component.factory(values, self.context, self.limiter)
+        self.preview = values["controller.preview"]
+        self.horizons: deque[list[float]] = deque()
+        self.speeds: deque[float] = deque()
+        self.step_index = 0
+        self.pending: dict[str, float] = {}
+        self.applied: list[tuple[int, dict[str, float]]] = []
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.component.output_names
+
+    def retune(self, changes: dict[str, float]) -> None:
+        """Rebuild the controller with `changes` to its live parameters, carrying its
+        state (the kind's `state_paths`) and the limiter's over: the run goes on as if
+        the new values had been set between two steps."""
+        live = self.component.live_parameters
+        refused = sorted(set(changes) - set(live))
+        if refused:
+            raise ScenarioError(f"{refused[0]} cannot change during a run (live parameters "
+                                f"of {self.component.kind}: {', '.join(live) or 'none'})")
+        values = type(self.values)(self.values.node, {**self.values, **changes}) \
+            if isinstance(self.values, NodeValues) else {**self.values, **changes}
+        rebuilt = self.component.factory(values, self.context, self.limiter)
+        for path in self.component.state_paths:
+            *owners, name = path.split(".")
+            old, new = self.controller, rebuilt
+            for owner in owners:
+                old, new = getattr(old, owner), getattr(new, owner)
+            setattr(new, name, getattr(old, name))
+        self.controller, self.values = rebuilt, values
+
+    def run_ready_steps(self) -> list:
+        """Run every step whose inputs have both arrived; their outputs in order."""
+        outputs = []
+        while self.speeds and self.horizons:
+            if self.pending:
+                self.retune(self.pending)
+                self.applied.append((self.step_index, self.pending))
+                self.pending = {}
+            horizon = self.horizons.popleft()
+            speed = self.speeds.popleft()
+            reference = horizon[self.preview]
+            if self.step_index == 0:
+                self.controller.start(reference, speed)
+            outputs.append(self.controller.step(reference, speed, horizon))
+            self.step_index += 1
+        return outputs

@@ -1,0 +1,106 @@
+"""The indices a run is scored on, as names: every index the scorer gives, those that only
+grow along a run, those that judge its stop, the fitnesses a tuning minimises, a
+requirement on an index (`name<=limit`) and the console table of a run's indices.
+Known to the configuration (report.require is checked against it) and to every
+scorer; computed by core/run/scoring.py from core/scoring/indices.py and operation.py."""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from ..base.errors import ScenarioError
+from .operation import format_operation
+
+# Every index score_series can give (a run gives those that apply to it).
+INDEX_NAMES = (
+    "steps", "finite", "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh",
+    "median_abs_error_kmh", "p95_abs_error_kmh", "j_seed004",
+    "eso_speed_max_dev", "eso_acceleration_max_dev", "eso_disturbance_max_dev",
+    "overshoot_percent", "traction_energy_kwh", "regenerated_energy_kwh", "net_energy_kwh",
+    "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time",
+    "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "arrival_time",
+    "running_time_error",
+    "max_abs_error_outside_steps_kmh", "stepped_time")
+# Those that only grow along a run (integrals of non-negative terms, maxima, counts):
+# a partial run that breaks a requirement on one of them has broken it for good.
+GROWING_INDICES = (
+    "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh", "j_seed004",
+    "traction_energy_kwh", "regenerated_energy_kwh", "max_jerk", "max_jerk_sampled",
+    "switch_count", "overspeed_time", "max_overspeed_kmh", "max_abs_error_outside_steps_kmh",
+    "stepped_time")
+# Those that judge the run's stop: they say nothing of a run that ended short of it.
+STOP_INDICES = ("stopping_error", "abs_stopping_error", "arrival_time", "running_time_error")
+# A tuning's fitness (tune.py --fitness) -> the index it minimises.
+FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
+           "p95_abs_error_kmh": "p95_abs_error_kmh"}
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """An operational requirement on an index, `name<=limit`: a candidate that breaks
+    it is infeasible, whatever its fitness (a controller that never leaves the
+    platform tracks a position-indexed target well: 0.3 m/s off, standing still)."""
+
+    name: str
+    limit: float
+
+    @classmethod
+    def parse(cls, text: str, source: str = "--require") -> Requirement:
+        """`name<=limit`; anything else is one ScenarioError naming `source`."""
+        name, sep, limit = text.partition("<=")
+        try:
+            requirement = cls(name.strip(), float(limit)) if sep else cls._bad(text, source)
+        except ValueError:
+            return cls._bad(text, source)
+        if not math.isfinite(requirement.limit):
+            raise ScenarioError(f"{source}: the limit of {requirement.name} must be a finite "
+                                f"number, not {limit.strip()!r}")
+        if requirement.name not in INDEX_NAMES:
+            close = difflib.get_close_matches(requirement.name, INDEX_NAMES, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            raise ScenarioError(f"{source}: unknown index {requirement.name!r}{hint}")
+        return requirement
+
+    @classmethod
+    def parse_list(cls, text: str, source: str) -> tuple[Requirement, ...]:
+        """A comma-separated list (a scenario's report.require)."""
+        return tuple(cls.parse(item, source) for item in text.split(",") if item.strip())
+
+    @staticmethod
+    def _bad(text: str, source: str):
+        raise ScenarioError(f"{source} expects INDEX<=VALUE (e.g. abs_stopping_error<=0.3), "
+                            f"got {text!r}")
+
+    def violation(self, indices: dict[str, Any]) -> float:
+        """0 when met; else how far it is broken, relative to max(|limit|, 1)."""
+        value = indices.get(self.name, math.nan)
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            return 1e3
+        return max(0.0, value - self.limit) / max(abs(self.limit), 1.0)
+
+
+def format_indices(indices: dict) -> str:
+    return "\n".join([
+        f"steps            {indices['steps']}",
+        f"ITAE             {indices['itae']:.6g}  (m/s) s^2",
+        f"IAE              {indices['iae']:.6g}  m",
+        f"ISE              {indices['ise']:.6g}  m^2/s",
+        f"max |e|          {indices['max_abs_error_kmh']:.4f} km/h"
+        f"  ({indices['max_abs_error']:.5f} m/s)",
+        f"median |e|       {indices['median_abs_error_kmh']:.4f} km/h",
+        f"p95 |e|          {indices['p95_abs_error_kmh']:.4f} km/h",
+        f"J (seed 004)     {indices.get('j_seed004', float('nan')):.6g}",
+        *([f"ESO max |z1 - v| {indices['eso_speed_max_dev']:.3g} m/s, |z2 - a| "
+           f"{indices['eso_acceleration_max_dev']:.3g} m/s^2, |z3 - f| "
+           f"{indices['eso_disturbance_max_dev']:.3g} m/s^3"]
+          if "eso_speed_max_dev" in indices else []),
+        *([f"overshoot        {indices['overshoot_percent']:.3f} %"]
+          if "overshoot_percent" in indices else []),
+        *([f"max |e| o. steps {indices['max_abs_error_outside_steps_kmh']:.4f} km/h outside "
+           f"{indices['stepped_time']:.1f} s of stepped approach"]
+          if "max_abs_error_outside_steps_kmh" in indices else []),
+        *format_operation(indices),
+    ])

@@ -1,0 +1,128 @@
+"""Operation indices of a run: energy, comfort, speed-limit compliance, stopping
+and punctuality (ROS-free).
+
+Series are sampled at every control step: t (s), position (m), speed (m/s),
+acceleration (m/s^2), force (specific force, N/kN: + traction, - braking) and
+optionally speed_limit (m/s, the line limit at the train's position). The force in
+kN is force * mass * gravity / 1000 with the mass in t.
+
+- traction_energy_kwh: integral of max(F, 0) max(v, 0) dt / efficiency, kWh drawn
+  from the supply.
+- regenerated_energy_kwh: integral of max(-F, 0) max(v, 0) dt * efficiency, kWh.
+  Assumes all braking is electric and regenerative, at the same efficiency.
+- net_energy_kwh: traction minus regenerated, kWh.
+- max_jerk: largest mean jerk over JERK_WINDOW (1 s): |a(t + 1 s) - a(t)| / 1 s, m/s^3.
+  Comfort standards judge jerk over about a second (EN 12299 smooths over 1 s); a
+  sampled step in the acceleration -- the end of braking as the train stops, a
+  neutral section -- counts as its size per second, not per control period.
+- max_jerk_sampled: largest |da/dt| between consecutive samples, m/s^3.
+- comfort_index: sum of |change of acceleration| per unit time (seed 002), m/s^3.
+- switch_count: changes between traction and braking; coasting does not end a mode.
+- overspeed_time (s), max_overspeed_kmh (km/h): time above and largest excess over
+  the speed limit, only when speed_limit is given.
+- stopping_error (m, + overshoot), abs_stopping_error (m): final position against
+  stop_position, only when it is given.
+- arrival_time (s): t of the first sample of the final standstill (speed <= 0.01
+  m/s); NaN if the train is still moving at the end or never moved.
+- running_time_error (s, + late): arrival_time - planned_run_time, when planned.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..base.units import MS_TO_KMH
+from .indices import _integral
+
+STANDSTILL = 0.01  # m/s
+JERK_WINDOW = 1.0  # s
+KJ_PER_KWH = 3600.0
+
+
+SWITCH_THRESHOLD = 0.5  # N/kN: a force this small or smaller is coasting
+
+
+def drive_modes(force: np.ndarray, threshold: float = SWITCH_THRESHOLD) -> np.ndarray:
+    """+1 traction, -1 braking, 0 coasting, per step."""
+    return np.where(np.abs(force) > threshold, np.sign(force), 0).astype(int)
+
+
+def _switch_count(force: np.ndarray, threshold: float) -> int:
+    """Changes between traction and braking (coasting in between does not count)."""
+    modes = drive_modes(force, threshold)
+    return int(np.count_nonzero(np.diff(modes[modes != 0])))
+
+
+def windowed_jerk(t: np.ndarray, acceleration: np.ndarray, window: float = JERK_WINDOW
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(centre times, mean jerk over `window`): max_jerk is its largest magnitude."""
+    lag = max(1, min(len(t) - 1, round(window / float(np.median(np.diff(t))))))
+    jerk = (acceleration[lag:] - acceleration[:-lag]) / (t[lag:] - t[:-lag])
+    return (t[lag:] + t[:-lag]) / 2, jerk
+
+
+def _arrival_time(t: np.ndarray, speed: np.ndarray) -> float:
+    moving = np.flatnonzero(speed > STANDSTILL)
+    if len(moving) == 0 or moving[-1] == len(speed) - 1:
+        return float("nan")
+    return float(t[moving[-1] + 1])
+
+
+def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float = 9.8,
+                      efficiency: float = 0.9, stop_position: float | None = None,
+                      planned_run_time: float | None = None,
+                      switch_threshold: float = SWITCH_THRESHOLD) -> dict[str, float]:
+    """Every operation index of a run, as a flat dict (see the module docstring)."""
+    t, position, speed, acceleration, force = (
+        np.asarray(series[name], dtype=float)
+        for name in ("t", "position", "speed", "acceleration", "force"))
+    force_kn = force * mass * gravity / 1000.0
+    v = np.maximum(speed, 0.0)
+    traction = _integral(t, np.maximum(force_kn, 0.0) * v) / efficiency / KJ_PER_KWH
+    regenerated = _integral(t, np.maximum(-force_kn, 0.0) * v) * efficiency / KJ_PER_KWH
+    dt = np.diff(t)
+    da = np.diff(acceleration)
+    span = float(t[-1] - t[0]) if len(t) > 1 else 0.0
+    arrival = _arrival_time(t, speed)
+    result = {
+        "traction_energy_kwh": traction,
+        "regenerated_energy_kwh": regenerated,
+        "net_energy_kwh": traction - regenerated,
+        "max_jerk": float(np.max(np.abs(windowed_jerk(t, acceleration)[1]))) if len(t) > 1
+        else 0.0,
+        "max_jerk_sampled": float(np.max(np.abs(da / dt))) if len(t) > 1 else 0.0,
+        "comfort_index": float(np.sum(np.abs(da))) / span if span > 0 else 0.0,
+        "switch_count": _switch_count(force, switch_threshold),
+        "arrival_time": arrival,
+    }
+    if "speed_limit" in series:
+        excess = speed - np.asarray(series["speed_limit"], dtype=float)
+        result["overspeed_time"] = float(np.sum(dt[excess[:-1] > 0.0]))
+        result["max_overspeed_kmh"] = (float(max(np.max(excess), 0.0)) * MS_TO_KMH
+                                       if len(excess) else 0.0)
+    if stop_position is not None:
+        result["stopping_error"] = float(position[-1] - stop_position)
+        result["abs_stopping_error"] = abs(result["stopping_error"])
+    if planned_run_time is not None:
+        result["running_time_error"] = arrival - planned_run_time
+    return result
+
+
+def format_operation(indices: dict) -> list[str]:
+    """Human-readable lines for whichever operation indices are present."""
+    formats = [
+        ("traction_energy_kwh", "traction energy", "{:.2f} kWh"),
+        ("regenerated_energy_kwh", "regenerated", "{:.2f} kWh"),
+        ("net_energy_kwh", "net energy", "{:.2f} kWh"),
+        ("max_jerk", "max jerk (1 s)", "{:.4g} m/s^3"),
+        ("max_jerk_sampled", "max jerk (step)", "{:.4g} m/s^3"),
+        ("comfort_index", "comfort index", "{:.4g} m/s^3"),
+        ("switch_count", "switches", "{}"),
+        ("overspeed_time", "overspeed time", "{:.2f} s"),
+        ("max_overspeed_kmh", "max overspeed", "{:.3f} km/h"),
+        ("stopping_error", "stopping error", "{:+.3f} m"),
+        ("arrival_time", "arrival time", "{:.2f} s"),
+        ("running_time_error", "running-time err", "{:+.2f} s"),
+    ]
+    return [f"{label:<17}{fmt.format(indices[key])}"
+            for key, label, fmt in formats if key in indices]

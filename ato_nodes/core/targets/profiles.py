@@ -1,0 +1,494 @@
+"""Target-speed profiles, ROS-free. Every profile maps (time, position) to m/s."""
+
+from __future__ import annotations
+
+import csv
+import functools
+import hashlib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..base.errors import ScenarioError
+from ..base.registry import Component
+from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
+from ..base.units import KMH
+from ..train.plant import TrainParameters
+
+SEED000_PARAMETERS = (
+    param("profile.seed000.cycle", 1200.0, "T of eq. 25, s", PROFILE_NODES, 1.0, 1e6),
+    param("profile.seed000.v_inc", 368.34 * KMH, "Vinc of eq. 25, m/s", PROFILE_NODES, 0.0, 300.0),
+    param("profile.seed000.t1", 125.2841, "t1 of eq. 25, s", PROFILE_NODES, 0.0, 1e6),
+    param("profile.seed000.cruise_high", 350.0 * KMH, "upper cruise speed, m/s", PROFILE_NODES,
+          0.0, 300.0),
+    param("profile.seed000.cruise_low", 200.0 * KMH, "lower cruise speed, m/s", PROFILE_NODES,
+          0.0, 300.0),
+)
+
+
+@dataclass(frozen=True)
+class Seed000Profile:
+    """Seed 000 eq. 25 as reconstructed in docs/papers.md (constants in SI; the
+    defaults are in SEED000_PARAMETERS).
+
+    Start - cruise - decelerate - cruise - accelerate - cruise - decelerate -
+    stop over 2T. The 200 km/h and 0 bounds of the second and fourth pieces
+    follow from continuity (the extracted text prints 350 for all four).
+    """
+
+    cycle: float         # T, s
+    v_inc: float         # m/s
+    t1: float            # s
+    cruise_high: float   # m/s
+    cruise_low: float    # m/s
+    position_indexed = False
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        T, v = self.cycle, self.v_inc
+        if t < T / 2:
+            return min(v * (1.0 - math.exp(-t / 120.0)), self.cruise_high)
+        if t < T:
+            return max(v * (1.0 - math.exp(-(T / 2 + 240.0 - t) / 80.0)), self.cruise_low)
+        if t < 3 * T / 2:
+            return min(v * (1.0 - math.exp(-(t - T + self.t1) / 160.0)), self.cruise_high)
+        return max(v * (1.0 - math.exp(-(3 * T / 2 + 480.0 - t) / 160.0)), 0.0)
+
+
+ROUNDING_WIDTH = 20  # samples per averaging window of round_corners
+
+
+def round_corners(samples: np.ndarray, width: int, after: float) -> np.ndarray:
+    """A speed curve sampled evenly in time, its acceleration made continuous: the mean
+    over `width` samples centred where it falls, over the past where it rises, so it
+    brakes earlier and accelerates later than the corners, never the other way (the
+    lower of the two means; the curve before its start holds its first value, after its
+    end `after`). An acceleration step of da becomes a ramp of da / (width * tick)."""
+    padded = np.concatenate((np.full(width, samples[0]), samples, np.full(width, after)))
+    sums = np.concatenate(([0.0], np.cumsum(padded)))
+    i = np.arange(len(samples))
+    past = (sums[i + width + 1] - sums[i + 1]) / width
+    centred = (sums[i + width + width // 2 + 1] - sums[i + width // 2 + 1]) / width
+    return np.minimum(past, centred)
+
+
+class FeasiblePlan:
+    """A time-indexed plan made drivable by the nominal train (profile.envelope_share,
+    profile.jerk), precomputed on the run's step grid: where the plan asks more
+    traction or braking force than `share` of the envelope against the basic
+    resistance, the target falls behind it and catches up as the share allows
+    (forward then backward pass; braking starts earlier, so the target is never above
+    what the train can brake from); then its corners are rounded to `jerk` over
+    T = (the largest planned acceleration change) / jerk. Between steps, linear."""
+
+    position_indexed = False
+
+    def __init__(self, plan, train: TrainParameters, share: float, jerk: float, period: float,
+                 steps: int):
+        self.period = period
+        times = period * np.arange(steps + 2 * MAX_PREVIEW)
+        raw = np.array([plan.speed(t) for t in times])
+        speeds = raw.copy()
+        if share > 0.0:
+            xi = train.xi
+            for k in range(len(speeds) - 1):  # forward: the acceleration it can give
+                v = speeds[k]
+                reach = v + period * xi * train.net_traction(v, share)
+                speeds[k + 1] = min(speeds[k + 1], max(reach, 0.0))
+            for k in range(len(speeds) - 2, -1, -1):  # backward: the braking it can give
+                v = speeds[k + 1]
+                reach = v + period * xi * train.net_braking(v, share)
+                speeds[k] = min(speeds[k], reach)
+        if jerk > 0.0:
+            acceleration = np.diff(speeds) / period
+            change = float(np.max(np.abs(np.diff(acceleration)))) if len(acceleration) > 1 else 0.0
+            width = max(2, 2 * round(change / jerk / period / 2))
+            speeds = round_corners(speeds, width, speeds[-1])
+        self.speeds = speeds.tolist()
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        x = t / self.period
+        i = min(max(int(x), 0), len(self.speeds) - 2)
+        low = self.speeds[i]
+        return low + (min(x, i + 1.0) - i) * (self.speeds[i + 1] - low)
+
+
+@dataclass(frozen=True)
+class StepProfile:
+    """Zero before `time`, `speed` from then on (seed 000's step-response test)."""
+
+    speed_after: float
+    time: float
+    position_indexed = False
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        return self.speed_after if t >= self.time else 0.0
+
+
+class TableProfile:
+    """Piecewise-linear speed against time or position, read from a CSV table.
+
+    The CSV has a header naming its two columns: `time` (s) or `position` (m),
+    then `speed` (m/s). Beyond the table the end values hold.
+    """
+
+    def __init__(self, axis: str, points: np.ndarray, speeds: np.ndarray):
+        if axis not in ("time", "position"):
+            raise ValueError(f"profile axis must be 'time' or 'position', not {axis!r}")
+        if len(points) < 2 or np.any(np.diff(points) <= 0):
+            raise ValueError("profile table needs at least two rows with strictly increasing "
+                             f"{axis}")
+        if np.any(speeds < 0) or not np.all(np.isfinite(speeds)):
+            raise ValueError("profile table speeds must be finite and non-negative")
+        self.axis = axis
+        self.position_indexed = axis == "position"
+        self.points = [float(x) for x in points]
+        self.speeds = [float(x) for x in speeds]
+
+    @classmethod
+    def from_csv(cls, path: str | Path) -> TableProfile:
+        path = Path(path)
+        try:
+            with path.open(newline="") as handle:
+                rows = [row for row in csv.reader(handle) if row and not row[0].startswith("#")]
+        except OSError as exc:
+            raise ValueError(f"cannot read profile table {path}: {exc.strerror}") from None
+        if not rows or len(rows[0]) != 2 or rows[0][1].strip() != "speed":
+            raise ValueError(f"{path}: header must be 'time,speed' or 'position,speed'")
+        try:
+            data = np.array([[float(a), float(b)] for a, b in rows[1:]])
+        except ValueError:
+            raise ValueError(f"{path}: every row after the header needs two numbers") from None
+        try:
+            return cls(rows[0][0].strip(), data[:, 0], data[:, 1])
+        except (ValueError, IndexError) as exc:
+            raise ValueError(f"{path}: {exc}") from None
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        x = t if self.axis == "time" else position
+        return float(np.interp(x, self.points, self.speeds))
+
+
+class StrategyProfile:
+    """A driving strategy (seed 002, scripts/optimize_strategy.py) as the target: its
+    speed against distance, interpolated in v^2 (kinetic energy is what a held force
+    changes linearly along the track), at least `start_speed` at the departure point
+    (a position-indexed target of 0 would never start the train). The strategy's mode
+    (1 traction, 0 cruise/coast, -1 brake) and planned force (N/kN) at a position are
+    there for a controller's feedforward: context.plan.mode(s), context.plan.force(s)."""
+
+    position_indexed = True
+
+    def __init__(self, plan, start_speed: float):
+        self.positions = plan.positions
+        energies = plan.speeds ** 2
+        energies[0] = max(energies[0], start_speed ** 2)
+        self.energies = energies
+        self.modes, self.forces = plan.modes, plan.forces
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        return math.sqrt(max(0.0, float(np.interp(position, self.positions, self.energies))))
+
+    def _stage(self, position: float) -> int:
+        index = int(np.searchsorted(self.positions, position, side="right")) - 1
+        return min(max(index, 0), len(self.positions) - 1)
+
+    def mode(self, position: float) -> int:
+        return int(self.modes[self._stage(position)])
+
+    def force(self, position: float) -> float:
+        return float(self.forces[self._stage(position)])
+
+
+class AtoCurve:
+    """Distance-indexed ATO target curve of one interstation run (seed 004).
+
+    On a grid of `resolution` m from the departure point to the line's stop
+    mark, the target is the lowest of: the line limit less `margin` (a raised
+    limit counts only once the train's tail has passed the change), a cruise
+    speed, the acceleration curve from the departure point and the braking
+    curve to every lower limit ahead and to the stop. In v^2 both curves are
+    running minima (v^2 grows by at most 2 a dx per cell), so the whole curve
+    is a few numpy passes. The cruise speed is the lowest that meets the
+    line's planned run time (bisection); when even the limits cannot meet the
+    plan, the curve runs at the limits. The departure point's target is
+    `start_speed`, not 0, or a position-indexed curve would never start the train.
+
+    Two additions, off by default (the papers' curves):
+    * `envelope_share` > 0 with the nominal `train`: the planned traction and braking
+      force never exceeds that share of the train's envelope at the speed, against its
+      basic and the line's resistance, so the controller keeps the rest for what the
+      plan does not know (a steep up grade lowers the target instead of leaving it
+      unreachable; a speed the share cannot hold is not planned; in a neutral section
+      the plan coasts). The
+      passes then step cell by cell; the curve for a cruise speed c is the curve
+      without one, capped at c (both passes are monotone in their start).
+    * `jerk` > 0: the acceleration is made continuous with at most this jerk, the
+      curve in time averaged over T = max(acceleration, deceleration) / jerk:
+      centred where it falls (the braking starts T/2 earlier, never later), over
+      the past where it rises (the acceleration starts later, never earlier). Where a
+      braking ends at a lower limit the centred mean passes over the corner by at
+      most da T / 8 (0.12 m/s for 0.7 m/s^2 at 0.5 m/s^3); the rounded curve is
+      kept half the margin under the limits, never clipped to the cap (a clip
+      would bring the corner back).
+    """
+
+    position_indexed = True
+    shapes_itself = True  # applies profile.envelope_share and profile.jerk in distance
+
+    def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
+                 start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
+                 power_speed: float = math.inf, stop_jerk: float = 0.0,
+                 train: TrainParameters | None = None, envelope_share: float = 0.0,
+                 jerk: float = 0.0):
+        self.line = line
+        stop = line.stop_position
+        self.positions = np.arange(0.0, stop + resolution / 2, resolution)
+        self.positions[-1] = stop
+        self.limits = self._belt_limits(self.positions, line, train_length)
+        self.acceleration, self.deceleration = acceleration, deceleration
+        self.power_speed, self.stop_jerk = power_speed, stop_jerk
+        self.start_speed = start_speed
+        self.caps = np.maximum(self.limits - margin, start_speed)
+        self.margin, self.jerk = margin, jerk
+        self.feasible = (self._feasible(train, envelope_share, train_length)
+                         if envelope_share > 0.0 else None)
+        top = float(self.caps.max())
+        if line.planned_run_time is None or self.run_time(top) >= line.planned_run_time:
+            self.cruise = top
+        else:
+            low, high = start_speed, top
+            for _ in range(60):
+                middle = 0.5 * (low + high)
+                low, high = (middle, high) if self.run_time(middle) > line.planned_run_time \
+                    else (low, middle)
+            self.cruise = high
+        self.speeds = self.curve(self.cruise)
+        self.planned_run_time = self.run_time(self.cruise)
+
+    @staticmethod
+    def _belt_limits(x: np.ndarray, line, train_length: float) -> np.ndarray:
+        limits = np.full_like(x, np.inf)
+        for section in line.speed_limits:
+            inside = (x >= section.start) & (x < section.end + train_length)
+            limits[inside] = np.minimum(limits[inside], section.value)
+        limits[~np.isfinite(limits)] = line.speed_limits[-1].value
+        return limits
+
+    def run_up(self, speed: np.ndarray) -> np.ndarray:
+        """Distance the planned acceleration needs from standstill to `speed`: a up to
+        power_speed v_p, then a v_p / v (constant power)."""
+        a, vp = self.acceleration, self.power_speed
+        low = speed * speed / (2.0 * a)
+        if not math.isfinite(vp):
+            return low
+        return np.where(speed <= vp, low,
+                        vp * vp / (2.0 * a) + (speed ** 3 - vp ** 3) / (3.0 * a * vp))
+
+    def run_up_speed(self, distance: np.ndarray) -> np.ndarray:
+        """The inverse of run_up."""
+        a, vp = self.acceleration, self.power_speed
+        low = np.sqrt(2.0 * a * distance)
+        if not math.isfinite(vp):
+            return low
+        knee = vp * vp / (2.0 * a)
+        return np.where(distance <= knee, low,
+                        np.cbrt(vp ** 3 + 3.0 * a * vp * np.maximum(distance - knee, 0.0)))
+
+    def curve(self, cruise: float) -> np.ndarray:
+        """The target at every grid point for a cruise speed, m/s."""
+        speeds = (np.minimum(self.feasible, cruise) if self.feasible is not None
+                  else self._fixed_rates(cruise))
+        return self._rounded(speeds) if self.jerk > 0.0 else speeds
+
+    def _fixed_rates(self, cruise: float) -> np.ndarray:
+        """In run-up distance d(v) the acceleration curve from any point grows by one
+        metre per metre, so the forward pass is a running minimum too."""
+        x = self.positions
+        run_up = self.run_up(np.minimum(self.caps, cruise))
+        run_up[0] = self.run_up(np.array(self.start_speed))
+        squared = self.run_up_speed(np.minimum.accumulate(run_up - x) + x) ** 2
+        fall = 2.0 * self.deceleration * (x[-1] - x)
+        squared[-1] = 0.0
+        squared = (np.minimum.accumulate((squared - fall)[::-1]) + fall[::-1])[::-1]
+        if self.stop_jerk > 0.0:
+            squared = np.minimum(squared, self.stopping(x[-1] - x) ** 2)
+        return np.sqrt(np.maximum(squared, 0.0))
+
+    def _feasible(self, train: TrainParameters, share: float, train_length: float
+                  ) -> np.ndarray:
+        """The curve without a cruise speed, each cell's rate the planned one or what the
+        share of the envelope's force gives against the resistance, whichever is lower
+        (forward then backward pass)."""
+        x, caps = self.positions, self.caps
+        line_resistance = [self.line.additional_resistance(p, train_length) for p in x]
+        powered = [not self.line.in_neutral_section(p - train.pantograph_offset) for p in x]
+        xi, a, vp = train.xi, self.acceleration, self.power_speed
+        squared = np.empty(len(x))
+        v2 = squared[0] = self.start_speed ** 2
+        for i in range(len(x) - 1):
+            v = math.sqrt(v2)
+            planned = a if v <= vp else a * vp / v
+            rate = min(planned, xi * train.net_traction(v, share, line_resistance[i], powered[i]))
+            v2 = min(max(v2 + 2.0 * rate * (x[i + 1] - x[i]), self.start_speed ** 2),
+                     caps[i + 1] ** 2)
+            squared[i + 1] = v2
+        stopping = self.stopping(x[-1] - x) ** 2 if self.stop_jerk > 0.0 else squared
+        v2 = squared[-1] = 0.0
+        for i in range(len(x) - 2, -1, -1):
+            v = math.sqrt(v2)
+            rate = min(self.deceleration, xi * train.net_braking(v, share, line_resistance[i]))
+            v2 = min(v2 + 2.0 * max(rate, 0.0) * (x[i + 1] - x[i]), squared[i], stopping[i])
+            squared[i] = v2
+        return np.sqrt(squared)
+
+    def _rounded(self, speeds: np.ndarray) -> np.ndarray:
+        """The curve with its acceleration made continuous (see the class docstring), in
+        time along the curve itself, then back onto the grid."""
+        x = self.positions
+        times = np.concatenate(([0.0], np.cumsum(2.0 * np.diff(x) / (speeds[:-1] + speeds[1:]))))
+        tick = max(self.acceleration, self.deceleration) / self.jerk / ROUNDING_WIDTH
+        grid = np.arange(0.0, times[-1] + tick / 2, tick)
+        rounded = round_corners(np.interp(grid, times, speeds), ROUNDING_WIDTH, 0.0)
+        rounded = np.minimum(np.interp(times, grid, rounded), self.limits - self.margin / 2)
+        rounded[0], rounded[-1] = speeds[0], 0.0
+        return rounded
+
+    def stopping(self, distance: np.ndarray) -> np.ndarray:
+        """Speed at `distance` before the mark on a stop whose braking eases off at
+        stop_jerk: in time before the stop, deceleration j t up to the service value
+        b (v = j t^2 / 2, d = j t^3 / 6), constant b before that."""
+        j, b = self.stop_jerk, self.deceleration
+        ease = b / j                                   # s of easing off
+        ease_distance, ease_speed = j * ease ** 3 / 6.0, j * ease ** 2 / 2.0
+        easing = 0.5 * j * np.cbrt(6.0 * np.maximum(distance, 0.0) / j) ** 2
+        braking = np.sqrt(ease_speed ** 2 + 2.0 * b * np.maximum(distance - ease_distance, 0.0))
+        return np.where(distance <= ease_distance, easing, braking)
+
+    def run_time(self, cruise: float) -> float:
+        v = self.curve(cruise)
+        return float(np.sum(2.0 * np.diff(self.positions) / (v[:-1] + v[1:])))
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        if position >= self.positions[-1]:
+            return 0.0
+        return float(np.interp(position, self.positions, self.speeds))
+
+    def limit(self, position: float) -> float:
+        """The limit that applies to the train with its head at `position`, m/s."""
+        cell = np.searchsorted(self.positions, position, side="right") - 1
+        return float(self.limits[min(max(cell, 0), len(self.limits) - 1)])
+
+
+def ato_curve(values: dict, line) -> AtoCurve:
+    """The ATO curve a run's profile.ato.* parameters give on `line`."""
+    return _ato_curve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
+                      values["profile.ato.margin"], values["profile.ato.start_speed"],
+                      values["plant.length"], values["profile.ato.power_speed"] or math.inf,
+                      values["profile.ato.stop_jerk"],
+                      TrainParameters.from_values(values) if values["profile.envelope_share"]
+                      else None, values["profile.envelope_share"], values["profile.jerk"])
+
+
+@functools.lru_cache(maxsize=8)
+def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
+               power_speed, stop_jerk, train, envelope_share, jerk) -> AtoCurve:
+    """One curve per distinct line and parameters (the profile and the scorer both need
+    it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
+    return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
+                    power_speed=power_speed, stop_jerk=stop_jerk, train=train,
+                    envelope_share=envelope_share, jerk=jerk)
+
+
+STEP_PARAMETERS = (
+    param("profile.step.speed", 10.0 * KMH, "step height, m/s", PROFILE_NODES, 0.0, 300.0),
+    param("profile.step.time", 0.0, "step instant, s", PROFILE_NODES, 0.0, 1e7),
+)
+TABLE_PARAMETERS = (
+    param("profile.table.file", "", "CSV table (time|position,speed); relative to the scenario "
+          "file, else to msg_config/", PROFILE_NODES),
+)
+ATO_PARAMETERS = (
+    param("profile.ato.acceleration", 0.8, "ATO curve: planned acceleration, m/s^2",
+          PROFILE_NODES, 0.01, 5.0),
+    param("profile.ato.power_speed", 0.0, "ATO curve: above this speed the planned acceleration "
+          "falls as 1/v (constant power), m/s (0 = constant acceleration)", PROFILE_NODES,
+          0.0, 300.0),
+    param("profile.ato.deceleration", 0.8, "ATO curve: planned service braking, m/s^2",
+          PROFILE_NODES, 0.01, 5.0),
+    param("profile.ato.stop_jerk", 0.0, "ATO curve: the braking into the stop mark eases off at "
+          "this jerk, m/s^3 (0 = full service braking to the mark)", PROFILE_NODES, 0.0, 10.0),
+    param("profile.ato.margin", 5.0 * KMH, "ATO curve: distance kept below the line limit, m/s",
+          PROFILE_NODES, 0.0, 50.0),
+    param("profile.ato.start_speed", 0.3, "ATO curve: target at the departure point (a position-"
+          "indexed curve is 0 there and would never start the train), m/s", PROFILE_NODES,
+          0.01, 10.0),
+)
+
+
+def _table(values, context) -> TableProfile:
+    if not values["profile.table.file"]:
+        raise ScenarioError("profile.kind is table but profile.table.file is empty")
+    try:
+        return TableProfile.from_csv(values["profile.table.file"])
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+
+
+def _ato(values, context) -> AtoCurve:
+    line = context.line
+    if line is None:
+        raise ScenarioError("profile.kind is ato but line.file is empty")
+    if line.stop_position <= 0.0:
+        raise ScenarioError(f"the ato profile needs a stop beyond the departure point; "
+                            f"{values['line.file']} stops at 0 m")
+    return ato_curve(values, line)
+
+
+STRATEGY_PARAMETERS = (
+    param("profile.strategy.file", "", "strategy file (scripts/optimize_strategy.py) planned "
+          "for this run's line and train; relative to the scenario file, else to msg_config/",
+          PROFILE_NODES),
+    param("profile.strategy.start_speed", 0.3, "strategy target at the departure point, m/s",
+          PROFILE_NODES, 0.01, 10.0),
+)
+
+
+def _strategy(values, context) -> StrategyProfile:
+    from . import strategy  # the DP and its helpers are not needed by the other kinds
+    path = values["profile.strategy.file"]
+    if not path:
+        raise ScenarioError("profile.kind is strategy but profile.strategy.file is empty")
+    if context.line is None:
+        raise ScenarioError("profile.kind is strategy but line.file is empty")
+    try:
+        plan = strategy.read_strategy(path)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+    digest = hashlib.sha256(Path(values["line.file"]).read_bytes()).hexdigest()
+    if plan.header.get("line_sha256") != digest:
+        raise ScenarioError(f"strategy file {path} was planned for another line "
+                            f"({plan.header.get('line', '?')}), not {values['line.file']}")
+    if plan.header.get("train") != values["plant.train"]:
+        raise ScenarioError(f"strategy file {path} was planned for train "
+                            f"{plan.header.get('train')!r}, the run uses "
+                            f"{values['plant.train'] or '(none)'!r}")
+    if abs(plan.positions[-1] - context.line.stop_position) > 1.0:
+        raise ScenarioError(f"strategy file {path} ends at {plan.positions[-1]:.0f} m, the "
+                            f"line's stop is at {context.line.stop_position:.0f} m")
+    return StrategyProfile(plan, values["profile.strategy.start_speed"])
+
+
+SEED000 = Component(
+    "seed000", "seed 000 eq. 25, time-indexed", SEED000_PARAMETERS,
+    lambda values, context: Seed000Profile(**{
+        spec.name.rsplit(".", 1)[1]: values[spec.name] for spec in SEED000_PARAMETERS}))
+STEP = Component(
+    "step", "a speed step at a given time", STEP_PARAMETERS,
+    lambda values, context: StepProfile(values["profile.step.speed"], values["profile.step.time"]))
+TABLE = Component("table", "CSV table against time or position", TABLE_PARAMETERS, _table)
+STRATEGY = Component("strategy", "a driving strategy from scripts/optimize_strategy.py "
+                     "(seed 002), distance-indexed", STRATEGY_PARAMETERS, _strategy)
+ATO = Component("ato", "distance-indexed ATO curve from the line, braking and planned run time",
+                ATO_PARAMETERS, _ato)

@@ -1,0 +1,637 @@
+"""Driving strategies along a line (seed 002), ROS-free: the energy-optimal limit by
+dynamic programming over (position, speed).
+
+The train is the project's mass belt (core.plant.TrainParameters, core.line.Line):
+basic resistance w0(v), the belt's gradient, curve and tunnel resistance, the
+traction and brake envelopes, traction cut while the pantograph is in a neutral
+section, speeds capped at the line limit over the belt minus a margin (seed 002's
+speed protection: limit - 7 km/h). In distance, over a stage of length ds with a
+specific force F (N/kN) held:
+
+    d(v^2/2)/ds = xi (F - w0(v) - w_line(s))          (xi = g/1000/(1 + gamma))
+
+integrated by Heun's method over the stage. Energy drawn: max(F, 0) m g / 1000 ds / eta
+(kJ); time: ds / mean speed.
+
+Dynamic programming (`solve`), backwards over stages of `ds` metres, on a grid of
+speeds; at every node, each control of CONTROLS (full, 3/4, 1/2 and 1/4 traction,
+cruise: F = the resistance, coasting, 1/4, 1/2 and full braking) leads to a next
+speed, at which the next stage's value is interpolated (no snapping of transitions
+to the grid, so coasting stays coasting). The cost is energy + lambda * time;
+lambda, the price of a second, is bisected (on a log scale) until the run meets the
+planned time. The terminal state is standstill at the stop mark. `solve(..., lam=None,
+energy_weight=0)` is the minimum-time (flat-out) run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..base import yamlfile
+from ..base.units import KMH
+from ..optimizers import optimize
+from ..train.line import MAX_LENGTH, Line
+from ..train.plant import TrainParameters
+
+MARGIN = 7.0 * KMH  # seed 002's speed protection: below the limit by this
+# (kind, fraction): traction and braking as fractions of the envelope at the speed
+CONTROLS = (("traction", 1.0), ("traction", 0.75), ("traction", 0.5), ("traction", 0.25),
+            ("cruise", 0.0), ("coast", 0.0), ("brake", 0.25), ("brake", 0.5),
+            ("brake", 1.0))
+MODE = {"traction": 1, "cruise": 0, "coast": 0, "brake": -1}
+CRUISE = [kind for kind, _ in CONTROLS].index("cruise")
+
+
+@dataclass(frozen=True)
+class Track:
+    """The line as the DP sees it, one entry per stage [s_i, s_i + ds]."""
+
+    positions: np.ndarray   # stage starts, m
+    ds: float
+    line_resistance: np.ndarray  # N/kN, the belt's, at the stage's middle
+    cap: np.ndarray         # m/s, the highest allowed speed over the stage
+    powered: np.ndarray     # bool: traction available over the whole stage
+
+    @classmethod
+    def of(cls, line: Line, train: TrainParameters, ds: float = 100.0,
+           margin: float = MARGIN) -> Track:
+        stages = max(1, round(line.stop_position / ds))
+        ds = line.stop_position / stages
+        starts = np.arange(stages) * ds
+        resistance, cap, powered = [], [], []
+        for s in starts:
+            resistance.append(line.additional_resistance(s + ds / 2, train.length))
+            belt = [max(0.0, x) for x in (s - train.length, s, s + ds / 2, s + ds)]
+            cap.append(min(line.speed_limit(min(x, line.length)) for x in belt) - margin)
+            pantograph = [x - train.pantograph_offset for x in (s, s + ds / 2, s + ds)]
+            powered.append(not any(line.in_neutral_section(x) for x in pantograph))
+        return cls(starts, ds, np.array(resistance), np.array(cap), np.array(powered))
+
+
+    @property
+    def stop(self) -> float:
+        """The stop mark: the end of the last stage, m."""
+        return float(self.positions[-1] + self.ds)
+
+    @property
+    def boundaries(self) -> np.ndarray:
+        """Stage starts and the stop mark, m."""
+        return np.append(self.positions, self.stop)
+
+    def without_neutral_sections(self) -> Track:
+        """The same track powered everywhere (a plan that ignores neutral sections)."""
+        return dataclasses.replace(self, powered=np.ones_like(self.powered))
+
+
+@dataclass
+class Strategy:
+    """A driving strategy: per stage the control chosen and the speeds it gives."""
+
+    positions: np.ndarray   # m, stage boundaries (stages + 1)
+    speeds: np.ndarray      # m/s at the boundaries
+    forces: np.ndarray      # N/kN applied over each stage
+    modes: np.ndarray       # 1 traction, 0 cruise/coast, -1 brake, per stage
+    controls: list[tuple[str, float]]
+    energy_kwh: float
+    time: float             # s
+    lam: float              # kW: the price of a second that met the planned time
+
+    def traction_in(self, sections) -> float:
+        """Largest traction force in any stage that overlaps one of `sections`."""
+        worst = 0.0
+        for start, force in zip(self.positions[:-1], self.forces, strict=False):
+            end = start + (self.positions[1] - self.positions[0])
+            if force > 0 and any(start < sec.end and end > sec.start for sec in sections):
+                worst = max(worst, force)
+        return worst
+
+
+class Problem:
+    """The train on the track: stage transitions for every control at every speed."""
+
+    def __init__(self, track: Track, train: TrainParameters, efficiency: float):
+        self.track, self.train, self.efficiency = track, train, efficiency
+        self.xi = train.xi
+        self.weight = train.mass * train.gravity  # kN
+
+    def forces(self, stage: int, v: np.ndarray) -> np.ndarray:
+        """(controls x speeds) specific force of every control at speeds v, N/kN; NaN
+        where the control is not available (traction in a neutral section)."""
+        brake, traction = self.limits(v)
+        resistance = self.resistance(v) + self.track.line_resistance[stage]
+        rows = []
+        for kind, fraction in CONTROLS:
+            if kind == "traction":
+                row = fraction * traction
+            elif kind == "brake":
+                row = fraction * brake
+            elif kind == "cruise":  # hold the speed if the envelope allows it
+                row = np.where((resistance <= traction) & (resistance >= brake), resistance,
+                               np.nan)
+            else:
+                row = np.zeros_like(v)
+            if not self.track.powered[stage]:
+                row = np.where(row > 0, np.nan, row)
+            rows.append(row)
+        return np.array(rows)
+
+    def limits(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p = self.train
+        speed = np.maximum(np.abs(v), 1e-6)
+        traction = np.minimum(p.max_traction_force, p.max_traction_power / speed)
+        brake = np.minimum(p.max_brake_force, p.max_brake_power / speed)
+        return -brake * 1000.0 / self.weight, traction * 1000.0 / self.weight
+
+    def resistance(self, v: np.ndarray) -> np.ndarray:
+        p = self.train
+        return p.davis_a + p.davis_b * v + p.davis_c * v * v
+
+    def energy(self, force):
+        """Energy drawn over one stage under `force` (N/kN), kJ."""
+        return np.maximum(force, 0.0) * self.weight / 1000.0 * self.track.ds / self.efficiency
+
+    def step(self, stage: int, v: np.ndarray, force: np.ndarray) -> np.ndarray:
+        """Speed at the end of the stage from v under force (Heun on v^2/2; the
+        resistance at the predicted end speed too). 0 where the train stops short."""
+        ds, extra = self.track.ds, self.track.line_resistance[stage]
+        energy = 0.5 * v * v
+        first = self.xi * (force - self.resistance(v) - extra)
+        predicted = np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * first)))
+        second = self.xi * (force - self.resistance(predicted) - extra)
+        return np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * 0.5 * (first + second))))
+
+
+def _stage_costs(problem: Problem, stage: int, grid: np.ndarray):
+    forces = problem.forces(stage, grid)
+    with np.errstate(invalid="ignore"):
+        following = problem.step(stage, grid[None, :], np.nan_to_num(forces))
+    following[CRUISE] = np.where(np.isnan(forces[CRUISE]), 0.0, grid)  # exactly held
+    mean = 0.5 * (grid[None, :] + following)
+    with np.errstate(divide="ignore"):
+        seconds = np.where(mean > 1e-6, problem.track.ds / mean, np.inf)
+    energy = problem.energy(np.nan_to_num(forces))
+    feasible = ~np.isnan(forces) & (following <= problem.track.cap[stage] + 1e-9)
+    return forces, following, seconds, energy, feasible
+
+
+def solve(track: Track, train: TrainParameters, efficiency: float, planned_time: float | None,
+          *, speed_step: float = 0.25, energy_weight: float = 1.0,
+          lam: float | None = None, iterations: int = 40) -> Strategy:
+    """The energy-optimal strategy that arrives in `planned_time` (lambda bisected), or
+    for a given price of a second `lam`; energy_weight 0 (and any lam > 0) is the
+    minimum-time run. Raises ValueError if the planned time cannot be met."""
+    problem = Problem(track, train, efficiency)
+    grid = np.arange(0.0, float(track.cap.max()) + speed_step, speed_step)
+    if lam is not None or planned_time is None:
+        return _forward(problem, grid, energy_weight, 1.0 if lam is None else lam)
+    fastest = _forward(problem, grid, 0.0, 1.0)
+    if fastest.time > planned_time:
+        raise ValueError(f"the planned time {planned_time:.0f} s is shorter than the "
+                         f"flat-out run's {fastest.time:.1f} s")
+    low, high = math.log(1e-3), math.log(1e6)  # kW per s of time saved
+    best = None
+    for _ in range(iterations):
+        middle = 0.5 * (low + high)
+        candidate = _forward(problem, grid, energy_weight, math.exp(middle))
+        if candidate.time > planned_time:
+            low = middle
+        else:
+            high, best = middle, candidate
+        if best is not None and planned_time - best.time < 0.05:
+            break
+    return best if best is not None else _forward(problem, grid, energy_weight, math.exp(high))
+
+
+INFEASIBLE = 1e30  # the value of a node from which the stop cannot be reached
+
+
+def _choices(problem: Problem, stage: int, speeds: np.ndarray, following_value: np.ndarray,
+             grid: np.ndarray, energy_weight: float, lam: float):
+    """Total cost of every control from every speed (controls x speeds), and what the
+    controls do: forces, end speeds, times, energies."""
+    forces, following, seconds, energy, feasible = _stage_costs(problem, stage, speeds)
+    if stage < len(problem.track.positions) - 1:  # a train stopped short is stuck
+        feasible &= following > 1e-9
+    future = np.interp(following, grid, following_value)
+    total = np.where(feasible & (future < INFEASIBLE / 2),
+                     energy_weight * energy + lam * seconds + future, INFEASIBLE)
+    return total, forces, following, seconds, energy
+
+
+def _values(problem: Problem, grid: np.ndarray, energy_weight: float, lam: float) -> list:
+    """The value function on the grid at every stage boundary (the last: the mark)."""
+    value = np.where(grid <= 1e-9, 0.0, INFEASIBLE)  # standing at the stop mark
+    values = [value]
+    for stage in range(len(problem.track.positions) - 1, -1, -1):
+        value = _choices(problem, stage, grid, value, grid, energy_weight, lam)[0].min(axis=0)
+        values.append(value)
+    values.reverse()
+    return values
+
+
+def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: float) -> Strategy:
+    """The value functions, then the run from standstill, each control chosen at the
+    actual speed (no rounding of the speed to the grid)."""
+    track = problem.track
+    values = _values(problem, grid, energy_weight, lam)
+    speeds, forces_taken, modes, controls = [0.0], [], [], []
+    energy_total = time_total = 0.0
+    for stage in range(len(track.positions)):
+        total, forces, following, seconds, energy = _choices(
+            problem, stage, np.array([speeds[-1]]), values[stage + 1], grid, energy_weight,
+            lam)
+        pick = int(np.argmin(total[:, 0]))
+        if total[pick, 0] >= INFEASIBLE / 2:
+            raise ValueError(f"no feasible way on from {track.positions[stage]:.0f} m at "
+                             f"{speeds[-1]:.2f} m/s")
+        speeds.append(float(following[pick, 0]))
+        forces_taken.append(float(forces[pick, 0]))
+        controls.append(CONTROLS[pick])
+        modes.append(MODE[CONTROLS[pick][0]])
+        energy_total += float(energy[pick, 0])
+        time_total += float(seconds[pick, 0])
+    return Strategy(track.boundaries, np.array(speeds), np.array(forces_taken),
+                    np.array(modes), controls, energy_total / 3600.0, time_total, lam)
+
+
+# Switching-point strategies (seed 002's decision variables) -----------------------
+TAU = 60.0  # s: the time-error index exp(|T' - T| / TAU) is e at one minute off the plan
+# G's weights (the paper leaves them to the user): energy and comfort relative to the
+# flat-out run's, so each term is ~1 for a plain strategy; the stop error per 10 m; the
+# speed protection weighs most (a strategy above limit - 7 km/h is not one to drive).
+WEIGHTS = {"energy": 1.0, "time": 1.0, "comfort": 0.2, "stop": 1.0, "protection": 10.0}
+
+
+def braking_curve(problem: Problem, service: float = 1.0) -> np.ndarray:
+    """Highest speed at each stage boundary from which braking at `service` x the brake
+    envelope keeps under every cap ahead and stops at the mark (backwards in distance)."""
+    track = problem.track
+    stages = len(track.positions)
+    curve = np.zeros(stages + 1)
+    for stage in range(stages - 1, -1, -1):
+        after = min(curve[stage + 1], track.cap[stage])
+        # the weakest deceleration over the stage: the brake envelope at its start speed
+        # (it falls with speed), the resistance at its end speed (it rises), so the
+        # train can follow the curve
+        start = after
+        for _ in range(3):
+            brake, _ = problem.limits(np.array([start]))
+            deceleration = problem.xi * (-service * float(brake[0]) + float(
+                problem.resistance(np.array([after]))[0]) + track.line_resistance[stage])
+            start = math.sqrt(after * after + 2.0 * track.ds * max(deceleration, 1e-6))
+        curve[stage] = min(track.cap[stage], start)
+    return curve
+
+
+def segments(track: Track) -> list[tuple[int, int]]:
+    """Stage ranges between neutral sections: [start, end) in stage indices, each ending
+    where the next unpowered run begins (the last at the mark)."""
+    bounds, previous = [0], True
+    for stage, powered in enumerate(track.powered):
+        if previous and not powered:
+            bounds.append(stage)
+        previous = powered
+    bounds.append(len(track.powered))
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+# Switching strategies brake along a curve at this share of the brake envelope: the
+# margin a tracking controller with dead time and lag needs to follow it (measured:
+# at the full envelope the stack's PID overran the stop by 23 m).
+PLANNED_BRAKING = 0.8
+
+
+class SwitchingStrategy:
+    """Seed 002's decision variables, per segment between neutral sections: the cruise
+    speed (a fraction of the segment's highest cap) and the point where coasting
+    starts (a fraction of the segment). In a segment the train applies full traction
+    up to the cruise speed, cruises (held at the cap where it is lower), coasts from
+    the coasting point, and brakes along the braking curve (PLANNED_BRAKING of the
+    envelope) wherever a lower cap ahead or the stop requires it. Traction is off
+    while unpowered."""
+
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        self.segments = segments(problem.track)
+        self.curve = braking_curve(problem, PLANNED_BRAKING)
+        self.dimension = 2 * len(self.segments)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lower = np.tile([0.3, 0.0], len(self.segments))
+        return lower, np.ones(self.dimension)
+
+    def run(self, x: np.ndarray) -> Strategy:
+        problem, track = self.problem, self.problem.track
+        controls = {}
+        for k, (first, last) in enumerate(self.segments):
+            cruise = x[2 * k] * float(track.cap[first:last].max())
+            coast_from = first + x[2 * k + 1] * (last - first)
+            for stage in range(first, last):
+                controls[stage] = (cruise, stage >= coast_from)
+
+        def decide(stage: int, v: float) -> tuple[str, float, float]:
+            cruise, coasting = controls[stage]
+            brake, traction = (float(a[0]) for a in problem.limits(np.array([v])))
+            hold = float(problem.resistance(np.array([v]))[0]) + track.line_resistance[stage]
+            limit = min(self.curve[stage + 1], track.cap[stage])
+            if coasting:
+                kind, force = "coast", 0.0
+            elif v < min(cruise, limit):
+                kind, force = "traction", traction
+            else:
+                kind, force = "cruise", min(max(hold, brake), traction)
+            if not track.powered[stage] and force > 0:
+                kind, force = "coast", 0.0
+            following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+            if kind == "cruise" and brake <= hold <= traction:
+                following = v
+            if following > limit:  # the braking curve or a cap: brake down to it
+                kind = "brake"
+                force = max(brake, _force_for(problem, stage, v, limit))
+                following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+                if following > limit:  # correct by what the stage really gave
+                    force = max(brake, force - (following ** 2 - limit ** 2)
+                                / (2.0 * track.ds * problem.xi))
+                    following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
+            return kind, force, following
+
+        return _drive(problem, decide)
+
+
+def _drive(problem: Problem, decide: Callable[[int, float], tuple[str, float, float]],
+           lam: float = math.nan) -> Strategy:
+    """A run from standstill, stage by stage: decide(stage, v) -> (kind of control,
+    force N/kN, end speed). A train that stops short of the mark ends where that stage
+    begins, standing, with an infinite running time."""
+    track = problem.track
+    speeds, forces, chosen = [0.0], [], []
+    energy = elapsed = 0.0
+    for stage in range(len(track.positions)):
+        v = speeds[-1]
+        kind, force, following = decide(stage, v)
+        if following <= 1e-9 and stage < len(track.positions) - 1:
+            positions = np.append(track.positions[:stage + 1], track.positions[stage])
+            chosen.append(("coast", 0.0))
+            return Strategy(positions, np.array(speeds + [0.0]), np.array(forces + [0.0]),
+                            np.array([MODE[k] for k, _ in chosen]), chosen,
+                            energy / 3600.0, math.inf, lam)
+        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
+        energy += float(problem.energy(force))
+        speeds.append(following)
+        forces.append(force)
+        chosen.append((kind, force))
+    return Strategy(track.boundaries, np.array(speeds), np.array(forces),
+                    np.array([MODE[k] for k, _ in chosen]), chosen, energy / 3600.0,
+                    elapsed, lam)
+
+
+def _force_for(problem: Problem, stage: int, v: float, target: float) -> float:
+    """The specific force that takes speed v to `target` over the stage (Euler)."""
+    track = problem.track
+    resistance = float(problem.resistance(np.array([0.5 * (v + target)]))[0])
+    return ((target * target - v * v) / (2.0 * track.ds) / problem.xi + resistance
+            + track.line_resistance[stage])
+
+
+def indices(result: Strategy, planned_time: float, track: Track) -> dict:
+    """Seed 002's indices of a strategy on `track`: energy (kWh), time error
+    exp(|T' - T| / TAU), comfort (sum of |change of acceleration| over the run time,
+    m/s^3), stopping error |S - s| (m), speed protection (sum of the excess over the
+    cap, m/s)."""
+    v, cap, stop = result.speeds, track.cap, track.stop
+    ds = np.maximum(np.diff(result.positions), 1e-9)
+    acceleration = (v[1:] ** 2 - v[:-1] ** 2) / (2.0 * ds)
+    finished = math.isfinite(result.time)
+    return {
+        "energy_kwh": result.energy_kwh,
+        "time": result.time,
+        "time_index": math.exp(min(abs(result.time - planned_time) / TAU, 50.0))
+        if finished else math.exp(50.0),
+        "comfort": float(np.abs(np.diff(acceleration)).sum() / result.time) if finished
+        else math.inf,
+        "stopping_error": abs(stop - result.positions[-1]) + overrun(result),
+        "protection": float(np.maximum(0.0, v[1:len(cap) + 1] - cap[:len(v) - 1]).sum()),
+    }
+
+
+def flat_out(problem: Problem) -> Strategy:
+    """The minimum-time run of a switching strategy: full traction up to the cap, held
+    at the cap, braking along the braking curve (no coasting but through neutral
+    sections)."""
+    switching = SwitchingStrategy(problem)
+    return switching.run(np.ones(switching.dimension))
+
+
+def overrun(result: Strategy, deceleration: float = 0.5) -> float:
+    """How far past the mark a strategy still moving at its end would stop, m (at a
+    service deceleration, m/s^2): 0 for one that stands at the mark."""
+    return float(result.speeds[-1]) ** 2 / (2.0 * deceleration)
+
+
+def objective(values: dict, reference: dict) -> float:
+    """G: the weighted sum of the indices, energy and comfort relative to `reference`
+    (the flat-out run's), the stopping error per 10 m."""
+    return (WEIGHTS["energy"] * values["energy_kwh"] / reference["energy_kwh"]
+            + WEIGHTS["time"] * values["time_index"]
+            + WEIGHTS["comfort"] * values["comfort"] / max(reference["comfort"], 1e-9)
+            + WEIGHTS["stop"] * values["stopping_error"] / 10.0
+            + WEIGHTS["protection"] * values["protection"])
+
+
+# The strategy file ------------------------------------------------------------------
+FORMAT = "ato-strategy-1"
+# What a strategy file may hold: a 2,000 km line (line.MAX_LENGTH) in optimize_strategy.py's
+# shortest stages (10 m) is 200,001 rows of at most ~35 bytes; speeds and forces beyond any
+# train's (1,080 km/h, 1 g of specific force) are a broken or hostile file, not a plan.
+MAX_FILE_BYTES = 8 << 20
+MAX_SPEED = 300.0   # m/s
+MAX_FORCE = 1000.0  # N/kN
+COLUMNS = "position,speed,mode,force"
+
+
+def write_strategy(path, header: dict, result: Strategy) -> None:
+    """The strategy file: `# key: value` header lines (format, line and its sha256,
+    train, planned time, algorithm, ...), then `position,speed,mode,force` rows (m, m/s,
+    1 traction / 0 cruise or coast / -1 brake, N/kN) at every stage start and the end."""
+    lines = [f"# {key}: {value}" for key, value in {"format": FORMAT, **header}.items()]
+    lines.append(COLUMNS)
+    forces = np.append(result.forces, 0.0)
+    modes = np.append(result.modes, 0)
+    lines += [f"{s:.1f},{v:.5f},{int(m)},{f:.5f}"
+              for s, v, m, f in zip(result.positions, result.speeds, modes, forces, strict=False)]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+@dataclass(frozen=True)
+class StrategyFile:
+    header: dict
+    positions: np.ndarray
+    speeds: np.ndarray
+    modes: np.ndarray
+    forces: np.ndarray
+
+
+def read_strategy(path) -> StrategyFile:
+    """A strategy file, checked (its size before it is read, then every row): ValueError
+    (one line, naming the file and the line) if it is not one."""
+    text = yamlfile.read_text(path, "strategy file", MAX_FILE_BYTES)
+    header, rows = {}, []
+    for number, line in enumerate(text.splitlines(), 1):
+        if line.startswith("#"):
+            key, _, value = line[1:].partition(":")
+            header[key.strip()] = value.strip()
+            continue
+        if not line.strip():
+            continue
+        if header.get("format") != FORMAT:  # the header comes first
+            raise _not_a_strategy(path, header)
+        if line.strip() == COLUMNS:
+            continue
+        try:
+            row = [float(v) for v in line.split(",")]
+        except ValueError:
+            row = []
+        problem = _row_problem(row, rows[-1][0] if rows else None)
+        if problem:
+            raise ValueError(f"{path} line {number}: {problem}")
+        rows.append(row)
+    if header.get("format") != FORMAT:  # comments only
+        raise _not_a_strategy(path, header)
+    if len(rows) < 2:
+        raise ValueError(f"{path}: a strategy needs at least two rows ({COLUMNS})")
+    data = np.array(rows, dtype=float)
+    return StrategyFile(header, data[:, 0], data[:, 1], data[:, 2].astype(int), data[:, 3])
+
+
+def _not_a_strategy(path, header: dict) -> ValueError:
+    return ValueError(f"{path}: not a strategy file (format {header.get('format')!r})")
+
+
+def _row_problem(row: list[float], previous_position: float | None) -> str:
+    """What is wrong with one row of a strategy file ('' if nothing)."""
+    if len(row) != 4:
+        return f"four numbers expected ({COLUMNS})"
+    position, speed, mode, force = row
+    if not all(math.isfinite(value) for value in row):
+        return "every number must be finite"
+    if not 0.0 <= position <= MAX_LENGTH:
+        return f"position {position:g} m is off any line (0-{MAX_LENGTH:g} m)"
+    if previous_position is not None and position <= previous_position:
+        return f"position {position:g} m does not increase (after {previous_position:g} m)"
+    if not 0.0 <= speed <= MAX_SPEED:
+        return f"speed {speed:g} m/s is outside 0-{MAX_SPEED:g} m/s"
+    if mode not in (-1.0, 0.0, 1.0):
+        return f"mode {mode:g} is not 1 (traction), 0 (cruise or coast) or -1 (brake)"
+    if abs(force) > MAX_FORCE:
+        return f"force {force:g} N/kN is beyond +-{MAX_FORCE:g} N/kN"
+    return ""
+
+
+# Planning by algorithm ----------------------------------------------------------------
+ALGORITHMS = ("kh", "pso", "dp", "mareco", "flatout")
+MARECO_COAST = 0.85  # the coasting point of every segment, as a fraction of it
+
+
+def plan(algorithm: str, problem: Problem, planning: Problem, planned: float,
+         reference: dict, *, evaluations: int = 1500, seed: int = 1):
+    """(strategy, optimizer result or None) of one algorithm. `planning` is the problem
+    the plan is made on (without neutral sections, for the paper's comparison), `problem`
+    the line as it is; G's reference is the flat-out run's indices."""
+    if algorithm == "flatout":
+        return flat_out(problem), None
+    if algorithm == "dp":
+        return solve(planning.track, planning.train, planning.efficiency, planned), None
+    if algorithm == "mareco":
+        return mareco(planning, planned), None
+    switching = SwitchingStrategy(planning)
+
+    def fitness(candidates):
+        return np.array([objective(indices(switching.run(x), planned, problem.track),
+                                   reference) for x in candidates])
+
+    found = optimize(algorithm, fitness, *switching.bounds(), budget=evaluations, seed=seed)
+    return switching.run(found.best_x), found
+
+
+def mareco(problem, planned: float) -> Strategy:
+    """One cruise speed for every segment, bisected until the run meets the planned
+    time, coasting from MARECO_COAST of each segment on."""
+    switching = SwitchingStrategy(problem)
+    low, high = 0.3, 1.0
+    best = switching.run(np.tile([high, MARECO_COAST], len(switching.segments)))
+    for _ in range(30):
+        middle = 0.5 * (low + high)
+        candidate = switching.run(np.tile([middle, MARECO_COAST], len(switching.segments)))
+        if candidate.time > planned:
+            low = middle
+        else:
+            high, best = middle, candidate
+    return best
+
+
+def replay(problem: Problem, planned_result: Strategy) -> Strategy:
+    """A plan made without neutral sections, driven on the line: each stage's force,
+    traction cut where unpowered."""
+    track = problem.track
+
+    def decide(stage: int, v: float) -> tuple[str, float, float]:
+        force = float(planned_result.forces[stage])
+        if not track.powered[stage] and force > 0:
+            force = 0.0
+        kind = "traction" if force > 0 else "brake" if force < 0 else "coast"
+        return kind, force, float(problem.step(stage, np.array([v]), np.array([force]))[0])
+
+    return _drive(problem, decide, planned_result.lam)
+
+
+def problems(line: Line, values: dict, ds: float, ignore_neutral: bool = False):
+    """(the line as it is, the line the plan is made on) for the train of the run values
+    `values` (plant.*): the same problem unless the plan ignores neutral sections."""
+    train = TrainParameters.from_values(values)
+    track = Track.of(line, train, ds)
+    problem = Problem(track, train, values["plant.efficiency"])
+    if not ignore_neutral:
+        return problem, problem
+    return problem, Problem(track.without_neutral_sections(), train, values["plant.efficiency"])
+
+
+@dataclass
+class Outcome:
+    result: Strategy    # driven on the line as it is
+    history: object     # the swarm's optimizers.Result, None for the other algorithms
+    values: dict        # indices, G, planned, time_error, saved_percent, seconds, ...
+    reference: dict     # the flat-out run's indices
+
+
+def evaluate(algorithm: str, problem: Problem, planning: Problem, planned: float | None, *,
+             supplement: float = 0.0, evaluations: int = 1500, seed: int = 1) -> Outcome:
+    """One algorithm's strategy for the planned time (None: the flat-out run's time plus
+    `supplement`, a share), judged on the line as it is (a plan made without neutral
+    sections is driven with traction cut in them). ValueError if the planned time is
+    shorter than the flat-out run's."""
+    fastest = flat_out(problem)
+    if planned is None:
+        planned = fastest.time * (1.0 + supplement)
+    if not planned >= fastest.time:
+        raise ValueError(f"the planned time {planned:g} s is shorter than the flat-out "
+                         f"run's {fastest.time:.1f} s")
+    reference = indices(fastest, planned, problem.track)
+    started = time.monotonic()
+    result, history = plan(algorithm, problem, planning, planned, reference,
+                           evaluations=evaluations, seed=seed)
+    seconds = time.monotonic() - started
+    if planning is not problem:
+        result = replay(problem, result)
+    values = indices(result, planned, problem.track)
+    values.update(G=objective(values, reference), planned=planned,
+                  time_error=result.time - planned, seconds=seconds,
+                  saved_percent=100 * (1 - result.energy_kwh / fastest.energy_kwh),
+                  flat_out_energy_kwh=fastest.energy_kwh)
+    return Outcome(result, history, values, reference)

@@ -1,0 +1,247 @@
+"""Line data: gradients, curves, tunnels, speed limits, neutral sections, stations.
+
+A line file (msg_config/lines/*.yaml) is validated on load; every problem is
+one ScenarioError naming the file and the line of the offending entry.
+Positions are metres from the line's origin; SI units throughout (speed
+limits in m/s). Sections of one kind must be ordered and must not overlap.
+
+The train is a uniform mass belt of length L whose head is at x (seed 002):
+the additional specific resistance is the average over the belt [x - L, x]
+of the point values, so it equals the single-point value while the train lies
+wholly on one section and varies linearly while it straddles a change:
+
+    gradient  i       per mille = N/kN, uphill positive
+    curve     600 / R N/kN (R in m)
+    tunnel    0.00013 L_s N/kN (L_s the tunnel's length in m)
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from ..base import yamlfile
+from ..base.errors import ScenarioError
+
+MAX_LENGTH = 2.0e6         # m: longer than any line; bounds what the ATO curve allocates
+CURVE_CONSTANT = 600.0     # A of w_r = A / R, N/kN m
+TUNNEL_CONSTANT = 0.00013  # w_s = 0.00013 L_s, N/kN per m of tunnel
+
+
+@dataclass(frozen=True)
+class Section:
+    start: float
+    end: float
+    value: float  # per kind: grade (per mille), radius (m), limit (m/s), 0 for tunnels etc.
+
+
+@dataclass(frozen=True)
+class Station:
+    name: str
+    position: float
+    dwell: float
+
+
+@dataclass(frozen=True)
+class Line:
+    name: str
+    length: float
+    gradients: tuple[Section, ...]
+    curves: tuple[Section, ...]
+    tunnels: tuple[Section, ...]
+    speed_limits: tuple[Section, ...]
+    neutral_sections: tuple[Section, ...]
+    stations: tuple[Station, ...]
+    planned_run_time: float | None
+
+    def speed_limit(self, position: float) -> float:
+        """Line speed limit at a point, m/s (the limits cover the whole line)."""
+        for section in self.speed_limits:
+            if section.start <= position < section.end:
+                return section.value
+        return self.speed_limits[-1].value
+
+    @property
+    def stop_position(self) -> float:
+        """Where the run ends: the last station's mark, else the end of the line."""
+        return self.stations[-1].position if self.stations else self.length
+
+    def in_neutral_section(self, position: float) -> bool:
+        return any(s.start <= position < s.end for s in self.neutral_sections)
+
+    def additional_resistance(self, head: float, train_length: float) -> float:
+        """Gradient + curve + tunnel specific resistance of the mass belt, N/kN."""
+        tail = head - train_length
+        total = _belt_average(self.gradients, tail, head, lambda s: s.value)
+        total += _belt_average(self.curves, tail, head, lambda s: CURVE_CONSTANT / s.value)
+        total += _belt_average(self.tunnels, tail, head,
+                               lambda s: TUNNEL_CONSTANT * (s.end - s.start))
+        return total
+
+
+def _belt_average(sections, tail: float, head: float, point_value) -> float:
+    """Mean over [tail, head] of a piecewise-constant quantity (0 outside sections);
+    the point value when the belt has no length."""
+    if head <= tail:
+        for section in sections:
+            if section.start <= head < section.end:
+                return point_value(section)
+        return 0.0
+    covered = 0.0
+    for section in sections:
+        overlap = min(head, section.end) - max(tail, section.start)
+        if overlap > 0:
+            covered += overlap * point_value(section)
+    return covered / (head - tail)
+
+
+# ---------------------------------------------------------------- loading ----
+
+SECTION_KEYS = {  # kind -> (value key or None, allowed keys)
+    "gradients": ("grade", {"start", "end", "grade"}),
+    "curves": ("radius", {"start", "end", "radius"}),
+    "tunnels": (None, {"start", "end"}),
+    "speed_limits": ("limit", {"start", "end", "limit"}),
+    "neutral_sections": (None, {"start", "end"}),
+}
+TOP_KEYS = {"name", "length", "planned_run_time", "stations", *SECTION_KEYS}
+
+
+def load_line(path: str | Path) -> Line:
+    return parse_line(yamlfile.read_text(path, "line file"), Path(path))
+
+
+@functools.lru_cache(maxsize=32)
+def parse_line(text: str, path: str | Path = "<line>") -> Line:
+    """A line from the text of a line file; `path` names it in error messages.
+    Cached (a Line is immutable): a run's validation, profile, plant and scorer all
+    read the same line, ~15 ms of YAML each, in every tuning evaluation."""
+    yamlfile.check_structure(text, str(path))
+    try:
+        root = yaml.compose(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" line {mark.line + 1}" if mark else ""
+        raise ScenarioError(f"{path}{at}: malformed YAML") from None
+    if not isinstance(root, yaml.MappingNode):
+        raise ScenarioError(f"{path}: a line file is a mapping (name, length, gradients, ...)")
+    fields = {}
+    for key_node, value_node in root.value:
+        if key_node.value not in TOP_KEYS:
+            raise _error(path, key_node, f"unknown key {key_node.value!r}")
+        fields[key_node.value] = value_node
+    for required in ("name", "length", "speed_limits"):
+        if required not in fields:
+            raise ScenarioError(f"{path}: missing {required!r}")
+    length = _number(path, fields["length"], "length", positive=True)
+    if length > MAX_LENGTH:
+        raise _error(path, fields["length"], f"length {length:g} m is beyond {MAX_LENGTH:g} m "
+                     "(the longest line a run may have)")
+    sections = {name: _sections(path, name, fields.get(name), length) for name in SECTION_KEYS}
+    _check_limits_cover(path, fields["speed_limits"], sections["speed_limits"], length)
+    stations = _stations(path, fields.get("stations"), length)
+    run_time = fields.get("planned_run_time")
+    return Line(
+        name=str(yaml.safe_load(yaml.serialize(fields["name"]))), length=length,
+        stations=stations,
+        planned_run_time=_number(path, run_time, "planned_run_time", positive=True)
+        if run_time is not None else None,
+        **sections)
+
+
+def _error(path: Path, node: yaml.Node, message: str) -> ScenarioError:
+    return ScenarioError(f"{path} line {node.start_mark.line + 1}: {message}")
+
+
+def _number(path: Path, node: yaml.Node, name: str, positive: bool = False) -> float:
+    value = yaml.safe_load(yaml.serialize(node))
+    if isinstance(value, str):  # YAML 1.1 reads 1e9 (no dot) as text
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _error(path, node, f"{name} must be a finite number, not {value!r}")
+    if positive and not value > 0:
+        raise _error(path, node, f"{name} must be positive, not {value}")
+    return float(value)
+
+
+def _entries(path: Path, node: yaml.Node | None, kind: str):
+    if node is None:
+        return []
+    if not isinstance(node, yaml.SequenceNode):
+        raise _error(path, node, f"{kind} must be a list")
+    entries = []
+    for item in node.value:
+        if not isinstance(item, yaml.MappingNode):
+            raise _error(path, item, f"each entry of {kind} is a mapping")
+        entries.append((item, {k.value: v for k, v in item.value}))
+    return entries
+
+
+def _sections(path: Path, kind: str, node: yaml.Node | None, length: float) -> tuple:
+    value_key, allowed = SECTION_KEYS[kind]
+    sections, previous_end = [], None
+    for item, entry in _entries(path, node, kind):
+        unknown = sorted(set(entry) - allowed)
+        if unknown:
+            raise _error(path, item, f"{kind}: unknown key {unknown[0]!r}")
+        missing = sorted(allowed - set(entry))
+        if missing:
+            raise _error(path, item, f"{kind}: missing {missing[0]!r}")
+        start = _number(path, entry["start"], "start")
+        end = _number(path, entry["end"], "end")
+        if end <= start:
+            raise _error(path, item, f"{kind}: section from {start:g} to {end:g} m has no "
+                         "positive length")
+        if start < 0 or end > length:
+            raise _error(path, item, f"{kind}: section {start:g}-{end:g} m is off the line "
+                         f"(0-{length:g} m)")
+        if previous_end is not None and start < previous_end:
+            raise _error(path, item, f"{kind}: section starting at {start:g} m overlaps or "
+                         f"precedes the one ending at {previous_end:g} m")
+        value = 0.0
+        if value_key is not None:
+            value = _number(path, entry[value_key], value_key,
+                            positive=value_key in ("radius", "limit"))
+        sections.append(Section(start, end, value))
+        previous_end = end
+    return tuple(sections)
+
+
+def _check_limits_cover(path, node, limits, length) -> None:
+    """Speed limits must cover the open line without gaps."""
+    position = 0.0
+    for section in limits:
+        if section.start > position:
+            raise _error(path, node, f"speed_limits: no limit between {position:g} and "
+                         f"{section.start:g} m")
+        position = section.end
+    if position < length:
+        raise _error(path, node, f"speed_limits: no limit from {position:g} m to the end")
+
+
+def _stations(path: Path, node: yaml.Node | None, length: float) -> tuple[Station, ...]:
+    stations = []
+    for item, entry in _entries(path, node, "stations"):
+        unknown = sorted(set(entry) - {"name", "position", "dwell"})
+        if unknown:
+            raise _error(path, item, f"stations: unknown key {unknown[0]!r}")
+        if "position" not in entry:
+            raise _error(path, item, "stations: missing 'position'")
+        position = _number(path, entry["position"], "position")
+        if not 0 <= position <= length:
+            raise _error(path, item, f"stations: {position:g} m is off the line")
+        dwell = _number(path, entry["dwell"], "dwell") if "dwell" in entry else 0.0
+        if dwell < 0:
+            raise _error(path, entry["dwell"], f"stations: dwell {dwell:g} s is negative")
+        name = str(yaml.safe_load(yaml.serialize(entry["name"]))) if "name" in entry else ""
+        if stations and position <= stations[-1].position:
+            raise _error(path, item, "stations must be in increasing position order")
+        stations.append(Station(name, position, dwell))
+    return tuple(stations)

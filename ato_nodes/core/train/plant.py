@@ -1,0 +1,284 @@
+"""Single mass-point train (seed 000 eq. 1-2), ROS-free.
+
+    ds/dt = v
+    dv/dt = xi (F - w0(v)) + phi(t),   xi = g/1000 / (1 + gamma)
+    w0(v) = a + b v + c v^2            [N/kN, v in m/s]
+    phi(t) = A sin(omega t + phase)     [m/s^2]
+
+F is the specific force actually applied by the train (N/kN, + traction,
+- braking). The commanded force u reaches F through an optional dead time
+(whole control periods), optional envelopes (constant force, then constant
+power, for traction and braking) and an optional first-order actuator lag
+tau: dG/dt = (sat(u) - G) / tau, F = sat(G) (seed 004's Gn(s); saturating
+again after the lag keeps F inside the envelope as the speed changes). With
+none of them (the paper-faithful variant) F = u.
+
+On a line (core.line), the mass belt's gradient, curve and tunnel
+resistance is added to w0 at the belt's position, and traction is cut
+(command and applied force -> min(., 0)) during every sub-step that starts
+with the pantograph inside a neutral section; it returns through the lag.
+`hold_at_standstill` floors the speed at 0: a stopped train is held by its
+brakes (acceleration 0) instead of rolling back.
+
+Integration: classic RK4 with `substeps` equal sub-steps per control
+period, the command held constant over the period (zero-order hold).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from ..base.kernels import jitable
+from .line import Line
+
+
+@dataclass(frozen=True)
+class TrainParameters:
+    """The train's physics (the plant.* parameters of the schema hold the defaults)."""
+
+    gamma: float
+    gravity: float
+    davis_a: float
+    davis_b: float
+    davis_c: float
+    mass: float                   # t, converts kN/kW envelopes to N/kN
+    disturbance_amplitude: float  # m/s^2
+    disturbance_frequency: float  # rad/s
+    disturbance_phase: float      # rad
+    max_traction_force: float     # kN (inf: no envelope)
+    max_traction_power: float     # kW
+    max_brake_force: float        # kN
+    max_brake_power: float        # kW
+    actuator_lag: float           # s, first-order time constant
+    dead_time: float              # s, before a command starts to act
+    length: float                 # m, train (mass belt) length
+    pantograph_offset: float      # m behind the head
+    hold_at_standstill: bool
+
+    @classmethod
+    def from_values(cls, values) -> TrainParameters:
+        """From the run's plant.* values; without plant.envelope the limits are infinite."""
+        envelope = values["plant.envelope"]
+        return cls(
+            gamma=values["plant.gamma"], gravity=values["plant.gravity"],
+            davis_a=values["plant.davis_a"], davis_b=values["plant.davis_b"],
+            davis_c=values["plant.davis_c"], mass=values["plant.mass"],
+            disturbance_amplitude=values["plant.disturbance.amplitude"],
+            disturbance_frequency=values["plant.disturbance.frequency"],
+            disturbance_phase=values["plant.disturbance.phase"],
+            **{name: values[f"plant.{name}"] if envelope else math.inf for name in (
+                "max_traction_force", "max_traction_power", "max_brake_force",
+                "max_brake_power")},
+            actuator_lag=values["plant.actuator_lag"], dead_time=values["plant.dead_time"],
+            length=values["plant.length"], pantograph_offset=values["plant.pantograph_offset"],
+            hold_at_standstill=values["plant.hold_at_standstill"])
+
+    @property
+    def xi(self) -> float:
+        """Acceleration per unit specific force, m/s^2 per N/kN."""
+        return self.gravity / 1000.0 / (1.0 + self.gamma)
+
+    def resistance(self, v: float) -> float:
+        """Basic running resistance w0 in N/kN, opposing the motion."""
+        return basic_resistance(v, self.davis_a, self.davis_b, self.davis_c)
+
+    def disturbance(self, t: float) -> float:
+        return disturbance(t, self.disturbance_amplitude, self.disturbance_frequency,
+                           self.disturbance_phase)
+
+    def net_traction(self, v: float, share: float, line_resistance: float = 0.0,
+                     powered: bool = True) -> float:
+        """What `share` of the traction envelope leaves at v against the basic and
+        `line_resistance`, N/kN (negative: the share cannot hold v); no traction when not
+        `powered` (a neutral section). Times xi: the acceleration a plan may ask."""
+        traction = self.force_limits(v)[1] if powered else 0.0
+        return share * traction - self.resistance(v) - line_resistance
+
+    def net_braking(self, v: float, share: float, line_resistance: float = 0.0) -> float:
+        """What `share` of the brake envelope gives at v, helped by the basic and
+        `line_resistance`, N/kN. Times xi: the deceleration a plan may ask."""
+        return self.resistance(v) + line_resistance - share * self.force_limits(v)[0]
+
+    def force_limits(self, v: float) -> tuple[float, float]:
+        """(most negative, most positive) achievable specific force at speed v, N/kN."""
+        return force_limits(v, self.envelope)
+
+    @property
+    def envelope(self) -> tuple[float, float, float, float, float]:
+        """(weight kN, max traction force kN, power kW, max brake force kN, power kW)."""
+        return (self.mass * self.gravity, self.max_traction_force, self.max_traction_power,
+                self.max_brake_force, self.max_brake_power)
+
+    @property
+    def limited(self) -> bool:
+        """Whether the train has a traction or brake envelope (plant.envelope)."""
+        return math.isfinite(self.max_traction_force + self.max_traction_power
+                             + self.max_brake_force + self.max_brake_power)
+
+    def constants(self) -> tuple:
+        """What rates() needs of the train, in its order."""
+        return (self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
+                self.disturbance_frequency, self.disturbance_phase, self.limited,
+                self.actuator_lag, self.hold_at_standstill, self.envelope)
+
+
+@jitable
+def basic_resistance(v: float, a: float, b: float, c: float) -> float:
+    """Davis resistance w0 in N/kN at v, opposing the motion."""
+    speed = v if v >= 0.0 else -v
+    return math.copysign(a + b * speed + c * speed * speed, v) if v != 0.0 else 0.0
+
+
+@jitable
+def disturbance(t: float, amplitude: float, omega: float, phase: float) -> float:
+    """phi(t), m/s^2."""
+    return amplitude * math.sin(omega * t + phase)
+
+
+@jitable
+def force_limits(v: float, envelope) -> tuple[float, float]:
+    """(most negative, most positive) achievable specific force at speed v, N/kN, from
+    TrainParameters.envelope."""
+    weight, max_traction_force, max_traction_power, max_brake_force, max_brake_power = envelope
+    speed = max(abs(v), 1e-6)
+    traction = min(max_traction_force, max_traction_power / speed)
+    brake = min(max_brake_force, max_brake_power / speed)
+    return -brake * 1000.0 / weight, traction * 1000.0 / weight
+
+
+@jitable
+def achievable(command: float, v: float, limited: bool, envelope) -> float:
+    """The command cut to the envelope at v (unchanged without one)."""
+    if limited:
+        low, high = force_limits(v, envelope)
+        return low if command < low else high if command > high else command
+    return command
+
+
+@jitable
+def rates(t: float, v: float, force: float, command: float, powered: bool,
+          line_resistance: float, constants) -> tuple[float, float]:
+    """(dv/dt, dG/dt), G the lag's state, `line_resistance` the belt's at the position,
+    `constants` TrainParameters.constants(). Unpowered (pantograph in a neutral
+    section), traction is gone at once, from the lag's input and from its output alike."""
+    xi, a, b, c, amplitude, omega, phase, limited, tau, hold, envelope = constants
+    resistance = basic_resistance(v, a, b, c) + line_resistance
+    if not powered and command > 0.0:
+        command = 0.0
+    if tau > 0.0:  # `force` is the lag's state; the envelope holds at every speed
+        dforce = (achievable(command, v, limited, envelope) - force) / tau
+        force = achievable(force, v, limited, envelope)
+    else:
+        force, dforce = achievable(command, v, limited, envelope), 0.0
+    if not powered and force > 0.0:
+        force = 0.0
+    acceleration = xi * (force - resistance) + disturbance(t, amplitude, omega, phase)
+    if hold and v <= 0.0 and acceleration < 0.0:  # held by the brakes
+        acceleration = 0.0
+    return acceleration, dforce
+
+
+@jitable
+def rk4_substep(t: float, x: float, v: float, f: float, h: float, command: float,
+                powered: bool, constants, belt_resistance) -> tuple[float, float, float]:
+    """One classic RK4 step of length h on (s, v, G), the command held;
+    belt_resistance(x) the line's resistance at the position, N/kN."""
+    a1, g1 = rates(t, v, f, command, powered, belt_resistance(x), constants)
+    x2, v2 = x + h / 2 * v, v + h / 2 * a1
+    a2, g2 = rates(t + h / 2, v2, f + h / 2 * g1, command, powered, belt_resistance(x2),
+                   constants)
+    x3, v3 = x + h / 2 * v2, v + h / 2 * a2
+    a3, g3 = rates(t + h / 2, v3, f + h / 2 * g2, command, powered, belt_resistance(x3),
+                   constants)
+    x4, v4 = x + h * v3, v + h * a3
+    a4, g4 = rates(t + h, v4, f + h * g3, command, powered, belt_resistance(x4), constants)
+    x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
+    v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+    f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
+    if constants[9] and v < 0.0:  # held at standstill
+        v, x_next = 0.0, max(x, x_next)
+    return x_next, v, f
+
+
+@jitable
+def no_line(x: float) -> float:
+    """The belt resistance of the open track of seed 000: none."""
+    return 0.0
+
+
+@dataclass
+class TrainState:
+    position: float = 0.0      # m
+    speed: float = 0.0         # m/s
+    force: float = 0.0         # N/kN actually applied
+    time: float = 0.0          # s
+
+
+class PointMassTrain:
+    """Integrates the train over one control period per call."""
+
+    def __init__(self, params: TrainParameters, period: float, substeps: int = 1,
+                 state: TrainState | None = None, line: Line | None = None):
+        self.p = params
+        self.period = period
+        self.substeps = substeps
+        self.line = line
+        self.state = state or TrainState()
+        self.steps = round(self.state.time / period)
+        self.lagged = params.actuator_lag > 0.0
+        self.limited = params.limited
+        # Commands waiting out the dead time; the oldest acts next.
+        self.delayed = deque([0.0] * round(params.dead_time / period))
+        self.acting = 0.0  # the command that acted over the last period (after the delay)
+        self.powered = True  # whether the last sub-step had traction power
+        self.lag_state = self.state.force  # the lag's output before the envelope
+        self.constants = params.constants()
+        self.belt_resistance = no_line if line is None else functools.partial(
+            line.additional_resistance, train_length=params.length)
+
+    def line_resistance(self) -> float:
+        """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
+        return self.belt_resistance(self.state.position)
+
+    def acceleration(self) -> float:
+        """True acceleration at the current state under the command now acting."""
+        s = self.state
+        return rates(s.time, s.speed, self.lag_state, self.acting, self.powered,
+                     self.belt_resistance(s.position), self.constants)[0]
+
+    def step(self, command: float) -> TrainState:
+        """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
+        if self.delayed:
+            self.delayed.append(command)
+            command = self.delayed.popleft()
+        s, line, constants = self.state, self.line, self.constants
+        h = self.period / self.substeps
+        start = s.time
+        x, v, f = s.position, s.speed, self.lag_state
+        powered = True
+        for i in range(self.substeps):
+            powered = line is None or not line.in_neutral_section(x - self.p.pantograph_offset)
+            x, v, f = rk4_substep(start + i * h, x, v, f, h, command, powered, constants,
+                                  self.belt_resistance)
+        self.acting, self.lag_state, self.powered = command, f, powered
+        self.steps += 1
+        s.time, s.position, s.speed = self.steps * self.period, x, v
+        s.force = achievable(f if self.lagged else command, v, self.limited,
+                             constants[10])
+        if not powered and s.force > 0.0:
+            s.force = 0.0
+        return s
+
+
+@jitable
+def sensor_reading(speed: float, draw: float, noise: float, quantum: float) -> float:
+    """The speed sensor's reading: speed plus noise (`draw` a standard normal sample),
+    to its resolution (rounded half to even, as round() does)."""
+    if noise > 0.0:
+        speed += noise * draw
+    if quantum > 0.0:
+        speed = quantum * round(speed / quantum)
+    return speed
