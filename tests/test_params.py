@@ -207,3 +207,27 @@ def test_a_node_given_a_parameter_of_a_kind_its_run_does_not_use_stops_in_one_li
     assert process.returncode == 2
     assert stderr.strip().splitlines() == [
         f"controller: error: adrc.mu1 belongs to controller kind han_adrc; {METRO_USES}"]
+
+
+def test_prepare_loads_overrides_and_validates_once(monkeypatch):
+    from ato_nodes.core.config import scenario
+    expected = scenario.apply_overrides(scenario.load_scenario("seed004-metro-ato"),
+                                        ["run.duration=30", "ladrc.omega_c=3"])
+    checks = []
+    real = scenario.validate
+    monkeypatch.setattr(scenario, "validate", lambda values, where: checks.append(where)
+                        or real(values, where))
+    assert scenario.prepare("seed004-metro-ato", ["run.duration=30", "ladrc.omega_c=3"]) \
+        == expected
+    assert checks == ["parameters"]
+    checks.clear()
+    scenario.prepare("seed004-metro-ato")
+    assert len(checks) == 1 and checks[0].endswith("seed004-metro-ato.yaml")
+
+
+def test_prepare_refuses_a_name_given_twice_and_an_override_of_an_unused_kind():
+    from ato_nodes.core.config.scenario import prepare
+    with pytest.raises(ScenarioError, match="run.duration is given twice"):
+        prepare("seed000", ["run.duration=10", "run.duration=20"])
+    with pytest.raises(ScenarioError, match="belongs to controller kind"):
+        prepare("seed004-metro", ["adrc.mu1=7000"])

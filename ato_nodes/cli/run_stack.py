@@ -15,8 +15,7 @@ from pathlib import Path
 
 from ato_nodes import cli
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.config.scenario import (apply_overrides, check_given_once, check_launcher_free,
-                                            load_scenario)
+from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.core.config.schema import steps
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.summary import bag_contents, write_summary
@@ -48,14 +47,12 @@ def main() -> None:
 def run_stack() -> None:
     args = parse_args()
     try:
-        values = load_scenario(args.scenario)
         overrides = list(args.set)
         if args.duration is not None:
             overrides.append(f"run.duration={args.duration}")
         if args.real_time:
             overrides.append("run.real_time=true")
-        check_given_once(overrides)
-        values = apply_overrides(values, overrides)
+        values = prepare(args.scenario, overrides)
         check_launcher_free(values)
     except ScenarioError as exc:
         cli.fail(str(exc))

@@ -23,8 +23,7 @@ from pathlib import Path
 from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.config.scenario import (apply_overrides, check_given_once, check_launcher_free,
-                                            load_scenario)
+from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
                               TuningSettings)
 
@@ -79,8 +78,7 @@ def tune() -> None:
         cli.fail("--evaluations and --workers must be positive and --population at least 2")
     cli.seconds(args.timeout, "--timeout")
     try:
-        check_given_once(args.set)
-        values = apply_overrides(load_scenario(args.scenario), args.set)
+        values = prepare(args.scenario, args.set)
         check_launcher_free(values)
         space = (SearchSpace.parse(args.params, values) if args.params
                  else SearchSpace.default(values))

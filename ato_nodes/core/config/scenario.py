@@ -60,10 +60,27 @@ def resolve_scenario(name_or_file: str) -> Path:
     raise ScenarioError(f"unknown scenario {name_or_file!r}; known: {', '.join(scenario_names())}")
 
 
+def prepare(scenario: str, overrides: list[str] | dict[str, Any] = ()) -> dict[str, Any]:
+    """A run's complete, checked values from a scenario (a name or a file) and overrides
+    (--set texts, each name once, or a mapping): loaded, overridden, then validated once
+    as a whole (validation builds the plan and the controller: once, not per stage)."""
+    if not isinstance(overrides, dict):
+        check_given_once(list(overrides))
+    values, where = _loaded(scenario)
+    if overrides:
+        values, where = _overridden(values, overrides), "parameters"
+    return validate(values, where)
+
+
 def load_scenario(name_or_file: str) -> dict[str, Any]:
     """All parameters of a scenario: defaults overlaid with the file's values, checked.
     A file with a top-level `base: SCENARIO` (a name, or a file relative to this one)
     holds only what differs from that scenario (tune.py's best.yaml)."""
+    return validate(*_loaded(name_or_file))
+
+
+def _loaded(name_or_file: str) -> tuple[dict[str, Any], str]:
+    """The scenario's values, each checked, and where they come from (for validate())."""
     path = resolve_scenario(name_or_file)
     document = yamlfile.load(path, "scenario")
     if not isinstance(document, dict):
@@ -74,15 +91,14 @@ def load_scenario(name_or_file: str) -> dict[str, Any]:
         raise ScenarioError(f"{path}: base must be a scenario name or file, not {base!r}")
     given = _given_values(path, document)
     if base is None:
-        return validate(complete(given, [path.parent], str(path)), str(path))
+        return complete(given, [path.parent], str(path)), str(path)
     relative = path.parent / base
-    base_values = load_scenario(str(relative) if relative.suffix in (".yaml", ".yml")
-                                else base)
+    base_values, _ = _loaded(str(relative) if relative.suffix in (".yaml", ".yml") else base)
     for name in FILE_PARAMETERS:
         if given.get(name):
             given[name] = resolve_file(given[name], [path.parent])
     try:
-        return apply_overrides(base_values, given)
+        return _overridden(base_values, given), str(path)
     except ScenarioError as exc:
         raise ScenarioError(f"{path}: {exc}") from None
 
@@ -211,6 +227,12 @@ def apply_overrides(values: dict[str, Any],
     """The run's `values` with `overrides` (--set texts, or a mapping) applied, checked as
     a whole; an override of a kind the run does not use (after the overrides: a new
     controller.kind's gains may come with it) is refused."""
+    return validate(_overridden(values, overrides), "parameters")
+
+
+def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
+                ) -> dict[str, Any]:
+    """apply_overrides() without the validation of the whole."""
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
@@ -230,7 +252,7 @@ def apply_overrides(values: dict[str, Any],
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
         merged.update(train_preset(overrides["plant.train"]))
         merged.update(overrides)
-    return validate(merged, "parameters")
+    return merged
 
 
 # Set by the launcher (ato_nodes.launch.Stack) for every run it starts, from the command's
