@@ -8,6 +8,7 @@ import pytest
 from ato_nodes.core.config.components import CONTROLLERS, PROFILES
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.registry import Controller, Plan
 from ato_nodes.core.run.loop import SERIES, simulate
 from ato_nodes.core.run.stages import ControllerStage, ProfileStage
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, validate
@@ -21,6 +22,27 @@ def values(scenario="seed000", *overrides):
 # what a kind needs beyond its defaults to build on seed 000 (the GPC's default
 # prediction model is a model file identified for another train)
 NEEDS = {"gpc": ("gpc.prediction=mechanistic", "gpc.horizon=2")}
+
+
+def test_every_registered_kind_implements_its_interface():
+    """Controllers and plans declare what the loop and the run context read of them
+    (core/base/registry.py), instead of being probed for it."""
+    for kind in CONTROLLERS.components:
+        stage = ControllerStage(NodeValues("controller", values(
+            "seed000", f"controller.kind={kind}", "controller.preview=2",
+            *NEEDS.get(kind, ()))))
+        assert isinstance(stage.controller, Controller), kind
+    plans = {"ato": "seed004-metro-ato", "strategy": "seed002-hsr", "table": "seed001-excitation"}
+    for kind in PROFILES.components:
+        scenario = plans.get(kind, "seed000")
+        plan = RunContext(values(scenario, f"profile.kind={kind}")).plan
+        assert isinstance(plan, Plan), kind
+        assert isinstance(plan.position_indexed, bool) and isinstance(plan.shapes_itself, bool)
+        if not plan.limits_speed:
+            with pytest.raises(NotImplementedError):
+                plan.limit(0.0)
+    ato = RunContext(values("seed004-metro-ato")).plan
+    assert ato.limits_speed and ato.limit(100.0) > 0.0
 
 
 def test_every_registered_kind_builds_and_steps_with_its_declared_outputs():

@@ -1,5 +1,6 @@
 """Plug-in registries: the one place that maps a component's `kind` to its factory,
-its parameter group and, for controllers, its named outputs.
+its parameter group and, for controllers, its named outputs; and what a controller
+and a plan are (Controller, Plan: the interfaces every kind implements).
 
 A component kind is registered once (core/config/components.py lists them); the
 schema takes its parameters from here, the loop its factory, the nodes and
@@ -11,10 +12,57 @@ from __future__ import annotations
 
 import difflib
 from dataclasses import dataclass
-from typing import Any, Callable
+from collections.abc import Sequence
+from typing import Any, Callable, Protocol, runtime_checkable
 
 from .errors import ScenarioError
 from .spec import ParamSpec, param
+
+
+@dataclass(slots=True)
+class ControllerOutput:
+    """One control step: the command (N/kN) and the values of the controller's
+    declared outputs, in the order of its registry entry."""
+
+    u: float
+    extras: tuple[float, ...]
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """A controller kind, as its registry entry's factory builds it. The loop calls
+    start() once, before the first step, then step() once per control period; what
+    it reports besides the command is declared by the entry's `outputs`, and what it
+    carries from step to step (for a live change of gains) by its `state_paths`."""
+
+    def start(self, target: float, measured: float) -> None:
+        """Initialise the state from the first target and measured speed, m/s."""
+
+    def step(self, target: float, measured: float, horizon: Sequence[float] | None
+             ) -> ControllerOutput:
+        """The command for one period: `target` the speed to track (m/s), `measured`
+        the sensor's speed (m/s), `horizon` the plan's targets r_k .. r_k+N."""
+
+
+@runtime_checkable
+class Plan(Protocol):
+    """A target profile, as its registry entry's factory builds it: the planned speed
+    at a time and position."""
+
+    # Indexed by position (the target follows where the train is, not the clock).
+    position_indexed: bool
+    # Applies profile.envelope_share and profile.jerk itself (else the run context
+    # wraps a time-indexed plan in core/targets/profiles.FeasiblePlan).
+    shapes_itself: bool = False
+    # Has belt limits of its own (limit()), which replace the line's speed limits.
+    limits_speed: bool = False
+
+    def speed(self, t: float, position: float = 0.0) -> float:
+        """The target at time t (s) with the head at `position` (m), m/s."""
+
+    def limit(self, position: float) -> float:
+        """The plan's own speed limit at `position`, m/s (only if limits_speed)."""
+        raise NotImplementedError(f"{type(self).__name__} has no speed limits of its own")
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ class RunContext:
         values = self.values
         plan = PROFILES.chosen(values).factory(values, self)
         share, jerk = values["profile.envelope_share"], values["profile.jerk"]
-        if not (share or jerk) or getattr(plan, "shapes_itself", False):
+        if not (share or jerk) or plan.shapes_itself:
             return plan
         if plan.position_indexed:
             raise ScenarioError(f"profile.envelope_share and profile.jerk apply to time-indexed "
@@ -48,9 +48,8 @@ class RunContext:
     def speed_limit(self, position: float) -> float:
         """The limit that applies with the head at `position`, m/s (inf without a line):
         the plan's own belt limit where it has one (the ATO curve's tail rule)."""
-        limit = getattr(self.plan, "limit", None)
-        if limit is not None:
-            return limit(position)
+        if self.plan.limits_speed:
+            return self.plan.limit(position)
         return self.line.speed_limit(position) if self.line is not None else math.inf
 
     def horizon(self, step: int, position: float, count: int) -> list[float]:

@@ -39,7 +39,7 @@ import math
 from dataclasses import astuple, dataclass
 
 from ..base.kernels import jitable
-from ..base.registry import Component, Output
+from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param, settings
 from .limiter import CommandLimiter, limit_command
 from .train_model import NominalTrain
@@ -174,15 +174,6 @@ class HanADRCGains:
     implicit_nlsef: bool
 
 
-@dataclass(slots=True)
-class ControllerOutput:
-    """One control step: the command (N/kN) and the values of the controller's
-    declared outputs, in the order of its registry entry."""
-
-    u: float
-    extras: tuple[float, ...]
-
-
 OBSERVER_OUTPUTS = (
     Output("z1", "m/s", "ESO speed estimate"),
     Output("z2", "m/s^2", "ESO acceleration estimate"),
@@ -192,7 +183,7 @@ OBSERVER_OUTPUTS = (
 )
 
 
-class HanADRC:
+class HanADRC(Controller):
     """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
 
     def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter):
@@ -311,7 +302,7 @@ class DiscreteADRCGains:
     h0: float
 
 
-class DiscreteADRC:
+class DiscreteADRC(Controller):
     """Seed 004's discrete second-order ADRC, the ESO exactly as printed:
 
         e = z1 - y;  z1 += z2 - b01 e;  z2 += z3 - b02 fal(e, 0.5) + b0 u;
@@ -376,7 +367,7 @@ class LinearADRCGains:
     delay_aware: bool
 
 
-class LinearADRC:
+class LinearADRC(Controller):
     """First-order linear ADRC for the speed loop (the plant's true relative degree).
 
     ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by the input

@@ -40,10 +40,9 @@ import daqp
 import numpy as np
 
 from ..base.errors import ScenarioError
-from ..base.registry import Component, Output
+from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param
 from ..base.units import KMH
-from .adrc import ControllerOutput
 from .limiter import CommandLimiter
 
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
@@ -196,7 +195,7 @@ class GPCSettings:
     bias_filter: float
 
 
-class GPC:
+class GPC(Controller):
     def __init__(self, settings: GPCSettings, model, period: float, limiter: CommandLimiter,
                  train, envelope: bool):
         if settings.horizon <= model.delay:

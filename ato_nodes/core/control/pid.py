@@ -17,9 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..base.registry import Component, Output
+from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param, settings
-from .adrc import ControllerOutput
 from .limiter import CommandLimiter
 
 PARAMETERS = (
@@ -44,7 +43,7 @@ class PIDGains:
     feedforward: float
 
 
-class PID:
+class PID(Controller):
     def __init__(self, gains: PIDGains, period: float, limiter: CommandLimiter, train):
         self.g, self.h, self.limiter, self.train = gains, period, limiter, train
         self.integral = 0.0

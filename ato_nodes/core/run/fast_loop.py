@@ -55,7 +55,7 @@ def covers(profile, plant, controller, changes) -> bool:
     train = plant.train
     return (AVAILABLE and not changes and type(controller.controller) is HanADRC
             and not profile.context.plan.position_indexed and profile.approach_step <= 0.0
-            and getattr(profile.context.plan, "limit", None) is None
+            and not profile.context.plan.limits_speed
             and profile.context.line is None and train.line is None and not train.delayed)
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..base.errors import ScenarioError
-from ..base.registry import Component
+from ..base.registry import Component, Plan
 from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
 from ..train.plant import TrainParameters
@@ -29,7 +29,7 @@ SEED000_PARAMETERS = (
 
 
 @dataclass(frozen=True)
-class Seed000Profile:
+class Seed000Profile(Plan):
     """Seed 000 eq. 25 as reconstructed in docs/papers.md (constants in SI; the
     defaults are in SEED000_PARAMETERS).
 
@@ -73,7 +73,7 @@ def round_corners(samples: np.ndarray, width: int, after: float) -> np.ndarray:
     return np.minimum(past, centred)
 
 
-class FeasiblePlan:
+class FeasiblePlan(Plan):
     """A time-indexed plan made drivable by the nominal train (profile.envelope_share,
     profile.jerk), precomputed on the run's step grid: where the plan asks more
     traction or braking force than `share` of the envelope against the basic
@@ -115,7 +115,7 @@ class FeasiblePlan:
 
 
 @dataclass(frozen=True)
-class StepProfile:
+class StepProfile(Plan):
     """Zero before `time`, `speed` from then on (seed 000's step-response test)."""
 
     speed_after: float
@@ -126,7 +126,7 @@ class StepProfile:
         return self.speed_after if t >= self.time else 0.0
 
 
-class TableProfile:
+class TableProfile(Plan):
     """Piecewise-linear speed against time or position, read from a CSV table.
 
     The CSV has a header naming its two columns: `time` (s) or `position` (m),
@@ -170,7 +170,7 @@ class TableProfile:
         return float(np.interp(x, self.points, self.speeds))
 
 
-class StrategyProfile:
+class StrategyProfile(Plan):
     """A driving strategy (seed 002, scripts/optimize_strategy.py) as the target: its
     speed against distance, interpolated in v^2 (kinetic energy is what a held force
     changes linearly along the track), at least `start_speed` at the departure point
@@ -201,7 +201,7 @@ class StrategyProfile:
         return float(self.forces[self._stage(position)])
 
 
-class AtoCurve:
+class AtoCurve(Plan):
     """Distance-indexed ATO target curve of one interstation run (seed 004).
 
     On a grid of `resolution` m from the departure point to the line's stop
@@ -236,6 +236,7 @@ class AtoCurve:
 
     position_indexed = True
     shapes_itself = True  # applies profile.envelope_share and profile.jerk in distance
+    limits_speed = True  # the belt's limits, with the tail rule (limit())
 
     def __init__(self, line, acceleration: float, deceleration: float, margin: float = 0.0,
                  start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
