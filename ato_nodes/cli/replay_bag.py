@@ -45,68 +45,16 @@ def parse_args() -> argparse.Namespace:
 
 def main() -> None:
     args = parse_args()
-    finite = all(math.isfinite(x) and abs(x) < 1e9 for x in (
-        args.rate, args.start, args.end if args.end is not None else 0.0))
-    if not finite or args.rate < 0 or args.start < 0 or (
-            args.end is not None and args.end <= args.start):
-        cli.fail("--rate and --start must be finite and not negative, and --end must exceed "
-                 "--start (seconds, below 1e9)")
-    domain = args.domain_id if args.domain_id is not None else int(
-        os.environ.get("ROS_DOMAIN_ID", "0") or 0)
-    if not 0 <= domain <= 232:
-        cli.fail(f"ROS domain {domain} is outside 0-232")
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    isolate_to_this_host(os.environ)
-    try:  # a run's domain is its own: never replay into it
-        _held = DomainLock(domain)  # released when the process exits
-    except RuntimeError:
-        cli.fail(f"ROS domain {domain} is in use by a run of this project; replay into "
-                 "another --domain-id")
-    try:
-        types, messages = read_messages(args.bag, args.topics)
-    except BagError as exc:
-        cli.fail(str(exc))
-    if not messages:
-        cli.fail(f"{args.bag}: no messages to replay")
-    first = messages[0][1]
-    begin = first + round(args.start * 1e9)
-    end = first + round(args.end * 1e9) if args.end is not None else None
-    messages = [m for m in messages if m[1] >= begin and (end is None or m[1] <= end)]
-    if not messages:
-        cli.fail(f"{args.bag}: no messages between --start and --end")
+    check_window(args)
+    _held = claim_domain(args.domain_id)  # released when the process exits
+    types, messages = messages_to_replay(args)
 
     import rclpy
-    from builtin_interfaces.msg import Time
-    from rosgraph_msgs.msg import Clock
-
-    from ato_nodes.nodes.base import QOS, message_class
 
     rclpy.init()
     node = rclpy.create_node("bag_replay")
     try:
-        publishers = {}
-        for topic, type_name in types.items():
-            try:
-                publishers[topic] = node.create_publisher(message_class(type_name), topic,
-                                                          QOS["data"])
-            except (ImportError, AttributeError, ValueError):
-                cli.fail(f"{args.bag}: message type {type_name} of {topic} is not installed")
-        clock = None if "/clock" in types else node.create_publisher(Clock, "/clock", QOS["data"])
-        wait_for_subscribers(publishers, args.wait_subscribers)
-        played, started = 0, time.monotonic()
-        while True:
-            played += play(messages, publishers, clock, args.rate, Clock, Time)
-            if not args.loop:
-                break
-        unacknowledged = [topic for topic, publisher in publishers.items()
-                          if not publisher.wait_for_all_acked(rclpy.duration.Duration(seconds=10))]
-        if unacknowledged:
-            print(f"warning: subscribers of {', '.join(unacknowledged)} did not acknowledge "
-                  "every message within 10 s", file=sys.stderr)
-        if not args.quiet:
-            elapsed = time.monotonic() - started
-            print(f"replayed {played} messages in {elapsed:.3f} s "
-                  f"({played / max(elapsed, 1e-9):,.0f} messages/s)", file=sys.stderr)
+        replay(node, args, types, messages)
     except KeyboardInterrupt:
         pass
     finally:
@@ -119,6 +67,91 @@ def main() -> None:
         watchdog.start()
         node.destroy_node()
         rclpy.try_shutdown()
+
+
+def check_window(args: argparse.Namespace) -> None:
+    """--rate, --start and --end as numbers a replay can use, else fail."""
+    finite = all(math.isfinite(x) and abs(x) < 1e9 for x in (
+        args.rate, args.start, args.end if args.end is not None else 0.0))
+    if not finite or args.rate < 0 or args.start < 0 or (
+            args.end is not None and args.end <= args.start):
+        cli.fail("--rate and --start must be finite and not negative, and --end must exceed "
+                 "--start (seconds, below 1e9)")
+
+
+def claim_domain(requested: int | None) -> DomainLock:
+    """The ROS domain to replay into (--domain-id, else $ROS_DOMAIN_ID), set in this
+    process's environment and locked; the lock lasts as long as the returned object."""
+    domain = requested if requested is not None else int(
+        os.environ.get("ROS_DOMAIN_ID", "0") or 0)
+    if not 0 <= domain <= 232:
+        cli.fail(f"ROS domain {domain} is outside 0-232")
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    isolate_to_this_host(os.environ)
+    try:  # a run's domain is its own: never replay into it
+        return DomainLock(domain)
+    except RuntimeError:
+        cli.fail(f"ROS domain {domain} is in use by a run of this project; replay into "
+                 "another --domain-id")
+
+
+def messages_to_replay(args: argparse.Namespace) -> tuple[dict[str, str], list]:
+    """(topic -> type, the bag's messages between --start and --end), else fail."""
+    try:
+        types, messages = read_messages(args.bag, args.topics)
+    except BagError as exc:
+        cli.fail(str(exc))
+    if not messages:
+        cli.fail(f"{args.bag}: no messages to replay")
+    first = messages[0][1]
+    begin = first + round(args.start * 1e9)
+    end = first + round(args.end * 1e9) if args.end is not None else None
+    messages = [m for m in messages if m[1] >= begin and (end is None or m[1] <= end)]
+    if not messages:
+        cli.fail(f"{args.bag}: no messages between --start and --end")
+    return types, messages
+
+
+def replay(node, args: argparse.Namespace, types: dict[str, str], messages: list) -> None:
+    """Publish the messages (again and again with --loop), wait for their
+    acknowledgement, and say how fast it went."""
+    import rclpy
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+
+    from ato_nodes.nodes.base import QOS
+
+    publishers = create_publishers(node, types, args.bag)
+    clock = None if "/clock" in types else node.create_publisher(Clock, "/clock", QOS["data"])
+    wait_for_subscribers(publishers, args.wait_subscribers)
+    played, started = 0, time.monotonic()
+    while True:
+        played += play(messages, publishers, clock, args.rate, Clock, Time)
+        if not args.loop:
+            break
+    unacknowledged = [topic for topic, publisher in publishers.items()
+                      if not publisher.wait_for_all_acked(rclpy.duration.Duration(seconds=10))]
+    if unacknowledged:
+        print(f"warning: subscribers of {', '.join(unacknowledged)} did not acknowledge "
+              "every message within 10 s", file=sys.stderr)
+    if not args.quiet:
+        elapsed = time.monotonic() - started
+        print(f"replayed {played} messages in {elapsed:.3f} s "
+              f"({played / max(elapsed, 1e-9):,.0f} messages/s)", file=sys.stderr)
+
+
+def create_publishers(node, types: dict[str, str], bag: Path) -> dict:
+    """topic -> a publisher of its recorded type, else fail naming the type missing."""
+    from ato_nodes.nodes.base import QOS, message_class
+
+    publishers = {}
+    for topic, type_name in types.items():
+        try:
+            publishers[topic] = node.create_publisher(message_class(type_name), topic,
+                                                      QOS["data"])
+        except (ImportError, AttributeError, ValueError):
+            cli.fail(f"{bag}: message type {type_name} of {topic} is not installed")
+    return publishers
 
 
 def exit_now(status: int) -> None:
