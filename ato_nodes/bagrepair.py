@@ -128,46 +128,65 @@ def repair(bag: str | Path) -> RepairReport:
     schemas, channels, messages = _readable_records(broken)
     if not channels:
         raise RepairError(f"{bag}: {broken.name} holds no readable channel; nothing to keep")
-    typestore = get_typestore(Stores.ROS2_JAZZY)
     staging = bag.parent / f".{bag.name}.repairing"
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir()
     try:
-        writer = open_writer(staging / bag.name)
-        sidecar = bag / SIDECAR
-        if sidecar.exists():
-            writer.set_custom_data(PARAMETERS_KEY, sidecar.read_text())
-        connections = {}
-        for channel_id, channel in sorted(channels.items()):
-            schema = schemas.get(channel.schema_id)
-            if schema is None:
-                continue
-            if schema.name not in typestore.fielddefs:  # a type of someone else's: its text
-                typestore.register(get_types_from_msg(schema.data.decode(), schema.name))
-            offered = channel.metadata.get("offered_qos_profiles")
-            connections[channel_id] = writer.add_connection(
-                channel.topic, schema.name, typestore=typestore,
-                offered_qos_profiles=parse_qos(offered) if offered else ())
-        kept: dict[str, int] = {connection.topic: 0 for connection in connections.values()}
-        for message in messages:
-            connection = connections.get(message.channel_id)
-            if connection is not None:
-                writer.write(connection, message.log_time, message.data)
-                kept[connection.topic] += 1
-        close_writer(writer, staging / bag.name)
         written = staging / bag.name
-        check = sum(1 for _ in _readable_records(_mcap_file(written))[2])
-        if check != sum(kept.values()):
-            raise RepairError(f"{bag}: the repaired bag reads back {check} messages, not "
+        kept = _write_bag(written, bag / SIDECAR, schemas, channels, messages)
+        _schemas, _channels, read_back = _readable_records(_mcap_file(written))
+        if len(read_back) != sum(kept.values()):
+            raise RepairError(f"{bag}: the repaired bag reads back {len(read_back)} messages, not "
                               f"{sum(kept.values())}; the original is left as it was")
-        new_mcap = _mcap_file(written)
-        new_mcap.replace(bag / new_mcap.name)  # the data first, then the metadata naming it
-        (written / "metadata.yaml").replace(bag / "metadata.yaml")
-        if broken.name != new_mcap.name:
-            broken.unlink()
+        _replace(bag, broken, written)
     except OSError as exc:
         raise RepairError(f"{bag}: cannot write the repaired bag: {exc.strerror or exc}") \
             from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return RepairReport(bag, True, kept)
+
+
+def _write_bag(written: Path, sidecar: Path, schemas: dict[int, Schema],
+               channels: dict[int, Channel], messages: list[Message]) -> dict[str, int]:
+    """A complete bag at `written` of the channels that have a schema, their messages
+    and the sidecar's parameters; returns the messages kept per topic."""
+    writer = open_writer(written)
+    if sidecar.exists():
+        writer.set_custom_data(PARAMETERS_KEY, sidecar.read_text())
+    connections = _connections(writer, schemas, channels)
+    kept: dict[str, int] = {connection.topic: 0 for connection in connections.values()}
+    for message in messages:
+        connection = connections.get(message.channel_id)
+        if connection is not None:
+            writer.write(connection, message.log_time, message.data)
+            kept[connection.topic] += 1
+    close_writer(writer, written)
+    return kept
+
+
+def _connections(writer, schemas: dict[int, Schema], channels: dict[int, Channel]) -> dict:
+    """channel id -> the writer's connection for it, with its type and offered QoS."""
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    connections = {}
+    for channel_id, channel in sorted(channels.items()):
+        schema = schemas.get(channel.schema_id)
+        if schema is None:
+            continue
+        if schema.name not in typestore.fielddefs:  # a type of someone else's: its text
+            typestore.register(get_types_from_msg(schema.data.decode(), schema.name))
+        offered = channel.metadata.get("offered_qos_profiles")
+        connections[channel_id] = writer.add_connection(
+            channel.topic, schema.name, typestore=typestore,
+            offered_qos_profiles=parse_qos(offered) if offered else ())
+    return connections
+
+
+def _replace(bag: Path, broken: Path, written: Path) -> None:
+    """The bag's files replaced by the repaired bag's: the data first, then the metadata
+    naming it."""
+    new_mcap = _mcap_file(written)
+    new_mcap.replace(bag / new_mcap.name)
+    (written / "metadata.yaml").replace(bag / "metadata.yaml")
+    if broken.name != new_mcap.name:
+        broken.unlink()
