@@ -89,6 +89,8 @@ class Component:
     (observer, filters, integrators); with it, the kind's own float parameters are live
     during a run: a change rebuilds the controller with the new values and carries
     the state over (stages.ControllerStage.retune). Without it none are.
+    compiled_step, for controllers: the step function (core/base/kernels.jitable) the
+    compiled loop runs for this kind (core/run/fast_loop.py; None: the Python loop).
     """
 
     kind: str
@@ -99,6 +101,7 @@ class Component:
     observer_gain: Callable[[Any], float] | None = None
     search_space: tuple[tuple[str, float, float], ...] = ()  # what tune.py tunes by default
     state_paths: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
+    compiled_step: Callable[..., Any] | None = None  # what the compiled loop runs (controllers)
 
     @property
     def live_parameters(self) -> tuple[str, ...]:

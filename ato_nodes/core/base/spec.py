@@ -77,8 +77,10 @@ def param(name: str, default: Any, description: str, nodes: str | tuple[str, ...
 
 
 def settings(cls, group: str, values) -> Any:
-    """A configuration dataclass whose fields are the parameters `group.<field>`."""
-    return cls(**{f.name: values[f"{group}.{f.name}"] for f in fields(cls)})
+    """A configuration dataclass or NamedTuple whose fields are the parameters
+    `group.<field>`."""
+    names = cls._fields if hasattr(cls, "_fields") else [f.name for f in fields(cls)]
+    return cls(**{name: values[f"{group}.{name}"] for name in names})
 
 
 # The read-only run context (core/config/context.py) holds the nominal train and the planned

@@ -36,12 +36,13 @@ Discretisation (the papers give continuous-time equations):
 from __future__ import annotations
 
 import math
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..base.kernels import jitable
 from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param, settings
-from .limiter import CommandLimiter, limit_command
+from .limiter import CommandLimiter, LimiterSettings, limit_command
 from .train_model import NominalTrain
 
 
@@ -103,25 +104,6 @@ class TrackingDifferentiator:
         return self.v1, self.v2
 
 
-class NonlinearESO:
-    """Third-order nonlinear extended state observer (seed 000 eq. 10).
-
-    z1 -> output y (speed), z2 -> its derivative, z3 -> total disturbance.
-    Integrated by linearly-implicit Euler (see module docstring).
-    """
-
-    def __init__(self, beta1: float, beta2: float, beta3: float, b0: float,
-                 delta: float, period: float, z1: float = 0.0):
-        self.beta1, self.beta2, self.beta3 = beta1, beta2, beta3
-        self.b0, self.delta, self.h = b0, delta, period
-        self.z1, self.z2, self.z3 = z1, 0.0, 0.0
-
-    def update(self, y: float, u: float) -> tuple[float, float, float]:
-        self.z1, self.z2, self.z3 = eso_update(self.z1, self.z2, self.z3, y, u, self.beta1,
-                                               self.beta2, self.beta3, self.b0, self.delta, self.h)
-        return self.z1, self.z2, self.z3
-
-
 @jitable
 def eso_update(z1: float, z2: float, z3: float, y: float, u: float, beta1: float, beta2: float,
                beta3: float, b0: float, delta: float, h: float) -> tuple[float, float, float]:
@@ -155,8 +137,7 @@ HAN_ADRC_PARAMETERS = (
 )
 
 
-@dataclass(frozen=True)
-class HanADRCGains:
+class HanADRCGains(NamedTuple):
     """Seed 000's parameters (adrc.*; the paper's initial values are the defaults in
     HAN_ADRC_PARAMETERS); b0 and delta are not in the paper."""
 
@@ -183,59 +164,68 @@ OBSERVER_OUTPUTS = (
 )
 
 
+class HanADRCState(NamedTuple):
+    """What Han's ADRC carries from one step to the next."""
+
+    z1: float = 0.0         # the nonlinear ESO's (eq. 10) speed (m/s), its derivative,
+    z2: float = 0.0         # the total disturbance (eso_update)
+    z3: float = 0.0
+    v1: float = 0.0         # the tracking differentiator's target (m/s) and derivative
+    v2: float = 0.0
+    u_applied: float = 0.0  # the command the observer is told: the last one let through
+
+
 class HanADRC(Controller):
-    """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
+    """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000); its
+    step is han_adrc_step(), which the compiled loop calls too."""
 
     def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter):
-        self.gains = gains
-        self.limiter = limiter
-        self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
-        self.eso = NonlinearESO(gains.beta1, gains.beta2, gains.beta3, gains.b0,
-                                gains.delta, period)
-        self.gains_tuple = astuple(gains)  # the compiled step's argument (HanADRCGains order)
-        self.u_applied = 0.0
+        self.gains, self.h, self.limiter = gains, period, limiter
+        self.state = HanADRCState()
 
     def start(self, target: float, measured: float) -> None:
-        """The TD starts at the first target, the observer at the first measurement."""
-        self.td.v1, self.eso.z1 = target, measured
-
-    def control_law(self, e1: float, e2: float, z2: float) -> float:
-        """NLSEF (eq. 12): u0 from the errors e1 = v1 - z1, e2 = v2 - z2."""
-        return nlsef(e1, e2, z2, self.gains_tuple, self.td.h)
+        self.state = han_adrc_start(self.state, target, measured)
 
     def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
-        td, eso, limiter = self.td, self.eso, self.limiter
-        u, eso.z1, eso.z2, eso.z3, td.v1, td.v2 = han_adrc_step(
-            eso.z1, eso.z2, eso.z3, td.v1, td.v2, self.u_applied, target, measured,
-            self.gains_tuple, td.h, limiter.last, limiter.settings)
-        self.u_applied = limiter.last = u
-        return ControllerOutput(u, (eso.z1, eso.z2, eso.z3, td.v1, td.v2))
+        limiter = self.limiter
+        u, self.state = han_adrc_step(self.state, target, measured, self.gains, self.h,
+                                      limiter.last, limiter.settings)
+        limiter.last = u
+        s = self.state
+        return ControllerOutput(u, (s.z1, s.z2, s.z3, s.v1, s.v2))
 
 
 @jitable
-def nlsef(e1: float, e2: float, z2: float, gains, h: float) -> float:
+def nlsef(e1: float, e2: float, z2: float, gains: HanADRCGains, h: float) -> float:
     """NLSEF (eq. 12), implicit or literal (see module docstring): u0 from the
-    errors e1 = v1 - z1, e2 = v2 - z2; `gains` HanADRC.gains_tuple."""
-    mu1, mu2, alpha1, alpha2, _, _, _, _, _, _, delta, implicit = gains
-    if not implicit:
-        return mu1 * fal(e1, alpha1, delta) + mu2 * fal(e2, alpha2, delta)
-    k1 = mu1 * fal_gain(e1, alpha1, delta)
-    k2 = mu2 * fal_gain(e2, alpha2, delta)
+    errors e1 = v1 - z1, e2 = v2 - z2."""
+    g = gains
+    if not g.implicit_nlsef:
+        return g.mu1 * fal(e1, g.alpha1, g.delta) + g.mu2 * fal(e2, g.alpha2, g.delta)
+    k1 = g.mu1 * fal_gain(e1, g.alpha1, g.delta)
+    k2 = g.mu2 * fal_gain(e2, g.alpha2, g.delta)
     return (k1 * (e1 - h * z2) + k2 * e2) / (1.0 + h * h * k1 + h * k2)
 
 
 @jitable
-def han_adrc_step(z1: float, z2: float, z3: float, v1: float, v2: float, u_applied: float,
-                  target: float, measured: float, gains, h: float, last: float,
-                  limits) -> tuple[float, float, float, float, float, float]:
-    """One step of Han's ADRC: (u, z1, z2, z3, v1, v2) after it; `gains`
-    HanADRC.gains_tuple, `last` and `limits` the limiter's (CommandLimiter)."""
-    _, _, _, _, r0, h0, beta1, beta2, beta3, b0, delta, _ = gains
-    z1, z2, z3 = eso_update(z1, z2, z3, measured, u_applied, beta1, beta2, beta3, b0, delta, h)
-    v1, v2 = td_update(v1, v2, target, r0, h0, h)
+def han_adrc_start(state: HanADRCState, target: float, measured: float) -> HanADRCState:
+    """The TD starts at the first target, the observer at the first measurement."""
+    return HanADRCState(measured, state.z2, state.z3, target, state.v2, state.u_applied)
+
+
+@jitable
+def han_adrc_step(state: HanADRCState, target: float, measured: float, gains: HanADRCGains,
+                  h: float, last: float, limits: LimiterSettings
+                  ) -> tuple[float, HanADRCState]:
+    """One step of Han's ADRC: (u, the state after it); `last` and `limits` the
+    limiter's (CommandLimiter)."""
+    g = gains
+    z1, z2, z3 = eso_update(state.z1, state.z2, state.z3, measured, state.u_applied, g.beta1,
+                            g.beta2, g.beta3, g.b0, g.delta, h)
+    v1, v2 = td_update(state.v1, state.v2, target, g.r0, g.h0, h)
     u0 = nlsef(v1 - z1, v2 - z2, z2, gains, h)
-    u = limit_command((u0 - z3) / b0, target, measured, last, limits)
-    return u, z1, z2, z3, v1, v2
+    u = limit_command((u0 - z3) / g.b0, target, measured, last, limits)
+    return u, HanADRCState(z1, z2, z3, v1, v2, u)
 
 
 NLADRC_PARAMETERS = (
@@ -430,13 +420,13 @@ def linear_adrc(values, context, limiter: CommandLimiter) -> LinearADRC:
     return LinearADRC(gains, context.period, limiter, model)
 
 
-HAN_STATE_PATHS = ("td.v1", "td.v2", "eso.z1", "eso.z2", "eso.z3", "u_applied")
+HAN_STATE_PATHS = ("state",)
 
 HAN_ADRC = Component(
     "han_adrc", "seed 000: Han's nonlinear ADRC", HAN_ADRC_PARAMETERS,
     lambda values, context, limiter: HanADRC(settings(HanADRCGains, "adrc", values),
                                              context.period, limiter),
-    OBSERVER_OUTPUTS, observer_gain=lambda values: values["adrc.b0"],
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["adrc.b0"], compiled_step=han_adrc_step,
     search_space=(("adrc.mu1", 600.0, 60000.0), ("adrc.mu2", 550.0, 55000.0),
                   ("adrc.beta1", 120.0, 12000.0), ("adrc.beta2", 170.0, 17000.0),
                   ("adrc.beta3", 450.0, 45000.0)),
@@ -447,7 +437,7 @@ NLADRC = Component(
     lambda values, context, limiter: HanADRC(nladrc_gains(**{
         spec.name.split(".", 1)[1]: values[spec.name] for spec in NLADRC_PARAMETERS}),
         context.period, limiter),
-    OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"],
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"], compiled_step=han_adrc_step,
     search_space=(("nladrc.kp", 0.05, 20.0), ("nladrc.kd", 0.05, 20.0),
                   ("nladrc.omega", 0.5, 40.0), ("nladrc.b", 0.002, 0.5)),
     state_paths=HAN_STATE_PATHS)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 from ..base.kernels import jitable
 from ..base.spec import param
 
@@ -25,26 +27,38 @@ LIMITER_PARAMETERS = (
 STOPPED = 0.1  # m/s: below this (measured) speed a train with a zero target is held
 
 
+class LimiterSettings(NamedTuple):
+    """A CommandLimiter's settings, as limit_command() reads them."""
+
+    u_min: float           # N/kN
+    u_max: float           # N/kN
+    max_change: float      # N/kN per period (0: no jerk limit)
+    mode_band: float       # m/s (0: off)
+    holding_brake: float   # N/kN (0: none)
+    holding_target: float  # m/s
+
+
 @jitable
 def clamp(x: float, low: float, high: float) -> float:
     return low if x < low else high if x > high else x
 
 
 @jitable
-def limit_command(u: float, target: float, speed: float, last: float, settings) -> float:
+def limit_command(u: float, target: float, speed: float, last: float,
+                  settings: LimiterSettings) -> float:
     """The command the limiter lets through (see CommandLimiter); `last` the previous
-    one, `settings` CommandLimiter.settings."""
-    u_min, u_max, max_change, mode_band, holding_brake, holding_target = settings
-    if holding_brake > 0.0 and target <= holding_target and speed < STOPPED:
-        u = min(u, -holding_brake)
-    if mode_band > 0.0:
-        if speed > target + mode_band:
+    one."""
+    s = settings
+    if s.holding_brake > 0.0 and target <= s.holding_target and speed < STOPPED:
+        u = min(u, -s.holding_brake)
+    if s.mode_band > 0.0:
+        if speed > target + s.mode_band:
             u = min(u, 0.0)
-        elif speed < target - mode_band:
+        elif speed < target - s.mode_band:
             u = max(u, 0.0)
-    if max_change > 0.0:
-        u = clamp(u, last - max_change, last + max_change)
-    return clamp(u, u_min, u_max)
+    if s.max_change > 0.0:
+        u = clamp(u, last - s.max_change, last + s.max_change)
+    return clamp(u, s.u_min, s.u_max)
 
 
 class CommandLimiter:
@@ -69,7 +83,8 @@ class CommandLimiter:
         self.max_change = max_rate * period
         self.mode_band = mode_band
         self.holding_brake, self.holding_target = holding_brake, holding_target
-        self.settings = (u_min, u_max, self.max_change, mode_band, holding_brake, holding_target)
+        self.settings = LimiterSettings(u_min, u_max, self.max_change, mode_band, holding_brake,
+                                        holding_target)
         self.last = 0.0
 
     def apply(self, u: float, target: float, speed: float) -> float:

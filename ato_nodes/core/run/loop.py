@@ -15,11 +15,7 @@ from ..config.schema import SPEC_BY_NAME, NodeValues, steps
 from ..scoring.indices import RunningIndex
 from ..train.line import load_line
 from . import fast_loop
-from .stages import ControllerStage, PlantStage, ProfileStage
-
-SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
-          "force", "resistance", "line_resistance", "speed_limit", "command")
-
+from .stages import SERIES, ControllerStage, PlantStage, ProfileStage
 
 def simulate(values: dict[str, Any], deadline: float | None = None,
              prune: tuple[RunningIndex, float] | None = None,
@@ -42,7 +38,7 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)
     if fast_loop.covers(profile, plant, controller, changes):
-        rows, extras, horizons = fast_loop.run(profile, plant, controller, len(SERIES), prune,
+        rows, extras, horizons = fast_loop.run(profile, plant, controller, prune,
                                                lambda step: _check_deadline(deadline, step))
         return _series(rows, extras, horizons, controller.output_names)
     rows, extras, horizons = [], [], []

@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -39,6 +39,14 @@ from ..train.line import Line, load_line
 from ..train.plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
 
 LOOKAHEAD = 2  # steps the profile runs ahead of the plant
+
+
+# The series of a run, one value per step, in the order of simulate()'s rows.
+SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
+          "force", "resistance", "line_resistance", "speed_limit", "command")
+# Each series' column in those rows, by name (the compiled loop writes them so).
+SeriesColumns = NamedTuple("SeriesColumns", [(name, int) for name in SERIES])
+COLUMNS = SeriesColumns(*range(len(SERIES)))
 
 
 class ProfileStage:

@@ -61,16 +61,19 @@ def tracking_indices(t: np.ndarray, target: np.ndarray, speed: np.ndarray,
     return result
 
 
+# The running indices' kinds, as compiled code reads them: positions in RunningIndex.MONOTONE.
+ITAE, IAE, MAX_ABS_ERROR = range(3)
+
+
 @jitable
 def running_add(kind: int, value: float, last_t: float, last_w: float, t: float,
                 error: float) -> tuple[float, float, float]:
     """RunningIndex.add on its state (value, last_t, last_w; last_t NaN before the
-    first sample): the state after adding (t, error); `kind` the index's position in
-    RunningIndex.MONOTONE."""
+    first sample): the state after adding (t, error); `kind` ITAE, IAE or MAX_ABS_ERROR."""
     magnitude = abs(error)
-    if kind == 2:
+    if kind == MAX_ABS_ERROR:
         return max(value, magnitude), last_t, last_w
-    weighted = t * magnitude if kind == 0 else magnitude
+    weighted = t * magnitude if kind == ITAE else magnitude
     if last_t == last_t:  # not NaN: a previous sample exists
         value += 0.5 * (t - last_t) * (weighted + last_w)
     return value, t, weighted
@@ -82,7 +85,7 @@ class RunningIndex:
     value has passed a bound ends above it (a tuner's pruning). Summed step by step,
     it may differ from the whole run's numpy sum in the last digits."""
 
-    MONOTONE = ("itae", "iae", "max_abs_error")
+    MONOTONE = ("itae", "iae", "max_abs_error")  # in the order of ITAE, IAE, MAX_ABS_ERROR
 
     def __init__(self, name: str):
         if name not in self.MONOTONE:

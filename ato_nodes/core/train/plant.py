@@ -30,9 +30,37 @@ import functools
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from ..base.kernels import jitable
 from .line import Line
+
+
+class Envelope(NamedTuple):
+    """The traction and brake envelope: constant force, then constant power."""
+
+    weight: float              # kN, converts the forces to N/kN
+    max_traction_force: float  # kN (inf: no envelope)
+    max_traction_power: float  # kW
+    max_brake_force: float     # kN
+    max_brake_power: float     # kW
+
+
+class TrainConstants(NamedTuple):
+    """What rates() and rk4_substep() read of the train (TrainParameters.constants()):
+    plain values, so compiled code reads them by name too."""
+
+    xi: float                     # m/s^2 per N/kN
+    davis_a: float                # N/kN
+    davis_b: float                # N/kN per m/s
+    davis_c: float                # N/kN per (m/s)^2
+    disturbance_amplitude: float  # m/s^2
+    disturbance_frequency: float  # rad/s
+    disturbance_phase: float      # rad
+    limited: bool                 # the envelope applies
+    actuator_lag: float           # s
+    hold_at_standstill: bool
+    envelope: Envelope
 
 
 @dataclass(frozen=True)
@@ -107,10 +135,9 @@ class TrainParameters:
         return force_limits(v, self.envelope)
 
     @property
-    def envelope(self) -> tuple[float, float, float, float, float]:
-        """(weight kN, max traction force kN, power kW, max brake force kN, power kW)."""
-        return (self.mass * self.gravity, self.max_traction_force, self.max_traction_power,
-                self.max_brake_force, self.max_brake_power)
+    def envelope(self) -> Envelope:
+        return Envelope(self.mass * self.gravity, self.max_traction_force,
+                        self.max_traction_power, self.max_brake_force, self.max_brake_power)
 
     @property
     def limited(self) -> bool:
@@ -118,11 +145,11 @@ class TrainParameters:
         return math.isfinite(self.max_traction_force + self.max_traction_power
                              + self.max_brake_force + self.max_brake_power)
 
-    def constants(self) -> tuple:
-        """What rates() needs of the train, in its order."""
-        return (self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
-                self.disturbance_frequency, self.disturbance_phase, self.limited,
-                self.actuator_lag, self.hold_at_standstill, self.envelope)
+    def constants(self) -> TrainConstants:
+        return TrainConstants(
+            self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
+            self.disturbance_frequency, self.disturbance_phase, self.limited,
+            self.actuator_lag, self.hold_at_standstill, self.envelope)
 
 
 @jitable
@@ -139,18 +166,16 @@ def disturbance(t: float, amplitude: float, omega: float, phase: float) -> float
 
 
 @jitable
-def force_limits(v: float, envelope) -> tuple[float, float]:
-    """(most negative, most positive) achievable specific force at speed v, N/kN, from
-    TrainParameters.envelope."""
-    weight, max_traction_force, max_traction_power, max_brake_force, max_brake_power = envelope
+def force_limits(v: float, envelope: Envelope) -> tuple[float, float]:
+    """(most negative, most positive) achievable specific force at speed v, N/kN."""
     speed = max(abs(v), 1e-6)
-    traction = min(max_traction_force, max_traction_power / speed)
-    brake = min(max_brake_force, max_brake_power / speed)
-    return -brake * 1000.0 / weight, traction * 1000.0 / weight
+    traction = min(envelope.max_traction_force, envelope.max_traction_power / speed)
+    brake = min(envelope.max_brake_force, envelope.max_brake_power / speed)
+    return -brake * 1000.0 / envelope.weight, traction * 1000.0 / envelope.weight
 
 
 @jitable
-def achievable(command: float, v: float, limited: bool, envelope) -> float:
+def achievable(command: float, v: float, limited: bool, envelope: Envelope) -> float:
     """The command cut to the envelope at v (unchanged without one)."""
     if limited:
         low, high = force_limits(v, envelope)
@@ -160,30 +185,32 @@ def achievable(command: float, v: float, limited: bool, envelope) -> float:
 
 @jitable
 def rates(t: float, v: float, force: float, command: float, powered: bool,
-          line_resistance: float, constants) -> tuple[float, float]:
-    """(dv/dt, dG/dt), G the lag's state, `line_resistance` the belt's at the position,
-    `constants` TrainParameters.constants(). Unpowered (pantograph in a neutral
-    section), traction is gone at once, from the lag's input and from its output alike."""
-    xi, a, b, c, amplitude, omega, phase, limited, tau, hold, envelope = constants
-    resistance = basic_resistance(v, a, b, c) + line_resistance
+          line_resistance: float, constants: TrainConstants) -> tuple[float, float]:
+    """(dv/dt, dG/dt), G the lag's state, `line_resistance` the belt's at the position.
+    Unpowered (pantograph in a neutral section), traction is gone at once, from the
+    lag's input and from its output alike."""
+    c = constants
+    resistance = basic_resistance(v, c.davis_a, c.davis_b, c.davis_c) + line_resistance
     if not powered and command > 0.0:
         command = 0.0
-    if tau > 0.0:  # `force` is the lag's state; the envelope holds at every speed
-        dforce = (achievable(command, v, limited, envelope) - force) / tau
-        force = achievable(force, v, limited, envelope)
+    if c.actuator_lag > 0.0:  # `force` is the lag's state; the envelope holds at every speed
+        dforce = (achievable(command, v, c.limited, c.envelope) - force) / c.actuator_lag
+        force = achievable(force, v, c.limited, c.envelope)
     else:
-        force, dforce = achievable(command, v, limited, envelope), 0.0
+        force, dforce = achievable(command, v, c.limited, c.envelope), 0.0
     if not powered and force > 0.0:
         force = 0.0
-    acceleration = xi * (force - resistance) + disturbance(t, amplitude, omega, phase)
-    if hold and v <= 0.0 and acceleration < 0.0:  # held by the brakes
+    acceleration = c.xi * (force - resistance) + disturbance(
+        t, c.disturbance_amplitude, c.disturbance_frequency, c.disturbance_phase)
+    if c.hold_at_standstill and v <= 0.0 and acceleration < 0.0:  # held by the brakes
         acceleration = 0.0
     return acceleration, dforce
 
 
 @jitable
 def rk4_substep(t: float, x: float, v: float, f: float, h: float, command: float,
-                powered: bool, constants, belt_resistance) -> tuple[float, float, float]:
+                powered: bool, constants: TrainConstants, belt_resistance
+                ) -> tuple[float, float, float]:
     """One classic RK4 step of length h on (s, v, G), the command held;
     belt_resistance(x) the line's resistance at the position, N/kN."""
     a1, g1 = rates(t, v, f, command, powered, belt_resistance(x), constants)
@@ -198,7 +225,7 @@ def rk4_substep(t: float, x: float, v: float, f: float, h: float, command: float
     x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
     v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
     f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
-    if constants[9] and v < 0.0:  # held at standstill
+    if constants.hold_at_standstill and v < 0.0:
         v, x_next = 0.0, max(x, x_next)
     return x_next, v, f
 
@@ -267,7 +294,7 @@ class PointMassTrain:
         self.steps += 1
         s.time, s.position, s.speed = self.steps * self.period, x, v
         s.force = achievable(f if self.lagged else command, v, self.limited,
-                             constants[10])
+                             constants.envelope)
         if not powered and s.force > 0.0:
             s.force = 0.0
         return s
