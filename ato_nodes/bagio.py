@@ -242,16 +242,7 @@ def run_status(path: Path) -> str | None:
 
 def _assemble(path, found, stamps, raws, types) -> Run:
     missing = [role for role in ROLES if role not in found or not raws[role]]
-    usable = {role for role in found if raws[role]}
-    silent = sorted(found[role] for role in ("target_speed", "state", "measured_speed")
-                    if role in found and role not in usable)
-    if silent and "target_speed" in found and found.keys() & {"state", "measured_speed"}:
-        raise BagError(f"{path}: no complete step: {', '.join(silent)} recorded no message "
-                       "(the run ended before its first step)")
-    if "target_speed" not in usable or not usable & {"state", "measured_speed"}:
-        names = ", ".join(sorted(types)) or "none"
-        raise BagError(f"{path}: needs a target speed and a speed topic; topics in the bag: "
-                       f"{names} (map others with --map role=/topic)")
+    usable = _usable_roles(path, found, raws, types)
     notes = []
     clock_role = "state" if "state" in usable else "measured_speed"
     if clock_role == "measured_speed":
@@ -283,16 +274,39 @@ def _assemble(path, found, stamps, raws, types) -> Run:
         notes.append(f"{np.count_nonzero(~keep)} of {len(base)} steps lack a message on "
                      f"{', '.join(sorted(short)) or 'a topic'}: only the {np.count_nonzero(keep)} "
                      "steps every topic has are read (no gap is filled)")
-    series: dict[str, np.ndarray] = {"t": base[keep] * 1e-9}
-    for role in sorted(usable, key=lambda r: r != clock_role):  # the stamps' source first
+    series = _decoded_series(base[keep] * 1e-9, clock_role, usable, picks, keep, raws)
+    return Run(path, series, _checked_parameters(path), {r: found[r] for r in usable}, missing,
+               notes)
+
+
+def _usable_roles(path, found, raws, types) -> set[str]:
+    """The roles found with messages; a BagError unless they give a target speed and a
+    speed, and, when their topics are there, a first complete step."""
+    usable = {role for role in found if raws[role]}
+    silent = sorted(found[role] for role in ("target_speed", "state", "measured_speed")
+                    if role in found and role not in usable)
+    if silent and "target_speed" in found and found.keys() & {"state", "measured_speed"}:
+        raise BagError(f"{path}: no complete step: {', '.join(silent)} recorded no message "
+                       "(the run ended before its first step)")
+    if "target_speed" not in usable or not usable & {"state", "measured_speed"}:
+        names = ", ".join(sorted(types)) or "none"
+        raise BagError(f"{path}: needs a target speed and a speed topic; topics in the bag: "
+                       f"{names} (map others with --map role=/topic)")
+    return usable
+
+
+def _decoded_series(t, clock_role, usable, picks, keep, raws) -> dict[str, np.ndarray]:
+    """The series of the kept steps: each role's picked messages decoded into columns,
+    the stamps' source first."""
+    series: dict[str, np.ndarray] = {"t": t}
+    for role in sorted(usable, key=lambda r: r != clock_role):
         msgtype, fields = ROLES[role]
         chosen = picks[role][keep]
         decoded = {i: TYPESTORE.deserialize_cdr(raws[role][i], msgtype) for i in set(chosen)}
         series.update(_columns(fields, [decoded[i] for i in chosen]))
     if "speed" not in series:
         series["speed"] = series["measured_speed"]
-    return Run(path, series, _checked_parameters(path), {r: found[r] for r in usable}, missing,
-               notes)
+    return series
 
 
 def _checked_parameters(path: Path) -> dict | None:
