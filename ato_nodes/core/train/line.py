@@ -21,11 +21,14 @@ import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Callable, NamedTuple
 
+import numpy as np
 import yaml
 
 from ..base import yamlfile
 from ..base.errors import ScenarioError
+from ..base.kernels import jitable
 
 MAX_LENGTH = 2.0e6         # m: longer than any line; bounds what the ATO curve allocates
 CURVE_CONSTANT = 600.0     # A of w_r = A / R, N/kN m
@@ -60,10 +63,7 @@ class Line:
 
     def speed_limit(self, position: float) -> float:
         """Line speed limit at a point, m/s (the limits cover the whole line)."""
-        for section in self.speed_limits:
-            if section.start <= position < section.end:
-                return section.value
-        return self.speed_limits[-1].value
+        return speed_limit(self.tables, position)
 
     @property
     def stop_position(self) -> float:
@@ -71,31 +71,106 @@ class Line:
         return self.stations[-1].position if self.stations else self.length
 
     def in_neutral_section(self, position: float) -> bool:
-        return any(s.start <= position < s.end for s in self.neutral_sections)
+        return in_neutral_section(self.tables, position)
 
     def additional_resistance(self, head: float, train_length: float) -> float:
         """Gradient + curve + tunnel specific resistance of the mass belt, N/kN."""
-        tail = head - train_length
-        total = _belt_average(self.gradients, tail, head, lambda s: s.value)
-        total += _belt_average(self.curves, tail, head, lambda s: CURVE_CONSTANT / s.value)
-        total += _belt_average(self.tunnels, tail, head,
-                               lambda s: TUNNEL_CONSTANT * (s.end - s.start))
-        return total
+        return belt_resistance(self.tables, head, train_length)
+
+    @functools.cached_property
+    def tables(self) -> LineTables:
+        """The sections as the line functions below read them (tuples: fast in Python)."""
+        return line_tables(self, tuple)
+
+    def arrays(self) -> LineTables:
+        """The same as numpy arrays, for compiled code (core/run/fast_loop.py)."""
+        return line_tables(self, lambda values: np.array(list(values), dtype=float))
 
 
-def _belt_average(sections, tail: float, head: float, point_value) -> float:
+class LineTables(NamedTuple):
+    """A line's sections as plain sequences (start, end, and the value each adds: the
+    point resistance in N/kN, the limit in m/s), so that compiled code and Python read
+    them with the same functions."""
+
+    gradient_starts: Any
+    gradient_ends: Any
+    gradient_values: Any     # grade, per mille = N/kN
+    curve_starts: Any
+    curve_ends: Any
+    curve_values: Any        # CURVE_CONSTANT / R, N/kN
+    tunnel_starts: Any
+    tunnel_ends: Any
+    tunnel_values: Any       # TUNNEL_CONSTANT * tunnel length, N/kN
+    limit_starts: Any
+    limit_ends: Any
+    limit_values: Any        # m/s
+    neutral_starts: Any
+    neutral_ends: Any
+
+
+def line_tables(line: Line | None, sequence: Callable) -> LineTables:
+    """`line`'s LineTables, each column made by `sequence` (tuple, or an array maker);
+    the open track (no line) has empty columns."""
+    def columns(sections, point_value):
+        return (sequence(s.start for s in sections), sequence(s.end for s in sections),
+                sequence(point_value(s) for s in sections))
+
+    if line is None:
+        empty = sequence(())
+        return LineTables(*[empty] * len(LineTables._fields))
+    neutral = columns(line.neutral_sections, lambda s: 0.0)[:2]
+    return LineTables(
+        *columns(line.gradients, lambda s: s.value),
+        *columns(line.curves, lambda s: CURVE_CONSTANT / s.value),
+        *columns(line.tunnels, lambda s: TUNNEL_CONSTANT * (s.end - s.start)),
+        *columns(line.speed_limits, lambda s: s.value), *neutral)
+
+
+@jitable
+def speed_limit(tables: LineTables, position: float) -> float:
+    """The line's speed limit at `position`, m/s (the last one beyond the end)."""
+    for i in range(len(tables.limit_starts)):
+        if tables.limit_starts[i] <= position < tables.limit_ends[i]:
+            return tables.limit_values[i]
+    return tables.limit_values[len(tables.limit_values) - 1]
+
+
+@jitable
+def in_neutral_section(tables: LineTables, position: float) -> bool:
+    for i in range(len(tables.neutral_starts)):
+        if tables.neutral_starts[i] <= position < tables.neutral_ends[i]:
+            return True
+    return False
+
+
+@jitable
+def belt_resistance(tables: LineTables, head: float, train_length: float) -> float:
+    """Gradient + curve + tunnel specific resistance of the mass belt [head - L, head],
+    N/kN (0 on the open track)."""
+    tail = head - train_length
+    total = _belt_average(tables.gradient_starts, tables.gradient_ends, tables.gradient_values,
+                          tail, head)
+    total += _belt_average(tables.curve_starts, tables.curve_ends, tables.curve_values, tail,
+                           head)
+    total += _belt_average(tables.tunnel_starts, tables.tunnel_ends, tables.tunnel_values,
+                           tail, head)
+    return total
+
+
+@jitable
+def _belt_average(starts, ends, values, tail: float, head: float) -> float:
     """Mean over [tail, head] of a piecewise-constant quantity (0 outside sections);
     the point value when the belt has no length."""
     if head <= tail:
-        for section in sections:
-            if section.start <= head < section.end:
-                return point_value(section)
+        for i in range(len(starts)):
+            if starts[i] <= head < ends[i]:
+                return values[i]
         return 0.0
     covered = 0.0
-    for section in sections:
-        overlap = min(head, section.end) - max(tail, section.start)
+    for i in range(len(starts)):
+        overlap = min(head, ends[i]) - max(tail, starts[i])
         if overlap > 0:
-            covered += overlap * point_value(section)
+            covered += overlap * values[i]
     return covered / (head - tail)
 
 
