@@ -40,12 +40,12 @@ from ..config.schema import NodeValues
 from ..control.adrc import HanADRCGains, HanADRCState, han_adrc_start, han_adrc_step
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
+from ..train.line import LineTables, belt_resistance, line_tables
 from ..train.plant import (
     TrainConstants,
     achievable,
     basic_resistance,
     disturbance,
-    no_line,
     rates,
     rk4_substep,
     sensor_reading,
@@ -100,6 +100,7 @@ class LoopInputs(NamedTuple):
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
     fitness_limit: float       # the running fitness past which the run ends (inf: never)
     columns: SeriesColumns     # where each series goes in a row
+    line: LineTables           # arrays (empty: the open track)
 
 
 class LoopState(NamedTuple):
@@ -144,7 +145,7 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
         targets, draws, float(plant.noise), float(plant.quantum), int(controller.preview),
         float(train.period), int(train.substeps), bool(train.powered), train.constants,
         bool(train.lagged), float(plant.max_speed), han.gains, limiter.settings,
-        int(running.kind), float(limit), COLUMNS)
+        int(running.kind), float(limit), COLUMNS, line_tables(None, np.array))
     state = train.state
     loop = LoopState(
         0, int(train.steps), float(state.time), float(state.position), float(state.speed),
@@ -181,7 +182,8 @@ def _han_adrc_steps_source(inputs: LoopInputs, loop: LoopState, stop: int, rows,
     while k < stop and not ended:
         # plant outputs at t_k (PlantStage.outputs)
         measured = sensor_reading(v, inputs.draws[k], inputs.noise, inputs.quantum)
-        acceleration = rates(clock, v, lag, acting, inputs.powered, no_line(x), train)[0]
+        acceleration = rates(clock, v, lag, acting, inputs.powered,
+                             belt_resistance(inputs.line, x, train.length), train)[0]
         reference = targets[k, inputs.preview]
         if k == 0:
             controller = han_adrc_start(controller, reference, measured)
@@ -207,7 +209,7 @@ def _han_adrc_steps_source(inputs: LoopInputs, loop: LoopState, stop: int, rows,
         start = clock
         for i in range(substeps):
             x, v, lag = rk4_substep(start + i * sub, x, v, lag, sub, u, inputs.powered,
-                                    train, no_line)
+                                    train, inputs.line)
         acting = u
         plant_steps += 1
         clock = plant_steps * period

@@ -161,6 +161,8 @@ def belt_resistance(tables: LineTables, head: float, train_length: float) -> flo
 def _belt_average(starts, ends, values, tail: float, head: float) -> float:
     """Mean over [tail, head] of a piecewise-constant quantity (0 outside sections);
     the point value when the belt has no length."""
+    if len(starts) == 0:  # none on this line (0 even where the position is not finite)
+        return 0.0
     if head <= tail:
         for i in range(len(starts)):
             if starts[i] <= head < ends[i]:

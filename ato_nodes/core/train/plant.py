@@ -26,14 +26,15 @@ period, the command held constant over the period (zero-order hold).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections import deque
 from dataclasses import dataclass
 from typing import NamedTuple
 
 from ..base.kernels import jitable
-from .line import Line
+from .line import Line, LineTables, belt_resistance, in_neutral_section, line_tables
+
+OPEN_TRACK = line_tables(None, tuple)  # no gradients, curves, tunnels, limits or neutral sections
 
 
 class Envelope(NamedTuple):
@@ -61,6 +62,7 @@ class TrainConstants(NamedTuple):
     actuator_lag: float           # s
     hold_at_standstill: bool
     envelope: Envelope
+    length: float                 # m, the mass belt's (line resistance)
 
 
 @dataclass(frozen=True)
@@ -149,7 +151,7 @@ class TrainParameters:
         return TrainConstants(
             self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
             self.disturbance_frequency, self.disturbance_phase, self.limited,
-            self.actuator_lag, self.hold_at_standstill, self.envelope)
+            self.actuator_lag, self.hold_at_standstill, self.envelope, self.length)
 
 
 @jitable
@@ -209,31 +211,26 @@ def rates(t: float, v: float, force: float, command: float, powered: bool,
 
 @jitable
 def rk4_substep(t: float, x: float, v: float, f: float, h: float, command: float,
-                powered: bool, constants: TrainConstants, belt_resistance
+                powered: bool, constants: TrainConstants, line: LineTables
                 ) -> tuple[float, float, float]:
-    """One classic RK4 step of length h on (s, v, G), the command held;
-    belt_resistance(x) the line's resistance at the position, N/kN."""
-    a1, g1 = rates(t, v, f, command, powered, belt_resistance(x), constants)
+    """One classic RK4 step of length h on (s, v, G), the command held, on `line`."""
+    length = constants.length
+    a1, g1 = rates(t, v, f, command, powered, belt_resistance(line, x, length), constants)
     x2, v2 = x + h / 2 * v, v + h / 2 * a1
-    a2, g2 = rates(t + h / 2, v2, f + h / 2 * g1, command, powered, belt_resistance(x2),
-                   constants)
+    a2, g2 = rates(t + h / 2, v2, f + h / 2 * g1, command, powered,
+                   belt_resistance(line, x2, length), constants)
     x3, v3 = x + h / 2 * v2, v + h / 2 * a2
-    a3, g3 = rates(t + h / 2, v3, f + h / 2 * g2, command, powered, belt_resistance(x3),
-                   constants)
+    a3, g3 = rates(t + h / 2, v3, f + h / 2 * g2, command, powered,
+                   belt_resistance(line, x3, length), constants)
     x4, v4 = x + h * v3, v + h * a3
-    a4, g4 = rates(t + h, v4, f + h * g3, command, powered, belt_resistance(x4), constants)
+    a4, g4 = rates(t + h, v4, f + h * g3, command, powered, belt_resistance(line, x4, length),
+                   constants)
     x_next = x + h / 6 * (v + 2 * v2 + 2 * v3 + v4)
     v += h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
     f += h / 6 * (g1 + 2 * g2 + 2 * g3 + g4)
     if constants.hold_at_standstill and v < 0.0:
         v, x_next = 0.0, max(x, x_next)
     return x_next, v, f
-
-
-@jitable
-def no_line(x: float) -> float:
-    """The belt resistance of the open track of seed 000: none."""
-    return 0.0
 
 
 @dataclass
@@ -263,33 +260,32 @@ class PointMassTrain:
         self.powered = True  # whether the last sub-step had traction power
         self.lag_state = self.state.force  # the lag's output before the envelope
         self.constants = params.constants()
-        self.belt_resistance = no_line if line is None else functools.partial(
-            line.additional_resistance, train_length=params.length)
+        self.tables = line.tables if line is not None else OPEN_TRACK
 
     def line_resistance(self) -> float:
         """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
-        return self.belt_resistance(self.state.position)
+        return belt_resistance(self.tables, self.state.position, self.p.length)
 
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""
         s = self.state
         return rates(s.time, s.speed, self.lag_state, self.acting, self.powered,
-                     self.belt_resistance(s.position), self.constants)[0]
+                     self.line_resistance(), self.constants)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
         if self.delayed:
             self.delayed.append(command)
             command = self.delayed.popleft()
-        s, line, constants = self.state, self.line, self.constants
+        s, tables, constants = self.state, self.tables, self.constants
         h = self.period / self.substeps
         start = s.time
         x, v, f = s.position, s.speed, self.lag_state
         powered = True
         for i in range(self.substeps):
-            powered = line is None or not line.in_neutral_section(x - self.p.pantograph_offset)
+            powered = not in_neutral_section(tables, x - self.p.pantograph_offset)
             x, v, f = rk4_substep(start + i * h, x, v, f, h, command, powered, constants,
-                                  self.belt_resistance)
+                                  tables)
         self.acting, self.lag_state, self.powered = command, f, powered
         self.steps += 1
         s.time, s.position, s.speed = self.steps * self.period, x, v
