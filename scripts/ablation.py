@@ -22,17 +22,15 @@ ablation.json in --out.
 
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
+import argparse
 from pathlib import Path
 
 import _cli
 
-from ato_nodes import jsontext
 from ato_nodes.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.config.scenario import apply_overrides, check_given_once, load_scenario
-from ato_nodes.core.run.scoring import score_series
+from ato_nodes.core.config.scenario import check_given_once
+from ato_nodes.studies import Variant, numeric, prepare_variants, run_study, write_outputs
 
 ADDITIONS = (
     ("feedforward", ["ladrc.feedforward=false"]),
@@ -43,14 +41,9 @@ ADDITIONS = (
     ("departure and berth", ["profile.ato.start_speed=0.3", "controller.holding_target=0"]),
 )
 TUNED = "tuned gains"
-def run(job: tuple[str, dict]) -> tuple[str, dict]:
-    label, values = job
-    series = simulate(values)
-    return label, {key: value for key, value in score_series(series, values).items()
-                   if isinstance(value, (int, float))}
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
     parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenario")
     parser.add_argument("--untuned", action="append", default=[], metavar="NAME=VALUE",
@@ -60,7 +53,25 @@ def main() -> None:
                         help="override for every run, references included (repeatable)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, required=True)
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def variants(scenario: str, additions: list, references: list[str]) -> dict[str, Variant]:
+    """The runs in the table's order: the references, none, the additions built up one
+    at a time (the last of them is all), then each addition left out."""
+    runs = {f"reference: {name}": Variant(name) for name in references}
+    runs["none (linear ADRC alone)"] = Variant(
+        scenario, [item for _, undo in additions for item in undo])
+    for i, (name, _) in enumerate(additions[:-1]):
+        still_off = [item for _, undo in additions[i + 1:] for item in undo]
+        runs[f"+ {name}"] = Variant(scenario, still_off)
+    runs["all additions"] = Variant(scenario)
+    runs.update({f"without {name}": Variant(scenario, undo) for name, undo in additions})
+    return runs
+
+
+def main() -> None:
+    args = parse_args()
     additions = list(ADDITIONS) + ([(TUNED, args.untuned)] if args.untuned else [])
     undone = [item.split("=", 1)[0] for _, undo in ADDITIONS for item in undo]
     for item in args.untuned:
@@ -68,37 +79,19 @@ def main() -> None:
             _cli.fail(f"--untuned {item}: another addition undoes {item.split('=', 1)[0]}")
     try:
         check_given_once(args.untuned)
-        check_given_once(args.set)
-        full = apply_overrides(load_scenario(args.scenario), args.set)
-        jobs = [("all additions", full)]
-        jobs += [(f"without {name}", apply_overrides(full, undo)) for name, undo in additions]
-        undone = [item for _, undo in additions for item in undo]
-        jobs.append(("none (linear ADRC alone)", apply_overrides(full, undone)))
-        for i, (name, _) in enumerate(additions[:-1]):
-            still_off = [item for _, undo in additions[i + 1:] for item in undo]
-            jobs.append((f"+ {name}", apply_overrides(full, still_off)))
-        jobs += [(f"reference: {name}", apply_overrides(load_scenario(name), args.set))
-                 for name in args.reference]
+        runs = prepare_variants(variants(args.scenario, additions, args.reference), args.set)
     except ScenarioError as exc:
         _cli.fail(str(exc))
     if args.workers < 1:
         _cli.fail("--workers must be positive")
     _cli.new_directory(args.out)
-    with ProcessPoolExecutor(args.workers) as pool:
-        results = dict(pool.map(run, jobs))
-    order = ([label for label, _ in jobs if label.startswith("reference")]
-             + ["none (linear ADRC alone)"]
-             + [label for label, _ in jobs if label.startswith("+ ")] + ["all additions"]
-             + [label for label, _ in jobs if label.startswith("without")])
+    results = {label: numeric(outcome.indices)
+               for label, outcome in run_study(runs, workers=args.workers).items()}
     table = "\n".join([f"Ablation of {args.scenario} (in-process; cumulative from none, then "
-                       f"each addition left out)", "",
-                       markdown_table({label: results[label] for label in order})])
-    args.out.mkdir()
-    (args.out / "ablation.md").write_text(table + "\n")
-    (args.out / "ablation.json").write_text(jsontext.dumps(
-        {"scenario": args.scenario, "untuned": args.untuned, "reference": args.reference,
-         "set": args.set,
-         "runs": {label: results[label] for label in order}}, indent=2))
+                       f"each addition left out)", "", markdown_table(results)])
+    write_outputs(args.out, "ablation", markdown=table, report={
+        "scenario": args.scenario, "untuned": args.untuned, "reference": args.reference,
+        "set": args.set, "runs": results})
     print(table)
 
 

@@ -18,11 +18,21 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes import jsontext
 from ato_nodes.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.launch import run_checked
+from ato_nodes.studies import Outcome, Variant, numeric, prepare_variants, run_study, write_outputs
+
+
+def variant(text: str) -> Variant:
+    """SCENARIO[:NAME=VALUE...] as a variant."""
+    scenario, *overrides = text.split(":")
+    return Variant(scenario, overrides)
+
+
+def progress(label: str, outcome: Outcome) -> None:
+    print(f"{label}: max |e| {outcome.indices['max_abs_error_kmh']:.3f} km/h, stack = "
+          f"in-process: {outcome.identical} ({outcome.bag})", flush=True)
+
 
 def main() -> None:
     parser = _cli.argument_parser(__doc__)
@@ -30,28 +40,21 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True, help="directory to create")
     args = parser.parse_args()
     try:
-        runs = {}
-        for text in args.scenarios:
-            name, *overrides = text.split(":")
-            runs[text] = apply_overrides(load_scenario(name), overrides)
+        runs = prepare_variants({text: variant(text) for text in args.scenarios})
     except ScenarioError as exc:
         _cli.fail(str(exc))
     _cli.new_directory(args.out)
     args.out.mkdir()
-    results = {}
-    for number, (text, values) in enumerate(runs.items()):
-        try:
-            indices, identical = run_checked(values, args.out / f"run{number}")
-        except RuntimeError as exc:
-            _cli.fail(str(exc), 1)
-        results[text] = {**{k: v for k, v in indices.items() if isinstance(v, (int, float))},
-                         "bit_identical": identical}
-        print(f"{text}: max |e| {indices['max_abs_error_kmh']:.3f} km/h, stack = in-process: "
-              f"{identical} ({args.out / f'run{number}'})", flush=True)
+    bags = {text: args.out / f"run{number}" for number, text in enumerate(runs)}
+    try:
+        outcomes = run_study(runs, bags=bags, progress=progress)
+    except RuntimeError as exc:
+        _cli.fail(str(exc), 1)
+    results = {text: {**numeric(outcome.indices), "bit_identical": outcome.identical}
+               for text, outcome in outcomes.items()}
     markdown = markdown_table(results, extra={"stack = in-process": {
-        name: "yes" if r["bit_identical"] else "NO" for name, r in results.items()}})
-    (args.out / "comparison.md").write_text(markdown + "\n")
-    (args.out / "comparison.json").write_text(jsontext.dumps(results, indent=2))
+        text: "yes" if result["bit_identical"] else "NO" for text, result in results.items()}})
+    write_outputs(args.out, "comparison", markdown=markdown, report=results)
     print(markdown)
 
 

@@ -21,18 +21,17 @@ from pathlib import Path
 import _cli
 import numpy as np
 
-from ato_nodes import jsontext
 from ato_nodes.bagio import read_run
-from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.launch import run_checked
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.studies import Outcome, Variant, prepare_variants, run_study, write_outputs
 
-VARIANTS = {  # name: (scenario, overrides)
-    "GPC, adaptive LSSVM": ("seed001-crh380al", []),
-    "GPC, LSSVM without correction": ("seed001-crh380al", ["gpc.correction=false"]),
-    "GPC, mechanistic model": ("seed001-crh380al", ["gpc.prediction=mechanistic"]),
-    "GPC, linear multi-model": ("seed001-crh380al", ["gpc.prediction=multimodel"]),
-    "Han ADRC (tuned)": ("seed001-crh380al-adrc", []),
-    "PID (tuned)": ("seed001-crh380al-pid", []),
+VARIANTS = {
+    "GPC, adaptive LSSVM": Variant("seed001-crh380al"),
+    "GPC, LSSVM without correction": Variant("seed001-crh380al", ["gpc.correction=false"]),
+    "GPC, mechanistic model": Variant("seed001-crh380al", ["gpc.prediction=mechanistic"]),
+    "GPC, linear multi-model": Variant("seed001-crh380al", ["gpc.prediction=multimodel"]),
+    "Han ADRC (tuned)": Variant("seed001-crh380al-adrc"),
+    "PID (tuned)": Variant("seed001-crh380al-pid"),
 }
 CONDITIONS = {"nominal": [], "resistance +30 %": ["plant.resistance_factor=1.3"]}
 COLUMNS = (  # key, heading, format
@@ -48,25 +47,25 @@ COLUMNS = (  # key, heading, format
 )
 
 
-def run_variant(values: dict, bag: Path) -> dict:
-    """Through the stack, then in-process; indices from the bag."""
-    try:
-        indices, identical = run_checked(values, bag)
-    except RuntimeError as exc:
-        _cli.fail(str(exc), 1)
-    run = read_run(bag)
-    indices["command_change_rms"] = float(np.sqrt(np.mean(np.diff(run.series["command"]) ** 2)))
-    indices["bit_identical"] = "yes" if identical else "NO"
-    return indices
-
-
-def table(results: dict) -> list[str]:
+def table(results: dict) -> str:
     lines = ["| variant | " + " | ".join(h for _, h, _ in COLUMNS) + " |",
              "|---|" + "---|" * len(COLUMNS)]
     for name, indices in results.items():
         cells = [fmt.format(indices[key]) if key in indices else "" for key, _, fmt in COLUMNS]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return lines
+    return "\n".join(lines)
+
+
+def with_smoothness(outcome: Outcome) -> dict:
+    """The bag's indices, the RMS of its command change per step and the agreement."""
+    command = read_run(outcome.bag).series["command"]
+    return {**outcome.indices, "command_change_rms": float(np.sqrt(np.mean(np.diff(command) ** 2))),
+            "bit_identical": "yes" if outcome.identical else "NO"}
+
+
+def progress(label: str, outcome: Outcome) -> None:
+    print(f"{label}: max |e| {outcome.indices['max_abs_error_kmh']:.3f} km/h ({outcome.bag})",
+          flush=True)
 
 
 def main() -> None:
@@ -75,23 +74,28 @@ def main() -> None:
     parser.add_argument("--duration", type=float, help="simulated seconds (default: the "
                         "scenario's whole run)")
     args = parser.parse_args()
+    extra = [f"run.duration={args.duration}"] if args.duration else []
+    runs, bags = {}, {}
+    try:
+        for number, (condition, change) in enumerate(CONDITIONS.items()):
+            runs.update(prepare_variants({f"{condition}: {name}": variant for name, variant
+                                          in VARIANTS.items()}, [*change, *extra]))
+            bags.update({f"{condition}: {name}": args.out / f"condition{number}-variant{index}"
+                         for index, name in enumerate(VARIANTS)})
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
     _cli.new_directory(args.out)
     args.out.mkdir()
-    extra = [f"run.duration={args.duration}"] if args.duration else []
-    report, markdown = {}, []
-    for number, (condition, change) in enumerate(CONDITIONS.items()):
-        results = {}
-        for variant, (name, (scenario, overrides)) in enumerate(VARIANTS.items()):
-            values = apply_overrides(load_scenario(scenario), [*overrides, *change, *extra])
-            bag = args.out / f"condition{number}-variant{variant}"
-            results[name] = run_variant(values, bag)
-            print(f"{condition}: {name}: max |e| {results[name]['max_abs_error_kmh']:.3f} km/h "
-                  f"({bag})", flush=True)
-        report[condition] = results
-        markdown += [f"## {condition}", "", *table(results), ""]
-    (args.out / "comparison.json").write_text(jsontext.dumps(report, indent=2))
-    (args.out / "comparison.md").write_text("\n".join(markdown))
-    print("\n".join(markdown))
+    try:
+        outcomes = run_study(runs, bags=bags, progress=progress)
+    except RuntimeError as exc:
+        _cli.fail(str(exc), 1)
+    report = {condition: {name: with_smoothness(outcomes[f"{condition}: {name}"])
+                          for name in VARIANTS} for condition in CONDITIONS}
+    markdown = "\n\n".join(f"## {condition}\n\n{table(results)}"
+                           for condition, results in report.items())
+    write_outputs(args.out, "comparison", markdown=markdown, report=report)
+    print(markdown + "\n")  # a blank line after the last table, as between tables
 
 
 if __name__ == "__main__":

@@ -16,16 +16,16 @@ Writes comparison.md and comparison.json in --out; swarm runs in --workers proce
 from __future__ import annotations
 
 import statistics
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import _cli
 
-from ato_nodes import jsontext
-from ato_nodes.core.targets import strategy
-from ato_nodes.core.train.line import load_line
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import resolve_file
 from ato_nodes.core.config.scenario import complete
+from ato_nodes.core.targets import strategy
+from ato_nodes.core.train.line import load_line
+from ato_nodes.studies import in_pool, write_outputs
 
 SUPPLEMENTS = (0.03, 0.05, 0.10)
 
@@ -56,6 +56,13 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
+    if args.workers < 1:
+        _cli.fail("--workers must be positive")
+    try:  # the line and the train, before the pool starts (its workers load them)
+        load_line(resolve_file(args.line, [Path.cwd()]))
+        complete({"plant.train": args.train}, [])
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
     _cli.new_directory(args.out)
     base = {"line": args.line, "train": args.train, "ds": args.ds,
             "evaluations": args.evaluations, "seed": args.seeds[0], "supplement": 0.05}
@@ -64,14 +71,11 @@ def main() -> None:
     jobs += [dict(base, algorithm="kh", supplement=s) for s in SUPPLEMENTS if s != 0.05]
     jobs += [dict(base, algorithm=a, seed=seed) for a in ("kh", "pso") for seed in args.seeds]
     jobs += [dict(base, algorithm="kh", ignore_neutral=True)]
-    with ProcessPoolExecutor(args.workers) as pool:
-        results = list(pool.map(evaluate, jobs))
-    args.out.mkdir()
-    (args.out / "comparison.json").write_text(jsontext.dumps(results, indent=2))
-    markdown = report(results, args)
-    (args.out / "comparison.md").write_text("\n".join(markdown) + "\n")
+    results = in_pool(evaluate, jobs, args.workers)
+    markdown = "\n".join(report(results, args))
+    write_outputs(args.out, "comparison", markdown=markdown, report=results)
     plot(results, args.out / "convergence.png")
-    print("\n".join(markdown))
+    print(markdown)
 
 
 def pick(results, algorithm, supplement=0.05, seed=None, ignore_neutral=False):

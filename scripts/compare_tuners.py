@@ -29,9 +29,10 @@ from ato_nodes.analysis import plot_convergence
 from ato_nodes.bagio import read_run
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.optimizers import create
-from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.launch import Stack
+from ato_nodes.studies import write_outputs
 from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
 
 PAPER_MAX_ERROR = {  # seed 000's reported tracking errors, km/h
@@ -115,7 +116,7 @@ def stack_check(values, best: dict, bag: Path) -> float:
 def main() -> None:
     args = parse_args()
     try:
-        values = apply_overrides(load_scenario(args.scenario), args.set)
+        values = prepare(args.scenario, args.set)
         space = SearchSpace.parse(args.params, values)
     except ScenarioError as exc:
         _cli.fail(str(exc))
@@ -146,14 +147,14 @@ def main() -> None:
     table = "\n".join(rows)
     spent = (f"{args.evaluations} evaluations" if args.evaluations is not None
              else f"{args.iterations} iterations")
-    (args.out / "comparison.md").write_text(
+    write_outputs(args.out, "comparison", markdown=(
         f"Budget {spent} each, population {args.population}, seeds "
         f"{' '.join(map(str, args.seeds))}, fitness {args.fitness}, scenario {args.scenario} "
-        f"{' '.join(args.set)}; options {' '.join(args.options) or 'the defaults'}\n\n{table}\n")
+        f"{' '.join(args.set)}; options {' '.join(args.options) or 'the defaults'}\n\n{table}"))
     plot_convergence(sorted(p for p in args.out.iterdir() if (p / "history.csv").exists()),
                      args.out / "convergence.png")
     print(table)
 
 
 if __name__ == "__main__":
-    main()
+    _cli.interrupted_quietly(main)

@@ -14,18 +14,15 @@ abs(stopping error), max jerk over 1 s and ITAE.
 
 from __future__ import annotations
 
+import argparse
 import math
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import _cli
 import numpy as np
 
-from ato_nodes import jsontext
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.config.scenario import apply_overrides, check_given_once, load_scenario
-from ato_nodes.core.run.scoring import score_series
+from ato_nodes.studies import Variant, prepare_variants, run_study, write_outputs
 
 INDICES = (  # key, heading, worst is the largest of
     ("max_abs_error_kmh", "max abs(e) km/h"),
@@ -46,18 +43,7 @@ def span(text: str, name: str) -> tuple[float, float]:
     return low, high
 
 
-def run_sample(job: tuple[dict, dict]) -> dict:
-    values, draw = job
-    series = simulate(apply_overrides(values, [f"{k}={v}" for k, v in draw.items()]))
-    indices = score_series(series, {**values, **draw})
-    result = {**draw, **{key: float(indices[key]) for key, _ in INDICES
-                         if key in indices}}
-    if "stopping_error" in indices:
-        result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
-    return result
-
-
-def main() -> None:
+def parse_args() -> argparse.Namespace:
     parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenario")
     parser.add_argument("--samples", type=int, default=50)
@@ -69,28 +55,45 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, required=True)
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def draw_trains(ranges: dict, samples: int, seed: int) -> list[dict]:
+    """Each sample's real train: a share of each nominal value, uniform in its range,
+    and a speed-sensor noise seed."""
+    rng = np.random.default_rng(seed)
+    return [{**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},
+             "plant.noise_seed": int(rng.integers(0, 2**31 - 1))}
+            for _ in range(samples)]
+
+
+def sample_result(draw: dict, indices: dict) -> dict:
+    """The sample's draw and the indices of INDICES it has."""
+    result = {**draw, **{key: float(indices[key]) for key, _ in INDICES if key in indices}}
+    if "stopping_error" in indices:
+        result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
+    return result
+
+
+def main() -> None:
+    args = parse_args()
     if args.samples < 1 or args.workers < 1:
         _cli.fail("--samples and --workers must be positive")
     ranges = {"plant.mass_factor": span(args.mass, "mass"),
               "plant.resistance_factor": span(args.resistance, "resistance"),
               "plant.lag_factor": span(args.lag, "lag")}
-    try:
-        check_given_once(args.set)
-        values = apply_overrides(load_scenario(args.scenario), args.set)
-        for name, bounds in ranges.items():  # both ends inside the schema's range
-            for bound in bounds:
-                apply_overrides(values, [f"{name}={bound}"])
+    draws = draw_trains(ranges, args.samples, args.seed)
+    try:  # both ends of each range inside the schema's range, then every sample
+        prepare_variants({f"{name}={bound}": Variant(args.scenario, [f"{name}={bound}"])
+                          for name, bounds in ranges.items() for bound in bounds}, args.set)
+        runs = prepare_variants({f"sample {number}": Variant(args.scenario, draw)
+                                 for number, draw in enumerate(draws)}, args.set)
     except ScenarioError as exc:
         _cli.fail(str(exc))
     _cli.new_directory(args.out)
-    rng = np.random.default_rng(args.seed)
-    draws = [{**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},
-              "plant.noise_seed": int(rng.integers(0, 2**31 - 1))}
-             for _ in range(args.samples)]
-    with ProcessPoolExecutor(args.workers) as pool:
-        results = list(pool.map(run_sample, [(values, draw) for draw in draws]))
-    args.out.mkdir()
+    outcomes = run_study(runs, workers=args.workers).values()
+    results = [sample_result(draw, outcome.indices)
+               for draw, outcome in zip(draws, outcomes, strict=True)]
     summary = {}
     for key, heading in INDICES:
         column = [r[key] for r in results if key in r]
@@ -98,9 +101,9 @@ def main() -> None:
             summary[key] = {"median": float(np.median(column)), "worst": float(max(column))}
             print(f"{heading:24s} median {summary[key]['median']:.4g}  worst "
                   f"{summary[key]['worst']:.4g}")
-    (args.out / "robustness.json").write_text(jsontext.dumps(
-        {"scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
-         "summary": summary, "samples": results}, indent=2))
+    write_outputs(args.out, "robustness", report={
+        "scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
+        "summary": summary, "samples": results})
     plot(results, args.out / "robustness.png", args.scenario)
     print(f"{args.samples} samples; outputs: {args.out}/robustness.json, robustness.png")
 

@@ -1,0 +1,109 @@
+"""Studies: named variants of a run, run side by side and set in one table.
+
+What the study commands (scripts/ablation.py, robustness.py, compare_scenarios.py,
+compare_seed001.py; compare_tuners.py and compare_strategies.py for their pool and
+outputs) share: each variant is a scenario and the overrides that make it, prepared
+(loaded, overridden, checked) before anything runs; the runs go in-process in a pool
+of processes, or through the stack one after another, each scored from its bag and
+checked bit for bit against the same run in-process; the study's Markdown table and
+its JSON report go to its output directory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ato_nodes import jsontext
+from ato_nodes.core.config.scenario import apply_overrides, prepare
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.scoring import score_series
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A scenario (a name or a file) and the overrides (--set texts or a mapping) that
+    make this variant of it; they are applied after the study's common overrides and
+    win over them."""
+    scenario: str
+    overrides: Sequence[str] | Mapping[str, Any] = ()
+
+
+def prepare_variants(variants: Mapping[str, Variant], common: Sequence[str] = ()
+                     ) -> dict[str, dict[str, Any]]:
+    """label -> the variant's complete, checked values. `common` (--set texts, each
+    name once) applies to every variant. Raises ScenarioError (one line)."""
+    bases: dict[str, dict[str, Any]] = {}  # scenario -> its values with `common`
+    prepared = {}
+    for label, variant in variants.items():
+        if variant.scenario not in bases:
+            bases[variant.scenario] = prepare(variant.scenario, list(common))
+        base = bases[variant.scenario]
+        prepared[label] = apply_overrides(base, variant.overrides) if variant.overrides else base
+    return prepared
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """One run of a study: its indices (score_series; through the stack, of its bag)
+    and, through the stack, its bag and whether the same run in-process gave every
+    series bit for bit."""
+    indices: dict[str, Any]
+    bag: Path | None = None
+    identical: bool | None = None
+
+
+def run_study(runs: Mapping[str, dict[str, Any]], *, workers: int = 1,
+              bags: Mapping[str, Path] | None = None,
+              progress: Callable[[str, Outcome], None] | None = None) -> dict[str, Outcome]:
+    """label -> Outcome of each run (label -> prepared values): in-process in `workers`
+    processes, or, given `bags` (label -> the bag directory to record), through the
+    stack one after another. progress(label, outcome) as each outcome is known. A
+    failed stack run raises RuntimeError (one line, naming its bag)."""
+    if bags is None:
+        outcomes = zip(runs, in_pool(run_in_process, runs.values(), workers), strict=True)
+    else:
+        outcomes = ((label, run_through_stack(values, bags[label]))
+                    for label, values in runs.items())
+    results = {}
+    for label, outcome in outcomes:
+        results[label] = outcome
+        if progress is not None:
+            progress(label, outcome)
+    return results
+
+
+def run_in_process(values: dict[str, Any]) -> Outcome:
+    return Outcome(score_series(simulate(values), values))
+
+
+def run_through_stack(values: dict[str, Any], bag: Path) -> Outcome:
+    # Imported here: the launcher loads the bag libraries, which in-process studies skip.
+    from ato_nodes.launch import run_checked
+    indices, identical = run_checked(values, bag)
+    return Outcome(indices, bag, identical)
+
+
+def in_pool(function: Callable, items: Iterable, workers: int) -> list:
+    """function(item) for every item, in `workers` processes, in the items' order."""
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(function, items))
+
+
+def numeric(indices: Mapping[str, Any]) -> dict[str, int | float]:
+    """The indices that are numbers (those a table compares)."""
+    return {key: value for key, value in indices.items() if isinstance(value, (int, float))}
+
+
+def write_outputs(out: Path, name: str, *, markdown: str | None = None,
+                  report: Any = None) -> None:
+    """`name`.md (the Markdown, ending in a newline) and `name`.json (strict JSON) in
+    `out`, created if it does not exist yet; each only when given."""
+    out.mkdir(exist_ok=True)
+    if markdown is not None:
+        (out / f"{name}.md").write_text(markdown + "\n")
+    if report is not None:
+        (out / f"{name}.json").write_text(jsontext.dumps(report, indent=2))
