@@ -20,21 +20,20 @@ figure printed) and MODEL.png (predicted against measured, free run, search).
 from __future__ import annotations
 
 import argparse
-import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import _cli
 import numpy as np
 
 from ato_nodes import jsontext
-from ato_nodes.bagio import BagError, read_run
+from ato_nodes.bagio import BagError, Run, read_run
+from ato_nodes.core.base.units import MS_TO_KMH
+from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.control import identification as ident
 from ato_nodes.core.control import lssvm
-from ato_nodes.core.control.gpc import MultiModel
 from ato_nodes.core.train.plant import TrainParameters
-from ato_nodes.core.config.schema import defaults
-from ato_nodes.core.base.units import MS_TO_KMH
 
 PAPER = {"train": (-1.2627, 1.0568), "test": (-1.9182, 1.8369), "mu": 6599.8,
          "delta": 0.0597 ** 0.5}
@@ -67,60 +66,8 @@ def parse_args() -> argparse.Namespace:
     return parser.parse_args()
 
 
-def load(path: Path):
-    """(measured speeds, effective commands, parameters) of a recorded run."""
-    try:
-        run = read_run(path)
-    except BagError as exc:
-        _cli.fail(str(exc))
-    speeds = run.series["measured_speed"]
-    train = TrainParameters.from_values({**defaults(), **run.parameters})
-    return (speeds, ident.effective_commands(train, speeds, run.series["command"]),
-            run.parameters)
-
-
-def ranges(errors: np.ndarray) -> dict:
-    errors = errors * MS_TO_KMH
-    return {"min_kmh": float(errors.min()), "max_kmh": float(errors.max()),
-            "rms_kmh": float(np.sqrt(np.mean(errors ** 2)))}
-
-
-def within_ctcs3(errors: np.ndarray, speeds: np.ndarray) -> float:
-    """Share of samples inside the CTCS-3 speed-measurement tolerance: 2 km/h below
-    30 km/h, 2 % of the speed above."""
-    tolerance = np.where(speeds * MS_TO_KMH < 30.0, 2.0, 0.02 * speeds * MS_TO_KMH)
-    return float(np.mean(np.abs(errors * MS_TO_KMH) <= tolerance))
-
-
-def free_run_error(model_step, layout, speeds, commands) -> dict:
-    predicted = ident.free_run(model_step, layout, speeds, commands)
-    return ranges(predicted - speeds)
-
-
-AHEAD = 20  # steps: the shipped GPC's prediction horizon
-
-
-def prediction_errors(model_step, layout, speeds, commands) -> dict:
-    """The free run over the whole run and the AHEAD-step-ahead predictions."""
-    return {"free_run": free_run_error(model_step, layout, speeds, commands),
-            f"ahead_{AHEAD}": ranges(ident.ahead(model_step, layout, speeds, commands, AHEAD))}
-
-
-def lssvm_step(model):
-    return lambda x: x[0] + float(model.increment(x)[0])
-
-
-def arx_step(layout, centres, width, coefficients):
-    model = MultiModel(layout, centres, width, coefficients)  # as the GPC blends them
-
-    def step(x):
-        row = model.row(x[0])
-        return float(row[0] + row[1:] @ x)
-    return step
-
-
-def main() -> None:
-    args = parse_args()
+def checked_layout(args: argparse.Namespace) -> lssvm.Layout:
+    """The regressor layout, after every option is checked (one line, exit 2)."""
     try:
         layout = lssvm.Layout(args.speed_lags, args.command_lags, args.delay)
     except ValueError as exc:
@@ -129,127 +76,139 @@ def main() -> None:
         _cli.fail("--train must be at least 2 and below --samples")
     if args.out.suffix != ".npz":
         _cli.fail("--out must name a .npz file")
-    runs = [load(path) for path in args.bags]
-    parameters = runs[0][2]
-    period = parameters["run.period"]
-    train_values = {name: value for name, value in parameters.items()
-                    if name.startswith("plant.") and not name.startswith("plant.disturbance")}
-    for path, (_, _, other) in zip(args.bags, runs, strict=True):
-        if other["run.period"] != period or other.get("plant.train") != parameters.get(
-                "plant.train"):
-            _cli.fail(f"{path}: another train or period than {args.bags[0]}")
+    return layout
 
-    # 1,500 samples spread over the runs in proportion to their length
-    lengths = np.array([len(speeds) for speeds, _, _ in runs])
-    counts = np.diff(np.round(np.concatenate([[0], np.cumsum(lengths)])
-                              * args.samples / lengths.sum()).astype(int))
-    xs, ts, vs = [], [], []
+
+def load(path: Path) -> Run:
     try:
-        for (speeds, commands, _), count in zip(runs, counts, strict=True):
-            x, t = layout.samples(speeds, commands, ident.sample_steps(len(speeds), layout,
-                                                                       count))
-            xs.append(x), ts.append(t), vs.append(x[:, 0])
-    except ValueError as exc:
+        return read_run(path)
+    except BagError as exc:
         _cli.fail(str(exc))
-    x, t, v = np.concatenate(xs), np.concatenate(ts), np.concatenate(vs)
-    train_rows, test_rows = ident.split(len(t), args.train)
 
+
+def recording(run: Run) -> ident.Recording:
+    """The run's measured speeds and effective commands."""
+    speeds = run.series["measured_speed"]
+    train = TrainParameters.from_values({**defaults(), **run.parameters})
+    return ident.Recording(speeds, ident.effective_commands(train, speeds,
+                                                            run.series["command"]))
+
+
+def check_one_train(paths: list[Path], runs: list[Run]) -> None:
+    first = runs[0].parameters
+    for path, run in zip(paths, runs, strict=True):
+        if run.parameters["run.period"] != first["run.period"] or run.parameters.get(
+                "plant.train") != first.get("plant.train"):
+            _cli.fail(f"{path}: another train or period than {paths[0]}")
+
+
+@dataclass(frozen=True)
+class Identified:
+    """The models fitted on the training samples and how their search went."""
+    model: lssvm.LSSVM
+    search: ident.Search
+    search_seconds: float
+    grid: tuple[np.ndarray, np.ndarray, np.ndarray]  # grid_around(): mu, delta, RMSE
+    centres: np.ndarray  # the multi-model's operating speeds, m/s
+    width: float
+    multimodel: np.ndarray  # its coefficients, one row per centre
+
+
+def identify(args: argparse.Namespace, layout: lssvm.Layout, x: np.ndarray, t: np.ndarray,
+             train_rows: np.ndarray) -> Identified:
+    """Both models fitted on the training samples; the multi-model's centres spread
+    over the speeds of all samples."""
+    x_train, t_train = x[train_rows], t[train_rows]
     started = time.monotonic()
-    search = ident.search_hyperparameters(layout, x[train_rows], t[train_rows], seed=args.seed,
+    search = ident.search_hyperparameters(layout, x_train, t_train, seed=args.seed,
                                           population=args.particles,
                                           iterations=args.iterations)
     search_seconds = time.monotonic() - started
-    mus, deltas, grid = ident.grid_around(layout, x[train_rows], t[train_rows], search.mu,
-                                          search.delta)
-    model = lssvm.fit(layout, x[train_rows], t[train_rows], search.mu, search.delta)
-    width = (v.max() - v.min()) / max(args.centres - 1, 1)
-    centres = np.linspace(v.min(), v.max(), args.centres)
-    arx = ident.fit_multimodel(layout, x[train_rows], t[train_rows], centres, width)
-    errors = {part: model.increment(x[rows]) - t[rows]
-              for part, rows in (("train", train_rows), ("test", test_rows))}
+    grid = ident.grid_around(layout, x_train, t_train, search.mu, search.delta)
+    model = lssvm.fit(layout, x_train, t_train, search.mu, search.delta)
+    speeds = x[:, 0]
+    width = (speeds.max() - speeds.min()) / max(args.centres - 1, 1)
+    centres = np.linspace(speeds.min(), speeds.max(), args.centres)
+    return Identified(model, search, search_seconds, grid, centres, width,
+                      ident.fit_multimodel(layout, x_train, t_train, centres, width))
+
+
+def search_report(identified: Identified) -> dict:
+    search, (mus, deltas, grid) = identified.search, identified.grid
+    return {"mu": search.mu, "delta": search.delta,
+            "validation_rmse_kmh": search.rmse * MS_TO_KMH,
+            "evaluations": search.result.evaluations, "seconds": identified.search_seconds,
+            "convergence_kmh": (search.result.trace("best_f") * MS_TO_KMH).tolist(),
+            "grid_mu": mus.tolist(), "grid_delta": deltas.tolist(),
+            "grid_rmse_kmh": (grid * MS_TO_KMH).tolist(),
+            "grid_is_local_optimum": bool(grid.min() >= grid[2, 2] - 1e-12),
+            "at_bound": ident.at_bound(search)}
+
+
+def main() -> None:
+    args = parse_args()
+    layout = checked_layout(args)
+    runs = [load(path) for path in args.bags]
+    check_one_train(args.bags, runs)
+    validation_run = load(args.validation) if args.validation else None
+    correction_run = load(args.correction) if args.correction else None
+    parameters = runs[0].parameters
+    try:  # the samples, spread over the runs in proportion to their length
+        x, t = ident.spread_samples(layout, [recording(run) for run in runs], args.samples)
+    except ValueError as exc:
+        _cli.fail(str(exc))
+    train_rows, test_rows = ident.split(len(t), args.train)
+    identified = identify(args, layout, x, t, train_rows)
+    model = identified.model
     report = {
-        "bags": [str(p) for p in args.bags], "period_s": period,
+        "bags": [str(p) for p in args.bags], "period_s": parameters["run.period"],
         "train": parameters.get("plant.train"),
         "layout": {"speed_lags": layout.speed_lags, "command_lags": layout.command_lags,
                    "delay": layout.delay},
         "samples": {"total": int(len(t)), "train": int(len(train_rows)),
                     "test": int(len(test_rows))},
-        "search": {"mu": search.mu, "delta": search.delta, "validation_rmse_kmh":
-                   search.rmse * MS_TO_KMH, "evaluations": search.result.evaluations,
-                   "seconds": search_seconds,
-                   "convergence_kmh": (search.result.trace("best_f") * MS_TO_KMH).tolist(),
-                   "grid_mu": mus.tolist(), "grid_delta": deltas.tolist(),
-                   "grid_rmse_kmh": (grid * MS_TO_KMH).tolist(),
-                   "grid_is_local_optimum": bool(grid.min() >= grid[2, 2] - 1e-12),
-                   "at_bound": [name for name, value, (low, high) in (
-                       ("mu", math.log10(search.mu), ident.LOG_MU),
-                       ("delta", search.delta, ident.DELTA))
-                       if not low + 1e-3 * (high - low) < value < high - 1e-3 * (high - low)]},
-        "one_step": {part: {**ranges(e), "within_ctcs3": within_ctcs3(e, v[rows])}
-                     for (part, e), rows in zip(errors.items(), (train_rows, test_rows),
-                                                strict=True)},
+        "search": search_report(identified),
+        "one_step": {part: ident.one_step_errors(model, x[rows], t[rows])
+                     for part, rows in (("train", train_rows), ("test", test_rows))},
         "paper": PAPER,
     }
-    if args.validation:
-        speeds, commands, _ = load(args.validation)
-        report["validation"] = {
-            "lssvm": prediction_errors(lssvm_step(model), layout, speeds, commands),
-            "multimodel": prediction_errors(arx_step(layout, centres, width, arx), layout,
-                                            speeds, commands)}
-    if args.correction:
-        report["correction"] = correction(args, layout, model, load(args.correction),
-                                          parameters)
-    lssvm.ModelFile(model, period, train_values, centres, float(width), arx).save(args.out)
-    report["model"] = {"file": str(args.out), "sha256": lssvm.file_digest(args.out)}
-    args.out.with_suffix(".json").write_text(jsontext.dumps(report, indent=2))
-    figure(args.out.with_suffix(".png"), model, x, t, test_rows, search, report)
+    if validation_run is not None:
+        report["validation"] = validation(layout, identified, recording(validation_run))
+    if correction_run is not None:
+        report["correction"] = correction(args, layout, model, correction_run, parameters)
+    save(args.out, identified, parameters, report)
+    figure(args.out.with_suffix(".png"), model, x, t, test_rows, identified.search)
     print_report(report)
 
 
-def correction(args, layout, offline, run, identified: dict) -> dict:
-    """Stream --correction-samples samples of a changed train through the online
-    correction; compare the one-step error on the other samples of that run and the
-    free run before and after; time every update; check against a fresh solve."""
-    speeds, commands, parameters = run
-    steps = ident.sample_steps(len(speeds), layout, 2 * args.correction_samples)
-    x, t = layout.samples(speeds, commands, steps)
-    stream, held_out = np.arange(0, len(t), 2), np.arange(1, len(t), 2)
-    model = offline.with_window(args.window)
-    threshold = args.threshold / MS_TO_KMH
-    costs = []
-    for i in stream:
-        error = float(model.increment(x[i])[0]) - t[i]
-        if abs(error) > threshold:
-            started = time.perf_counter()
-            model.add(x[i], t[i])
-            costs.append(time.perf_counter() - started)
-    drift = {}
-    for window in (len(stream), len(stream) // 5):  # every sample joins; then with forgetting
-        forced = offline.with_window(window)
-        for i in stream:
-            forced.add(x[i], t[i])
-        fresh = forced.refit()
-        drift[f"window_{window}"] = {
-            "updates": forced.added, "forgotten": forced.forgotten,
-            "max_kmh": float(np.abs(fresh.increment(x) - forced.increment(x)).max()) * MS_TO_KMH}
-    result = {
-        "train_change": {name: [identified.get(name), value] for name, value in
-                         parameters.items() if name.startswith("plant.") and name not in (
-                             "plant.noise_seed",) and identified.get(name) != value},
-        "threshold_kmh": args.threshold, "window": args.window,
-        "samples_streamed": int(len(stream)), "added": model.added,
-        "rejected_by_guard": model.rejected, "forgotten": model.forgotten,
-        "one_step_before": ranges(offline.increment(x[held_out]) - t[held_out]),
-        "one_step_after": ranges(model.increment(x[held_out]) - t[held_out]),
-        "before": prediction_errors(lssvm_step(offline), layout, speeds, commands),
-        "after": prediction_errors(lssvm_step(model), layout, speeds, commands),
-        "drift_from_fresh_solve": drift,
-    }
-    if costs:
-        costs = np.array(costs) * 1e3
-        result["update_ms"] = {"median": float(np.median(costs)),
-                               "p99": float(np.percentile(costs, 99))}
-    return result
+def validation(layout: lssvm.Layout, identified: Identified, run: ident.Recording) -> dict:
+    """Both models' free run and AHEAD-step predictions over a run they never saw."""
+    multimodel = ident.multimodel_step(layout, identified.centres, identified.width,
+                                       identified.multimodel)
+    return {"lssvm": ident.prediction_errors(ident.lssvm_step(identified.model), layout, run),
+            "multimodel": ident.prediction_errors(multimodel, layout, run)}
+
+
+def correction(args: argparse.Namespace, layout: lssvm.Layout, offline: lssvm.LSSVM,
+               run: Run, identified: dict) -> dict:
+    """The online-correction study on a changed train's run, and what changed."""
+    return {"train_change": {name: [identified.get(name), value]
+                             for name, value in run.parameters.items()
+                             if name.startswith("plant.") and name != "plant.noise_seed"
+                             and identified.get(name) != value},
+            **ident.correction_study(offline, layout, recording(run),
+                                     samples=args.correction_samples, window=args.window,
+                                     threshold_kmh=args.threshold)}
+
+
+def save(path: Path, identified: Identified, parameters: dict, report: dict) -> None:
+    """The model file (with the identified train's plant values), then MODEL.json."""
+    train_values = {name: value for name, value in parameters.items()
+                    if name.startswith("plant.") and not name.startswith("plant.disturbance")}
+    lssvm.ModelFile(identified.model, parameters["run.period"], train_values,
+                    identified.centres, float(identified.width), identified.multimodel).save(path)
+    report["model"] = {"file": str(path), "sha256": lssvm.file_digest(path)}
+    path.with_suffix(".json").write_text(jsontext.dumps(report, indent=2))
 
 
 def print_report(report: dict) -> None:
@@ -287,13 +246,13 @@ def print_report(report: dict) -> None:
 
 
 def describe(errors: dict) -> str:
-    free, ahead = errors["free_run"], errors[f"ahead_{AHEAD}"]
+    free, ahead = errors["free_run"], errors[f"ahead_{ident.AHEAD}"]
     return (f"free run {free['min_kmh']:+.2f} .. {free['max_kmh']:+.2f} km/h (RMS "
-            f"{free['rms_kmh']:.2f}), {AHEAD} steps ahead {ahead['min_kmh']:+.2f} .. "
+            f"{free['rms_kmh']:.2f}), {ident.AHEAD} steps ahead {ahead['min_kmh']:+.2f} .. "
             f"{ahead['max_kmh']:+.2f} km/h (RMS {ahead['rms_kmh']:.3f})")
 
 
-def figure(path: Path, model, x, t, test_rows, search, report) -> None:
+def figure(path: Path, model, x, t, test_rows, search) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

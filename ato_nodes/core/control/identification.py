@@ -1,5 +1,6 @@
 """Seed 001's identification pipeline, ROS-free: excitation targets, samples from runs,
-the hyperparameter search, the linear multi-model, free-run prediction.
+the hyperparameter search, the linear multi-model, free-run prediction, the models'
+error figures and the study of online correction on a changed train.
 
 Data: the project's own plant (the CRH380AL preset with its envelopes, lag, dead
 time and a noisy speed sensor) run through the stack, not the paper's Xuzhou East -
@@ -21,13 +22,16 @@ linearisations had a negative input gain, fatal for a predictive controller).
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..base.units import KMH
+from ..base.units import KMH, MS_TO_KMH
 from ..optimizers import optimize
 from . import lssvm
+from .gpc import MultiModel
 
 
 def excitation_table(seed: int, duration: float, top_speed: float) -> list[tuple[float, float]]:
@@ -62,6 +66,28 @@ def sample_steps(length: int, layout: lssvm.Layout, count: int) -> np.ndarray:
     if length - first < count:
         raise ValueError(f"a run of {length} steps holds fewer than {count} samples")
     return np.linspace(first, length - 1, count).round().astype(int)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recorded run as the models see it, step by step: the measured speeds (m/s)
+    and the effective commands (N/kN, effective_commands())."""
+    speeds: np.ndarray
+    commands: np.ndarray
+
+
+def spread_samples(layout: lssvm.Layout, recordings: Sequence[Recording], total: int
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """`total` samples (regressors, targets) spread over the recordings in proportion
+    to their lengths, each recording's evenly over it (sample_steps()). Raises
+    ValueError when a recording is too short for its share."""
+    lengths = np.array([len(recording.speeds) for recording in recordings])
+    counts = np.diff(np.round(np.concatenate([[0], np.cumsum(lengths)])
+                              * total / lengths.sum()).astype(int))
+    parts = [layout.samples(recording.speeds, recording.commands,
+                            sample_steps(len(recording.speeds), layout, count))
+             for recording, count in zip(recordings, counts, strict=True)]
+    return np.concatenate([x for x, _ in parts]), np.concatenate([t for _, t in parts])
 
 
 def split(count: int, train: int) -> tuple[np.ndarray, np.ndarray]:
@@ -120,6 +146,14 @@ def search_hyperparameters(layout: lssvm.Layout, x: np.ndarray, t: np.ndarray, *
     return Search(10.0 ** result.best_x[0], float(result.best_x[1]), result.best_f, result)
 
 
+def at_bound(search: Search) -> list[str]:
+    """The hyperparameters the search left within 0.1 % of the box's edge (the box may
+    have cut the optimum off)."""
+    return [name for name, value, (low, high) in (("mu", math.log10(search.mu), LOG_MU),
+                                                   ("delta", search.delta, DELTA))
+            if not low + 1e-3 * (high - low) < value < high - 1e-3 * (high - low)]
+
+
 def grid_around(layout, x, t, mu: float, delta: float, factor: float = 2.0, points: int = 5):
     """Validation RMSE on a log grid of mu and delta around (mu, delta), from mu/factor
     to mu*factor and the same for delta, inside the search box (a point on its edge is
@@ -167,3 +201,104 @@ def ahead(step, layout: lssvm.Layout, speeds: np.ndarray, commands: np.ndarray, 
     return np.array([free_run(step, layout, speeds[:start + count], commands[:start + count],
                               start)[-1] - speeds[start + count - 1]
                      for start in range(first, len(speeds) - count, every)])
+
+
+# The models' errors, in km/h: one step ahead, free run, AHEAD steps ahead.
+
+AHEAD = 20  # steps: the shipped GPC's prediction horizon
+
+
+def error_ranges(errors: np.ndarray) -> dict:
+    """Smallest, largest and RMS of errors given in m/s, in km/h."""
+    errors = errors * MS_TO_KMH
+    return {"min_kmh": float(errors.min()), "max_kmh": float(errors.max()),
+            "rms_kmh": float(np.sqrt(np.mean(errors ** 2)))}
+
+
+def within_ctcs3(errors: np.ndarray, speeds: np.ndarray) -> float:
+    """Share of samples inside the CTCS-3 speed-measurement tolerance: 2 km/h below
+    30 km/h, 2 % of the speed above."""
+    tolerance = np.where(speeds * MS_TO_KMH < 30.0, 2.0, 0.02 * speeds * MS_TO_KMH)
+    return float(np.mean(np.abs(errors * MS_TO_KMH) <= tolerance))
+
+
+def one_step_errors(model: lssvm.LSSVM, x: np.ndarray, t: np.ndarray) -> dict:
+    """error_ranges() of the model's one-step predictions of samples (x, t), and the
+    share inside the CTCS-3 tolerance."""
+    errors = model.increment(x) - t
+    return {**error_ranges(errors), "within_ctcs3": within_ctcs3(errors, x[:, 0])}
+
+
+def prediction_errors(step: Callable[[np.ndarray], float], layout: lssvm.Layout,
+                      recording: Recording) -> dict:
+    """error_ranges() of the free run over the whole recording and of the AHEAD-step-ahead
+    predictions. step(x) -> y(k), as free_run() takes it."""
+    speeds, commands = recording.speeds, recording.commands
+    return {"free_run": error_ranges(free_run(step, layout, speeds, commands) - speeds),
+            f"ahead_{AHEAD}": error_ranges(ahead(step, layout, speeds, commands, AHEAD))}
+
+
+def lssvm_step(model: lssvm.LSSVM) -> Callable[[np.ndarray], float]:
+    return lambda x: x[0] + float(model.increment(x)[0])
+
+
+def multimodel_step(layout: lssvm.Layout, centres: np.ndarray, width: float,
+                    coefficients: np.ndarray) -> Callable[[np.ndarray], float]:
+    model = MultiModel(layout, centres, width, coefficients)  # as the GPC blends them
+
+    def step(x: np.ndarray) -> float:
+        row = model.row(x[0])
+        return float(row[0] + row[1:] @ x)
+    return step
+
+
+def correction_study(offline: lssvm.LSSVM, layout: lssvm.Layout, recording: Recording, *,
+                     samples: int, window: int, threshold_kmh: float) -> dict:
+    """Stream `samples` samples of a changed train's recording through the online
+    correction (every other of 2 x `samples` spread over it; the rest are held out);
+    the one-step error on the held-out samples and the free run before and after;
+    the cost of every update; the drift from a fresh solve."""
+    x, t = layout.samples(recording.speeds, recording.commands,
+                          sample_steps(len(recording.speeds), layout, 2 * samples))
+    stream, held_out = np.arange(0, len(t), 2), np.arange(1, len(t), 2)
+    model = offline.with_window(window)
+    threshold = threshold_kmh / MS_TO_KMH
+    costs = []
+    for i in stream:
+        error = float(model.increment(x[i])[0]) - t[i]
+        if abs(error) > threshold:
+            started = time.perf_counter()
+            model.add(x[i], t[i])
+            costs.append(time.perf_counter() - started)
+    result = {
+        "threshold_kmh": threshold_kmh, "window": window,
+        "samples_streamed": int(len(stream)), "added": model.added,
+        "rejected_by_guard": model.rejected, "forgotten": model.forgotten,
+        "one_step_before": error_ranges(offline.increment(x[held_out]) - t[held_out]),
+        "one_step_after": error_ranges(model.increment(x[held_out]) - t[held_out]),
+        "before": prediction_errors(lssvm_step(offline), layout, recording),
+        "after": prediction_errors(lssvm_step(model), layout, recording),
+        "drift_from_fresh_solve": drift_from_fresh_solve(offline, x[stream], t[stream], x),
+    }
+    if costs:
+        costs = np.array(costs) * 1e3
+        result["update_ms"] = {"median": float(np.median(costs)),
+                               "p99": float(np.percentile(costs, 99))}
+    return result
+
+
+def drift_from_fresh_solve(offline: lssvm.LSSVM, x_added: np.ndarray, t_added: np.ndarray,
+                           x: np.ndarray) -> dict:
+    """How far the predictions on `x` of the offline model with every added sample
+    forced in (the recursive updates) lie from a fresh solve of the same samples:
+    with a window that keeps them all, then with one a fifth as long (forgetting)."""
+    drift = {}
+    for window in (len(t_added), len(t_added) // 5):
+        forced = offline.with_window(window)
+        for sample, target in zip(x_added, t_added, strict=True):
+            forced.add(sample, target)
+        fresh = forced.refit()
+        drift[f"window_{window}"] = {
+            "updates": forced.added, "forgotten": forced.forgotten,
+            "max_kmh": float(np.abs(fresh.increment(x) - forced.increment(x)).max()) * MS_TO_KMH}
+    return drift
