@@ -4,9 +4,9 @@ import math
 
 import pytest
 
-from ato_nodes.core.control.adrc import (HanADRC, HanADRCGains, LinearADRC, LinearADRCGains,
+from ato_nodes.core.control.adrc import (HanADRCGains, LinearADRC, LinearADRCGains,
                                          TrackingDifferentiator, eso_update, fal, fal_gain, fhan,
-                                         nlsef)
+                                         han_adrc, nlsef)
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.base.spec import settings
@@ -164,7 +164,7 @@ class TestNLSEF:
         assert u0 == pytest.approx(k1 * e1_next + k2 * e2_next)
 
     def test_command_saturates_and_observer_sees_the_saturated_value(self):
-        adrc = HanADRC(han_gains(), 0.05, CommandLimiter(-5.0, 5.0))
+        adrc = han_adrc(han_gains(), 0.05, CommandLimiter(-5.0, 5.0))
         out = adrc.step(100.0, 0.0)
         assert out.u == 5.0
         assert adrc.state.u_applied == 5.0

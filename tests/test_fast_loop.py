@@ -11,7 +11,7 @@ from ato_nodes.core.run import fast_loop, loop
 from ato_nodes.core.base import kernels
 from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
@@ -27,6 +27,13 @@ VARIANTS = [
     ("seed000", ["controller.kind=nladrc", "controller.holding_brake=5",
                  "plant.initial_speed=10"]),
 ]
+
+
+def stages(values):
+    from ato_nodes.core.run.stages import ControllerStage, PlantStage, ProfileStage
+    from ato_nodes.core.config.schema import NodeValues
+    return (ProfileStage(NodeValues("profile", values)), PlantStage(NodeValues("plant", values)),
+            ControllerStage(NodeValues("controller", values)), None)
 
 
 def python_run(monkeypatch, values, prune=None):
@@ -98,15 +105,41 @@ def test_pruned_and_diverging_runs_end_at_the_same_step_in_chunks(monkeypatch):
     assert np.array_equal(whole["speed"], chunked["speed"], equal_nan=True)
 
 
-def test_every_run_it_covers_calls_one_compiled_signature():
-    """So one compilation (setup.sh's, or a tuning's before its workers start) serves
-    every compiled run of the checkout."""
+# Every shipped scenario whose run the compiled loop covers (the others: controller kinds
+# without compiled steps).
+COVERED = sorted(name for name in scenario_names()
+                 if fast_loop.covers(*stages(load_scenario(name))))
+
+
+def test_the_compiled_loop_covers_every_shipped_scenario_of_a_compiled_kind():
+    kinds = {load_scenario(name)["controller.kind"] for name in scenario_names()
+             if name not in COVERED}
+    assert kinds <= {"linear_adrc", "discrete_adrc", "gpc"}
+    assert {"seed000", "seed002-hsr", "seed003-maglev", "seed001-excitation"} <= set(COVERED)
+
+
+@pytest.mark.parametrize("scenario", COVERED)
+def test_every_covered_shipped_scenario_gives_the_python_loops_bits(monkeypatch, scenario):
+    values = load_scenario(scenario)
+    values = apply_overrides(values, {"run.duration": min(300.0, values["run.duration"])})
+    compiled, python = simulate(values), python_run(monkeypatch, values)
+    assert compiled.keys() == python.keys()
+    for name in python:
+        assert np.array_equal(compiled[name], python[name], equal_nan=True), name
+
+
+def test_every_run_of_a_kind_calls_one_compiled_signature():
+    """So one compilation per controller kind (setup.sh's, or a tuning's before its
+    workers start) serves every compiled run of the checkout: lines or open track,
+    time- or position-indexed targets, dead time or none."""
     loop.warm()
     for scenario, overrides in VARIANTS:
         values = apply_overrides(load_scenario(scenario), ["run.duration=1", *overrides])
         simulate(values)
         simulate(values, prune=(RunningIndex("max_abs_error"), 1.0))
-    assert [len(compiled.signatures) for compiled in fast_loop.LOOPS.values()] == [1]
+    for scenario in COVERED:
+        simulate(apply_overrides(load_scenario(scenario), ["run.duration=1"]))
+    assert len(fast_loop._steps.signatures) == len(set(fast_loop.STEPS_BY_STATE))
 
 
 def test_warming_takes_any_run_a_tuning_may_start_from():
@@ -126,12 +159,19 @@ def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):
 
 
 def test_runs_it_does_not_cover_take_the_python_loop():
-    for scenario in ("seed004-metro", "seed003-maglev", "seed000-ato", "hsr-neutral"):
-        assert not fast_loop.covers(*stages(load_scenario(scenario)))
+    assert not fast_loop.covers(*stages(load_scenario("seed001-crh380al")))  # no GPC steps
+    stepped = apply_overrides(load_scenario("seed000"), ["profile.approach_step=0.5"])
+    assert not fast_loop.covers(*stages(stepped))  # time-indexed, with the stepped approach
+    profile, plant, controller, _ = stages(load_scenario("seed000"))
+    assert not fast_loop.covers(profile, plant, controller, {10: {"adrc.mu1": 700.0}})
 
 
-def stages(values):
-    from ato_nodes.core.run.stages import ControllerStage, PlantStage, ProfileStage
-    from ato_nodes.core.config.schema import NodeValues
-    return (ProfileStage(NodeValues("profile", values)), PlantStage(NodeValues("plant", values)),
-            ControllerStage(NodeValues("controller", values)), None)
+@pytest.mark.parametrize("scenario", ["seed003-maglev", "seed002-hsr", "seed001-excitation"])
+def test_a_line_run_in_one_step_chunks_gives_the_bits_of_a_run_in_one_call(monkeypatch,
+                                                                            scenario):
+    """What the loop carries between chunks on a line: the commands inside the dead time,
+    the profile's last position and stair, the traction power."""
+    values = apply_overrides(load_scenario(scenario), ["run.duration=100"])
+    whole, chunked = (chunked_run(monkeypatch, values, first) for first in (10**9, 1))
+    for name in whole:
+        assert np.array_equal(whole[name], chunked[name]), name

@@ -6,7 +6,8 @@ from dataclasses import replace
 import pytest
 
 from ato_nodes.core.control.limiter import CommandLimiter
-from ato_nodes.core.control.pid import PID, PIDGains
+from ato_nodes.core.control.pid import PID_STEPS, PIDGains, PIDSettings
+from ato_nodes.core.control.stepped import SteppedController
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.base.spec import settings
@@ -15,7 +16,11 @@ PERIOD = 0.05
 
 
 def gains(**changes) -> PIDGains:
-    return replace(settings(PIDGains, "pid", defaults()), **changes)
+    return settings(PIDGains, "pid", defaults())._replace(**changes)
+
+
+def PID(gains: PIDGains, period: float, limiter: CommandLimiter, train: TrainParameters):
+    return SteppedController(PID_STEPS, PIDSettings(gains, period, train.constants()), limiter)
 
 
 def train() -> TrainParameters:

@@ -22,9 +22,9 @@ from contextlib import contextmanager
 
 try:
     import numba
-    from numba.extending import register_jitable
+    from numba.extending import overload, register_jitable  # noqa: F401 (overload: exported)
 except ImportError:  # optional: runs are then Python only
-    numba = None
+    numba = overload = None
 
 AVAILABLE = numba is not None
 

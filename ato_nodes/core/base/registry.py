@@ -64,6 +64,12 @@ class Plan(Protocol):
         """The plan's own speed limit at `position`, m/s (only if limits_speed)."""
         raise NotImplementedError(f"{type(self).__name__} has no speed limits of its own")
 
+    def table(self) -> Any:
+        """A position-indexed plan as the table compiled code reads (a PlanTable of
+        core/targets/profiles.py), or None: its runs take the Python loop. Time-indexed
+        plans need none (their targets are computed once per plan)."""
+        return None
+
 
 @dataclass(frozen=True)
 class Output:
@@ -89,8 +95,9 @@ class Component:
     (observer, filters, integrators); with it, the kind's own float parameters are live
     during a run: a change rebuilds the controller with the new values and carries
     the state over (stages.ControllerStage.retune). Without it none are.
-    compiled_step, for controllers: the step function (core/base/kernels.jitable) the
-    compiled loop runs for this kind (core/run/fast_loop.py; None: the Python loop).
+    steps, for controllers whose step is a plain function of NamedTuples: their
+    core/control/stepped.ControllerSteps, which the compiled loop runs too
+    (core/run/fast_loop.py); without it a run of the kind takes the Python loop.
     """
 
     kind: str
@@ -101,7 +108,7 @@ class Component:
     observer_gain: Callable[[Any], float] | None = None
     search_space: tuple[tuple[str, float, float], ...] = ()  # what tune.py tunes by default
     state_paths: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
-    compiled_step: Callable[..., Any] | None = None  # what the compiled loop runs (controllers)
+    steps: Any = None  # ControllerSteps: what the Python and the compiled loop run
 
     @property
     def live_parameters(self) -> tuple[str, ...]:

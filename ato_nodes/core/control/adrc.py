@@ -43,6 +43,7 @@ from ..base.kernels import jitable
 from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param, settings
 from .limiter import CommandLimiter, LimiterSettings, limit_command
+from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 from .train_model import NominalTrain
 
 
@@ -175,24 +176,14 @@ class HanADRCState(NamedTuple):
     u_applied: float = 0.0  # the command the observer is told: the last one let through
 
 
-class HanADRC(Controller):
-    """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000); its
-    step is han_adrc_step(), which the compiled loop calls too."""
+class HanADRCSettings(NamedTuple):
+    gains: HanADRCGains
+    period: float  # s
 
-    def __init__(self, gains: HanADRCGains, period: float, limiter: CommandLimiter):
-        self.gains, self.h, self.limiter = gains, period, limiter
-        self.state = HanADRCState()
 
-    def start(self, target: float, measured: float) -> None:
-        self.state = han_adrc_start(self.state, target, measured)
-
-    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
-        limiter = self.limiter
-        u, self.state = han_adrc_step(self.state, target, measured, self.gains, self.h,
-                                      limiter.last, limiter.settings)
-        limiter.last = u
-        s = self.state
-        return ControllerOutput(u, (s.z1, s.z2, s.z3, s.v1, s.v2))
+def han_adrc(gains: HanADRCGains, period: float, limiter: CommandLimiter) -> SteppedController:
+    """Han's second-order nonlinear ADRC: TD + nonlinear ESO + NLSEF (seed 000)."""
+    return SteppedController(HAN_ADRC_STEPS, HanADRCSettings(gains, period), limiter)
 
 
 @jitable
@@ -208,24 +199,26 @@ def nlsef(e1: float, e2: float, z2: float, gains: HanADRCGains, h: float) -> flo
 
 
 @jitable
-def han_adrc_start(state: HanADRCState, target: float, measured: float) -> HanADRCState:
+def han_adrc_start(settings: HanADRCSettings, state: HanADRCState, target: float,
+                   measured: float) -> HanADRCState:
     """The TD starts at the first target, the observer at the first measurement."""
     return HanADRCState(measured, state.z2, state.z3, target, state.v2, state.u_applied)
 
 
 @jitable
-def han_adrc_step(state: HanADRCState, target: float, measured: float, gains: HanADRCGains,
-                  h: float, last: float, limits: LimiterSettings
-                  ) -> tuple[float, HanADRCState]:
-    """One step of Han's ADRC: (u, the state after it); `last` and `limits` the
-    limiter's (CommandLimiter)."""
-    g = gains
+def han_adrc_step(settings: HanADRCSettings, state: HanADRCState, target: float,
+                  measured: float, horizon, last: float, limits: LimiterSettings):
+    """One step of Han's ADRC (ControllerSteps.step); outputs z1, z2, z3, v1, v2."""
+    g, h = settings.gains, settings.period
     z1, z2, z3 = eso_update(state.z1, state.z2, state.z3, measured, state.u_applied, g.beta1,
                             g.beta2, g.beta3, g.b0, g.delta, h)
     v1, v2 = td_update(state.v1, state.v2, target, g.r0, g.h0, h)
-    u0 = nlsef(v1 - z1, v2 - z2, z2, gains, h)
+    u0 = nlsef(v1 - z1, v2 - z2, z2, g, h)
     u = limit_command((u0 - z3) / g.b0, target, measured, last, limits)
-    return u, HanADRCState(z1, z2, z3, v1, v2, u)
+    return u, (z1, z2, z3, v1, v2), HanADRCState(z1, z2, z3, v1, v2, u)
+
+
+HAN_ADRC_STEPS = ControllerSteps(han_adrc_start, han_adrc_step, HanADRCState)
 
 
 NLADRC_PARAMETERS = (
@@ -420,27 +413,26 @@ def linear_adrc(values, context, limiter: CommandLimiter) -> LinearADRC:
     return LinearADRC(gains, context.period, limiter, model)
 
 
-HAN_STATE_PATHS = ("state",)
 
 HAN_ADRC = Component(
     "han_adrc", "seed 000: Han's nonlinear ADRC", HAN_ADRC_PARAMETERS,
-    lambda values, context, limiter: HanADRC(settings(HanADRCGains, "adrc", values),
-                                             context.period, limiter),
-    OBSERVER_OUTPUTS, observer_gain=lambda values: values["adrc.b0"], compiled_step=han_adrc_step,
+    lambda values, context, limiter: han_adrc(settings(HanADRCGains, "adrc", values),
+                                              context.period, limiter),
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["adrc.b0"], steps=HAN_ADRC_STEPS,
     search_space=(("adrc.mu1", 600.0, 60000.0), ("adrc.mu2", 550.0, 55000.0),
                   ("adrc.beta1", 120.0, 12000.0), ("adrc.beta2", 170.0, 17000.0),
                   ("adrc.beta3", 450.0, 45000.0)),
-    state_paths=HAN_STATE_PATHS)
+    state_paths=STATE_PATHS)
 
 NLADRC = Component(
     "nladrc", "seed 003: NLADRC, bandwidth-parametrised observer", NLADRC_PARAMETERS,
-    lambda values, context, limiter: HanADRC(nladrc_gains(**{
+    lambda values, context, limiter: han_adrc(nladrc_gains(**{
         spec.name.split(".", 1)[1]: values[spec.name] for spec in NLADRC_PARAMETERS}),
         context.period, limiter),
-    OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"], compiled_step=han_adrc_step,
+    OBSERVER_OUTPUTS, observer_gain=lambda values: values["nladrc.b"], steps=HAN_ADRC_STEPS,
     search_space=(("nladrc.kp", 0.05, 20.0), ("nladrc.kd", 0.05, 20.0),
                   ("nladrc.omega", 0.5, 40.0), ("nladrc.b", 0.002, 0.5)),
-    state_paths=HAN_STATE_PATHS)
+    state_paths=STATE_PATHS)
 
 DISCRETE_ADRC = Component(
     "discrete_adrc", "seed 004: discrete ADRC", DISCRETE_ADRC_PARAMETERS,

@@ -15,11 +15,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
-from ..base.registry import Component, Controller, ControllerOutput, Output
+from ..base.kernels import jitable
+from ..base.registry import Component, Output
 from ..base.spec import param, settings
-from .limiter import CommandLimiter
+from ..train.plant import TrainConstants, basic_resistance
+from .limiter import LimiterSettings, limit_command
+from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 
 PARAMETERS = (
     param("pid.kp", 50.0, "PID proportional gain, N/kN per m/s", "controller", 0.0, 1e6),
@@ -33,8 +36,7 @@ PARAMETERS = (
 )
 
 
-@dataclass(frozen=True)
-class PIDGains:
+class PIDGains(NamedTuple):
     kp: float
     ki: float
     kd: float
@@ -43,38 +45,54 @@ class PIDGains:
     feedforward: float
 
 
-class PID(Controller):
-    def __init__(self, gains: PIDGains, period: float, limiter: CommandLimiter, train):
-        self.g, self.h, self.limiter, self.train = gains, period, limiter, train
-        self.integral = 0.0
-        self.filtered = 0.0
+class PIDSettings(NamedTuple):
+    gains: PIDGains
+    period: float  # s
+    train: TrainConstants  # the nominal train (the feedforward's model)
 
-    def start(self, target: float, measured: float) -> None:
-        self.filtered = measured
 
-    def step(self, target: float, measured: float, horizon) -> ControllerOutput:
-        g, h, train = self.g, self.h, self.train
-        planned_acceleration = (horizon[-1] - horizon[-2]) / h if len(horizon) > 1 else 0.0
-        feedforward = g.feedforward * (planned_acceleration / train.xi + train.resistance(target))
-        previous = self.filtered
-        self.filtered += h / (g.tf + h) * (measured - previous)
-        derivative = -g.kd * (self.filtered - previous) / h
-        error = target - measured
-        proportional = g.kp * error
-        raw = feedforward + proportional + self.integral + derivative
-        u = self.limiter.apply(raw, target, measured)
-        self.integral += h * (g.ki * error + g.kt * (u - raw))
-        return ControllerOutput(u, (feedforward, proportional, self.integral, derivative))
+class PIDState(NamedTuple):
+    integral: float = 0.0  # N/kN
+    filtered: float = 0.0  # m/s, the measurement through the derivative's filter
+
+
+@jitable
+def pid_start(settings: PIDSettings, state: PIDState, target: float, measured: float
+              ) -> PIDState:
+    return PIDState(state.integral, measured)
+
+
+@jitable
+def pid_step(settings: PIDSettings, state: PIDState, target: float, measured: float, horizon,
+             last: float, limits: LimiterSettings):
+    """One step (ControllerSteps.step); outputs feedforward, proportional, integral (after
+    the step), derivative."""
+    g, h, train = settings.gains, settings.period, settings.train
+    planned_acceleration = (horizon[-1] - horizon[-2]) / h if len(horizon) > 1 else 0.0
+    feedforward = g.feedforward * (planned_acceleration / train.xi + basic_resistance(
+        target, train.davis_a, train.davis_b, train.davis_c))
+    previous = state.filtered
+    filtered = previous + h / (g.tf + h) * (measured - previous)
+    derivative = -g.kd * (filtered - previous) / h
+    error = target - measured
+    proportional = g.kp * error
+    raw = feedforward + proportional + state.integral + derivative
+    u = limit_command(raw, target, measured, last, limits)
+    integral = state.integral + h * (g.ki * error + g.kt * (u - raw))
+    return u, (feedforward, proportional, integral, derivative), PIDState(integral, filtered)
+
+
+PID_STEPS = ControllerSteps(pid_start, pid_step, PIDState)
 
 
 PID_CONTROLLER = Component(
     "pid", "PID with nominal-model feedforward and anti-windup", PARAMETERS,
-    lambda values, context, limiter: PID(settings(PIDGains, "pid", values), context.period,
-                                         limiter, context.train),
+    lambda values, context, limiter: SteppedController(PID_STEPS, PIDSettings(
+        settings(PIDGains, "pid", values), context.period, context.train.constants()), limiter),
     (Output("feedforward", "N/kN", "nominal-model feedforward"),
      Output("proportional", "N/kN", "proportional term"),
      Output("integral", "N/kN", "integrator state (after this step)"),
      Output("derivative", "N/kN", "derivative term on the filtered measurement")),
     search_space=(("pid.kp", 1.0, 1000.0), ("pid.ki", 0.0, 500.0), ("pid.kd", 0.0, 500.0),
                   ("pid.tf", 0.01, 2.0), ("pid.kt", 0.0, 20.0), ("pid.feedforward", 0.0, 1.5)),
-    state_paths=("integral", "filtered"))
+    state_paths=STATE_PATHS, steps=PID_STEPS)

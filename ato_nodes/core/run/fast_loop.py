@@ -1,28 +1,30 @@
-"""The lockstep loop compiled (numba), for the runs that tuning repeats most.
+"""The lockstep loop compiled (numba), for the runs that tuning and studies repeat.
 
 simulate() hands a run here when numba is installed and the run is of the kind a
-compiled loop covers: Han's ADRC (seed 000 and seed 003's NLADRC), a time-indexed
-target without the stepped approach, the point-mass train on the open track
-(no line) with no dead time; lag, envelopes and the noisy, quantised speed sensor
-included. Everything else (lines, position-indexed curves, other controllers,
-dead time, live gain changes) runs the Python loop. The step is the one
-core/run/stages.py describes, in the same order, and every formula is the Python path's
-own function (core/base/kernels.py's jitable: plant.rates, rk4_substep and
-sensor_reading, adrc.han_adrc_step, limiter.limit_command, indices.running_add),
-compiled, reading the same NamedTuples by name;
-tests/test_fast_loop.py checks that both paths give the same bits.
+compiled loop covers: a controller kind whose registry entry names its
+ControllerSteps (core/control/stepped.py), a time-indexed target (its horizons are
+computed once per plan) or a position-indexed one with a PlanTable (the ATO curve,
+a strategy, a position table: their horizons along the planned trajectory, step by
+step), the point-mass train on the open track or on a line (gradients, curves,
+tunnels, limits, neutral sections as LineTables arrays), dead time, lag, envelopes,
+the noisy, quantised speed sensor and seed 003's stepped approach. Anything else
+(live gain changes, a kind without compiled steps, a time-indexed target with the
+stepped approach) runs the Python loop. The step is the one core/run/stages.py
+describes, in the same order, and every formula is the Python path's own jitable
+function (core/base/kernels.py) reading the same NamedTuples by name;
+tests/test_fast_loop.py checks that both paths give the same bits for every shipped
+scenario the loop covers.
+
+The controller kind is chosen by the type of its state: controller_start() and
+controller_step() below resolve, while compiling, to the kind's own functions, so
+one loop serves every kind, compiled once per kind and cached on disk (numba keys
+its cache by the argument types; loop.warm() compiles the common ones).
 
 A run is computed in chunks of steps, each one call of the compiled loop lasting
 about CHUNK_SECONDS, so that simulate() can check its deadline between them (a
 step at 10000 RK4 sub-steps takes ~1 ms); everything a step changes goes from one
 chunk to the next in a LoopState, by name, and the chunks give the bits of one
-uninterrupted call. Every covered run calls the loop with the same argument types,
-so it is compiled once (loop.warm(): scripts/setup.sh, a tuning before its workers
-start) and loaded from numba's cache by every later process.
-
-The targets of a time-indexed plan do not depend on the run, so the horizons are
-computed once per process and plan, by the ProfileStage itself, and reused by
-every tuning candidate.
+uninterrupted call.
 """
 
 from __future__ import annotations
@@ -31,16 +33,17 @@ import functools
 import json
 import math
 import time
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from ..base.kernels import AVAILABLE, compiled
+from ..base.kernels import AVAILABLE, compiled, jitable, overload
+from ..config.components import CONTROLLERS
 from ..config.schema import NodeValues
-from ..control.adrc import HanADRCGains, HanADRCState, han_adrc_start, han_adrc_step
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
-from ..train.line import LineTables, belt_resistance, line_tables
+from ..targets.profiles import PlanTable, plan_table, table_limit, table_speed
+from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
 from ..train.plant import (
     TrainConstants,
     achievable,
@@ -50,18 +53,28 @@ from ..train.plant import (
     rk4_substep,
     sensor_reading,
 )
-from .stages import COLUMNS, ProfileStage, SeriesColumns
+from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns
+
+# The compiled steps of every controller kind that has them, by the type of its state.
+STEPS_BY_STATE = {component.steps.state_type: component.steps
+                  for component in CONTROLLERS.components.values() if component.steps}
+
+
+def compiled_kinds() -> list[str]:
+    """One controller kind for each compiled step (loop.warm() compiles each)."""
+    kinds = {component.steps.state_type: kind
+             for kind, component in CONTROLLERS.components.items() if component.steps}
+    return sorted(kinds.values())
 
 
 def covers(profile, plant, controller, changes) -> bool:
-    """Whether the compiled loop runs this run (stages built by simulate()): a controller
-    kind whose registry entry names a step this module has a loop for, and a run of the
-    kind that loop covers."""
-    train, plan = plant.train, profile.context.plan
-    return (AVAILABLE and not changes and controller.component.compiled_step in LOOPS
-            and not plan.position_indexed and not plan.limits_speed
-            and profile.approach_step <= 0.0
-            and profile.context.line is None and train.line is None and not train.delayed)
+    """Whether the compiled loop runs this run (stages built by simulate())."""
+    plan = profile.context.plan
+    if plan.position_indexed:
+        drawable = plan.table() is not None
+    else:  # its horizons are computed once, without the stepped approach
+        drawable = profile.approach_step <= 0.0 and not plan.limits_speed
+    return AVAILABLE and not changes and controller.component.steps is not None and drawable
 
 
 @functools.lru_cache(maxsize=4)
@@ -74,8 +87,9 @@ def _horizons(profile_values: str) -> np.ndarray:
 
 
 def horizons(profile) -> np.ndarray:
-    """Every step's horizon (steps x (N + 1)) as a ProfileStage publishes them, computed
-    once per process and plan (read-only: shared by every run of the plan)."""
+    """Every step's horizon (steps x (N + 1)) of a time-indexed plan as a ProfileStage
+    publishes them, computed once per process and plan (read-only: shared by every
+    run of the plan)."""
     table = _horizons(json.dumps(dict(profile.context.values), sort_keys=True))
     table.flags.writeable = False
     return table
@@ -84,23 +98,24 @@ def horizons(profile) -> np.ndarray:
 class LoopInputs(NamedTuple):
     """What every step of a compiled run reads and none changes."""
 
-    targets: np.ndarray        # every step's horizon (steps x (N + 1)), read-only
     draws: np.ndarray          # the speed sensor's normal draws, one per step
     noise: float               # plant.speed_noise
     quantum: float             # plant.speed_quantum
-    preview: int               # the horizon entry the controller tracks
     period: float              # s
     substeps: int              # RK4 sub-steps per period
-    powered: bool              # traction power (always, on the open track)
-    train: TrainConstants
+    train: TrainConstants      # the real train's
+    pantograph_offset: float   # m behind the head
     lagged: bool               # the force follows the command through the actuator lag
     max_speed: float           # m/s, past it the run has diverged
-    gains: HanADRCGains
+    line: LineTables           # arrays (empty: the open track)
+    plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
+    preview: int               # the horizon entry the controller tracks
+    approach_step: float       # m/s, seed 003's stepped approach (0: off)
+    settings: Any              # the controller kind's settings NamedTuple
     limits: LimiterSettings
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
     fitness_limit: float       # the running fitness past which the run ends (inf: never)
     columns: SeriesColumns     # where each series goes in a row
-    line: LineTables           # arrays (empty: the open track)
 
 
 class LoopState(NamedTuple):
@@ -115,7 +130,12 @@ class LoopState(NamedTuple):
     force: float               # N/kN applied
     lag: float                 # the lag's output before the envelope (PointMassTrain.lag_state)
     acting: float              # the command that acted over the last period
-    controller: HanADRCState
+    powered: bool              # traction power over the last sub-step
+    delayed: np.ndarray        # commands inside the dead time (a ring, oldest at `oldest`)
+    oldest: int
+    last_position: float       # m, the profile's previous position
+    stair: float               # m/s, the stepped approach's stair (NaN: none)
+    controller: Any            # the controller kind's state NamedTuple
     last: float                # the limiter's last command
     fitness: float             # the running fitness (RunningIndex value, last_t, last_w)
     fitness_last_t: float
@@ -130,34 +150,41 @@ CHUNK_SECONDS = 0.05  # wall time each later call aims at: the deadline is check
 def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
         check: Callable[[int], None]):
     """The run, compiled: (rows (steps x len(SERIES)), the controller's outputs
-    (steps x 5), the horizons). It runs in chunks of steps, each a call of the
+    (steps x outputs), the horizons). It runs in chunks of steps, each a call of the
     compiled loop lasting about CHUNK_SECONDS; `check(step)` is called before each
     (simulate() raises there once past its deadline)."""
-    targets = horizons(profile)
-    train, han, limiter = plant.train, controller.controller, controller.limiter
+    context, train, limiter = profile.context, plant.train, controller.limiter
+    total = context.steps
+    plan = context.plan.table() if context.plan.position_indexed else None
+    if plan is None:  # a copy: the loop's one argument type is a writable array
+        targets = horizons(profile).copy()
+        plan = plan_table((), ())
+    else:  # filled in as the run goes, LOOKAHEAD steps ahead
+        targets = np.empty((total, profile.preview + 1))
     running, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
-    rows = np.empty((len(targets), len(COLUMNS)))
-    extras = np.empty((len(targets), 5))
+    rows = np.empty((total, len(COLUMNS)))
+    extras = np.empty((total, len(controller.output_names)))
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
-    draws = plant.rng.standard_normal(len(targets)) if plant.noise > 0.0 else \
-        np.zeros(len(targets))
+    draws = plant.rng.standard_normal(total) if plant.noise > 0.0 else np.zeros(total)
+    line = line_arrays(train.line)
     inputs = LoopInputs(
-        targets, draws, float(plant.noise), float(plant.quantum), int(controller.preview),
-        float(train.period), int(train.substeps), bool(train.powered), train.constants,
-        bool(train.lagged), float(plant.max_speed), han.gains, limiter.settings,
-        int(running.kind), float(limit), COLUMNS, line_tables(None, np.array))
+        draws, float(plant.noise), float(plant.quantum), float(train.period),
+        int(train.substeps), train.constants, float(train.p.pantograph_offset),
+        bool(train.lagged), float(plant.max_speed), line, plan, int(controller.preview),
+        float(profile.approach_step), controller.controller.settings, limiter.settings,
+        int(running.kind), float(limit), COLUMNS)
     state = train.state
     loop = LoopState(
         0, int(train.steps), float(state.time), float(state.position), float(state.speed),
-        float(state.force), float(train.lag_state), float(train.acting), han.state,
-        float(limiter.last), float(running.value), float(running.last_t),
-        float(running.last_w), False)
+        float(state.force), float(train.lag_state), float(train.acting), bool(train.powered),
+        np.array(train.delayed, dtype=float), 0, float(profile.last_position), math.nan,
+        controller.controller.state, float(limiter.last), float(running.value),
+        float(running.last_t), float(running.last_w), False)
     chunk = FIRST_CHUNK
-    loop_of_kind = LOOPS[controller.component.compiled_step]
-    while loop.step < len(targets) and not loop.ended:
+    while loop.step < total and not loop.ended:
         check(loop.step)
         started = time.perf_counter()
-        loop = loop_of_kind(inputs, loop, min(len(targets), loop.step + chunk), rows, extras)
+        loop = _steps(inputs, loop, min(total, loop.step + chunk), targets, rows, extras)
         elapsed = time.perf_counter() - started
         chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
     running.value, running.last_t, running.last_w = \
@@ -165,33 +192,109 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     return rows[:loop.step], extras[:loop.step], targets[:loop.step]
 
 
-def _han_adrc_steps_source(inputs: LoopInputs, loop: LoopState, stop: int, rows, extras
-                           ) -> LoopState:
-    """simulate()'s loop for the runs `covers` accepts with Han's ADRC, from step
-    loop.step up to `stop` (or the step the run ends at); the state after."""
-    train, targets, period, substeps = inputs.train, inputs.targets, inputs.period, \
-        inputs.substeps
-    column = inputs.columns
-    sub = period / substeps
+def controller_start(settings, state, target: float, measured: float):
+    """The kind's ControllerSteps.start, chosen by the type of `state`."""
+    return STEPS_BY_STATE[type(state)].start(settings, state, target, measured)
+
+
+def controller_step(settings, state, target: float, measured: float, horizon, last: float,
+                    limits: LimiterSettings):
+    """The kind's ControllerSteps.step, chosen by the type of `state`."""
+    return STEPS_BY_STATE[type(state)].step(settings, state, target, measured, horizon, last,
+                                            limits)
+
+
+if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
+    @overload(controller_start)
+    def _compiled_start(settings, state, target, measured):
+        start = STEPS_BY_STATE[state.instance_class].start
+        return lambda settings, state, target, measured: start(settings, state, target,
+                                                                measured)
+
+    @overload(controller_step)
+    def _compiled_step(settings, state, target, measured, horizon, last, limits):
+        step = STEPS_BY_STATE[state.instance_class].step
+        return lambda settings, state, target, measured, horizon, last, limits: step(
+            settings, state, target, measured, horizon, last, limits)
+
+
+@jitable
+def _plan_horizon(inputs: LoopInputs, step: int, position: float, horizon) -> None:
+    """RunContext.horizon of a position-indexed plan, into `horizon`: the plan's
+    targets of steps step .. step + N along the planned trajectory from `position`
+    (Heun's method, one step per period)."""
+    plan, h = inputs.plan, inputs.period
+    horizon[0] = table_speed(plan, position)
+    for i in range(1, len(horizon)):
+        v = horizon[i - 1]
+        ahead = table_speed(plan, position + h * v)
+        position += 0.5 * h * (v + ahead)
+        horizon[i] = table_speed(plan, position)
+
+
+@jitable
+def _approach(step_size: float, stair: float, target: float, speed: float):
+    """ProfileStage.approach on the stair (NaN: none): (target, stair)."""
+    if step_size <= 0.0 or target - speed <= step_size:
+        return target, math.nan
+    if stair != stair or abs(stair - speed) < step_size / 4:
+        stair = speed + step_size
+    return min(stair, target), stair
+
+
+@jitable
+def _speed_limit(inputs: LoopInputs, position: float) -> float:
+    """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
+    if len(inputs.plan.limits):
+        return table_limit(inputs.plan, position)
+    if len(inputs.line.limit_starts):
+        return speed_limit(inputs.line, position)
+    return math.inf
+
+
+def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows, extras
+                  ) -> LoopState:
+    """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
+    (or the step the run ends at); the state after. `targets` holds every step's
+    horizon: given (time-indexed plans) or filled in LOOKAHEAD steps ahead."""
+    train, line, column, period = inputs.train, inputs.line, inputs.columns, inputs.period
+    sub = period / inputs.substeps
+    position_indexed = len(inputs.plan.positions) > 0
     plant_steps, clock, x, v, force = loop.plant_steps, loop.time, loop.position, loop.speed, \
         loop.force
-    lag, acting, last, controller = loop.lag, loop.acting, loop.last, loop.controller
+    lag, acting, powered, delayed, oldest = loop.lag, loop.acting, loop.powered, \
+        loop.delayed, loop.oldest
+    last_position, stair, controller, last = loop.last_position, loop.stair, \
+        loop.controller, loop.last
     fitness, fitness_last_t, fitness_last_w = \
         loop.fitness, loop.fitness_last_t, loop.fitness_last_w
     k, ended = loop.step, False
     while k < stop and not ended:
         # plant outputs at t_k (PlantStage.outputs)
         measured = sensor_reading(v, inputs.draws[k], inputs.noise, inputs.quantum)
-        acceleration = rates(clock, v, lag, acting, inputs.powered,
-                             belt_resistance(inputs.line, x, train.length), train)[0]
-        reference = targets[k, inputs.preview]
+        line_resistance = belt_resistance(line, x, train.length)
+        acceleration = rates(clock, v, lag, acting, powered, line_resistance, train)[0]
+        # the horizons the profile publishes for this position (ProfileStage.on_position)
+        if position_indexed:
+            travel = x - last_position if k else 0.0
+            speed = travel / period
+            first = 0 if k == 0 else k + LOOKAHEAD
+            for step in range(first, k + LOOKAHEAD + 1):
+                if step < len(targets):
+                    _plan_horizon(inputs, step, x + LOOKAHEAD * travel if k else x,
+                                  targets[step])
+                    targets[step, 0], stair = _approach(inputs.approach_step, stair,
+                                                        targets[step, 0], speed)
+            last_position = x
+        horizon = targets[k]
+        reference = horizon[inputs.preview]
         if k == 0:
-            controller = han_adrc_start(controller, reference, measured)
-        u, controller = han_adrc_step(controller, reference, measured, inputs.gains, period,
-                                      last, inputs.limits)
+            controller = controller_start(inputs.settings, controller, reference, measured)
+        u, outputs, controller = controller_step(inputs.settings, controller, reference,
+                                                 measured, horizon, last, inputs.limits)
         last = u
         row = rows[k]
-        row[column.t], row[column.target], row[column.position] = k * period, targets[k, 0], x
+        row[column.t], row[column.target], row[column.position] = k * period, horizon[0], x
         row[column.measured_speed], row[column.speed] = measured, v
         row[column.acceleration] = acceleration
         row[column.disturbance] = disturbance(clock, train.disturbance_amplitude,
@@ -200,31 +303,38 @@ def _han_adrc_steps_source(inputs: LoopInputs, loop: LoopState, stop: int, rows,
         row[column.force] = force
         row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b,
                                                   train.davis_c)
-        row[column.line_resistance], row[column.speed_limit], row[column.command] = \
-            0.0, math.inf, u
-        extras[k, 0], extras[k, 1], extras[k, 2] = controller.z1, controller.z2, controller.z3
-        extras[k, 3], extras[k, 4] = controller.v1, controller.v2
-        speed = v
+        row[column.line_resistance] = line_resistance
+        row[column.speed_limit], row[column.command] = _speed_limit(inputs, x), u
+        for i in range(len(outputs)):
+            extras[k, i] = outputs[i]
+        speed_k = v
         # plant.apply(u) (PointMassTrain.step)
+        command = u
+        if len(delayed):
+            command, delayed[oldest] = delayed[oldest], u
+            oldest = (oldest + 1) % len(delayed)
         start = clock
-        for i in range(substeps):
-            x, v, lag = rk4_substep(start + i * sub, x, v, lag, sub, u, inputs.powered,
-                                    train, inputs.line)
-        acting = u
+        for i in range(inputs.substeps):
+            powered = not in_neutral_section(line, x - inputs.pantograph_offset)
+            x, v, lag = rk4_substep(start + i * sub, x, v, lag, sub, command, powered, train,
+                                    line)
+        acting = command
         plant_steps += 1
         clock = plant_steps * period
-        force = achievable(lag if inputs.lagged else u, v, train.limited, train.envelope)
+        force = achievable(lag if inputs.lagged else command, v, train.limited, train.envelope)
+        if not powered and force > 0.0:
+            force = 0.0
         if not (abs(v) <= inputs.max_speed):  # PlantStage.diverged
             ended = True
         else:
             fitness, fitness_last_t, fitness_last_w = running_add(
                 inputs.fitness_kind, fitness, fitness_last_t, fitness_last_w, k * period,
-                targets[k, 0] - speed)
+                horizon[0] - speed_k)
             ended = fitness > inputs.fitness_limit
         k += 1
-    return LoopState(k, plant_steps, clock, x, v, force, lag, acting, controller, last,
-                     fitness, fitness_last_t, fitness_last_w, ended)
+    return LoopState(k, plant_steps, clock, x, v, force, lag, acting, powered, delayed, oldest,
+                     last_position, stair, controller, last, fitness, fitness_last_t,
+                     fitness_last_w, ended)
 
 
-# The compiled loops, by the controller step (a registry entry's compiled_step) each runs.
-LOOPS = {han_adrc_step: compiled(_han_adrc_steps_source)} if AVAILABLE else {}
+_steps = compiled(_steps_source)

@@ -79,10 +79,12 @@ def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndar
 
 def warm(values: dict | None = None) -> None:
     """Compile the loop of core/run/fast_loop.py now, or load it from its cache beside that
-    file, by a two-step run of `values` (default: the shipped seed000), if it is a run
-    that loop covers. Every run it covers calls it with the same argument types
-    (LoopInputs, LoopState), so this one compilation serves them all, in every process
-    of this checkout."""
+    file, by a two-step run of `values` (default: the shipped seed000) with each
+    controller kind that has compiled steps. Every run of a kind calls the loop with the
+    same argument types, so this one compilation per kind serves them all, in every
+    process of this checkout."""
     values = load_scenario("seed000") if values is None else values
     shortest = SPEC_BY_NAME["run.duration"].low
-    simulate(apply_overrides(values, {"run.duration": max(2 * values["run.period"], shortest)}))
+    duration = max(2 * values["run.period"], shortest)
+    for kind in fast_loop.compiled_kinds():
+        simulate(apply_overrides(values, {"run.duration": duration, "controller.kind": kind}))

@@ -8,10 +8,12 @@ import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from ..base.errors import ScenarioError
+from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
@@ -26,6 +28,44 @@ SEED000_PARAMETERS = (
     param("profile.seed000.cruise_low", 200.0 * KMH, "lower cruise speed, m/s", PROFILE_NODES,
           0.0, 300.0),
 )
+
+
+class PlanTable(NamedTuple):
+    """A position-indexed plan as compiled code reads it: the speed interpolated in
+    `values` against `positions` (values are speeds, or squared speeds when `squared`),
+    0 from the last position on when `stops_at_end`; the plan's own limits per cell
+    of `positions` when it has them (Plan.limits_speed)."""
+
+    positions: np.ndarray  # m, increasing
+    values: np.ndarray     # m/s, or (m/s)^2 when squared
+    squared: bool
+    stops_at_end: bool
+    limits: np.ndarray     # m/s per cell (empty: the line's limits apply)
+
+
+def plan_table(positions, values, squared: bool = False, stops_at_end: bool = False,
+               limits=()) -> PlanTable:
+    """A PlanTable of contiguous float arrays (compiled code takes one array layout)."""
+    def array(sequence):
+        return np.ascontiguousarray(sequence, dtype=float)
+
+    return PlanTable(array(positions), array(values), squared, stops_at_end, array(limits))
+
+
+@jitable
+def table_speed(table: PlanTable, position: float) -> float:
+    """The plan's speed at `position`, m/s (as the plan's speed() gives it)."""
+    if table.stops_at_end and position >= table.positions[len(table.positions) - 1]:
+        return 0.0
+    value = np.interp(position, table.positions, table.values)
+    return math.sqrt(max(0.0, value)) if table.squared else value
+
+
+@jitable
+def table_limit(table: PlanTable, position: float) -> float:
+    """The plan's own limit with the head at `position`, m/s (AtoCurve.limit)."""
+    cell = np.searchsorted(table.positions, position, side="right") - 1
+    return table.limits[min(max(cell, 0), len(table.limits) - 1)]
 
 
 @dataclass(frozen=True)
@@ -169,6 +209,11 @@ class TableProfile(Plan):
         x = t if self.axis == "time" else position
         return float(np.interp(x, self.points, self.speeds))
 
+    def table(self) -> PlanTable | None:
+        if not self.position_indexed:
+            return None
+        return plan_table(self.points, self.speeds)
+
 
 class StrategyProfile(Plan):
     """A driving strategy (seed 002, scripts/optimize_strategy.py) as the target: its
@@ -189,6 +234,9 @@ class StrategyProfile(Plan):
 
     def speed(self, t: float, position: float = 0.0) -> float:
         return math.sqrt(max(0.0, float(np.interp(position, self.positions, self.energies))))
+
+    def table(self) -> PlanTable:
+        return plan_table(self.positions, self.energies, squared=True)
 
     def _stage(self, position: float) -> int:
         index = int(np.searchsorted(self.positions, position, side="right")) - 1
@@ -375,6 +423,9 @@ class AtoCurve(Plan):
         if position >= self.positions[-1]:
             return 0.0
         return float(np.interp(position, self.positions, self.speeds))
+
+    def table(self) -> PlanTable:
+        return plan_table(self.positions, self.speeds, stops_at_end=True, limits=self.limits)
 
     def limit(self, position: float) -> float:
         """The limit that applies to the train with its head at `position`, m/s."""

@@ -82,9 +82,6 @@ class Line:
         """The sections as the line functions below read them (tuples: fast in Python)."""
         return line_tables(self, tuple)
 
-    def arrays(self) -> LineTables:
-        """The same as numpy arrays, for compiled code (core/run/fast_loop.py)."""
-        return line_tables(self, lambda values: np.array(list(values), dtype=float))
 
 
 class LineTables(NamedTuple):
@@ -124,6 +121,11 @@ def line_tables(line: Line | None, sequence: Callable) -> LineTables:
         *columns(line.curves, lambda s: CURVE_CONSTANT / s.value),
         *columns(line.tunnels, lambda s: TUNNEL_CONSTANT * (s.end - s.start)),
         *columns(line.speed_limits, lambda s: s.value), *neutral)
+
+
+def line_arrays(line: Line | None) -> LineTables:
+    """`line`'s tables as numpy arrays, for compiled code (empty: the open track)."""
+    return line_tables(line, lambda values: np.array(list(values), dtype=float))
 
 
 @jitable
