@@ -180,6 +180,32 @@ def prune_limit(objective: Objective, bound: float) -> float | None:
     return None
 
 
+@dataclass(frozen=True)
+class Candidate:
+    """A candidate ready to run, as both evaluators start it."""
+
+    values: dict[str, Any]  # the base run's values with the candidate's overrides
+    objective: Objective
+    limit: float | None     # prune_limit's, None: the run is not pruned
+    started: float          # time.perf_counter() as its evaluation began
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.started
+
+
+def _candidate(values: dict[str, Any], overrides: dict[str, Any], objective: Objective | str,
+               index: int, bound: float) -> Candidate | Evaluation:
+    """The candidate to run, or its `invalid` Evaluation when the run refuses the
+    overrides."""
+    started = time.perf_counter()
+    objective = objective_of(objective)
+    try:
+        run_values = apply_overrides(values, overrides)
+    except ScenarioError as exc:
+        return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
+    return Candidate(run_values, objective, prune_limit(objective, bound), started)
+
+
 def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
                         objective: Objective | str, index: int, bound: float = math.inf,
                         timeout: float | None = None) -> Evaluation:
@@ -188,30 +214,26 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
     finite `bound` (pruning: the optimizer does not care by how much a candidate
     misses it) a run whose fitness, which only grows, has passed the bound ends
     there as `pruned`, its fitness the value reached (a lower bound)."""
-    started = time.perf_counter()
-    objective = objective_of(objective)
-    try:
-        run_values = apply_overrides(values, overrides)
-    except ScenarioError as exc:
-        return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    limit = prune_limit(objective, bound)
-    running = RunningIndex(FITNESS[objective.fitness]) if limit is not None else None
+    candidate = _candidate(values, overrides, objective, index, bound)
+    if isinstance(candidate, Evaluation):
+        return candidate
+    run_values, limit = candidate.values, candidate.limit
+    running = RunningIndex(FITNESS[candidate.objective.fitness]) if limit is not None else None
     try:
         series = simulate(run_values, None if timeout is None else time.monotonic() + timeout,
                           (running, limit) if running is not None else None)
     except TimeoutError as exc:
-        return Evaluation(index, overrides, PENALTY, "timeout", time.perf_counter() - started,
+        return Evaluation(index, overrides, PENALTY, "timeout", candidate.elapsed(),
                           message=f"{exc} ({timeout:g} s)")
     if limit is not None and running.value > limit:
-        return Evaluation(index, overrides, running.value, "pruned",
-                          time.perf_counter() - started,
-                          message=f"{objective.fitness} passed {bound:.9g} at t = "
+        return Evaluation(index, overrides, running.value, "pruned", candidate.elapsed(),
+                          message=f"{candidate.objective.fitness} passed {bound:.9g} at t = "
                                   f"{series['t'][-1]:g} s")
     indices = score_series(series, run_values)
-    elapsed = time.perf_counter() - started
+    elapsed = candidate.elapsed()
     if len(series["t"]) < steps(run_values) or not indices["finite"]:
         return Evaluation(index, overrides, PENALTY, "diverged", elapsed, indices)
-    value, status, message = objective_of(objective).score(indices)
+    value, status, message = candidate.objective.score(indices)
     return Evaluation(index, overrides, value, status, elapsed, indices, message)
 
 
@@ -225,31 +247,28 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
     from ato_nodes.bagio import BagError, read_parameters, read_series
     from ato_nodes.launch import Stack
 
-    started = time.perf_counter()
-    objective = objective_of(objective)
-    try:
-        run_values = apply_overrides(values, overrides)
-    except ScenarioError as exc:
-        return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    limit = prune_limit(objective, bound)
-    if limit is not None:
-        run_values = {**run_values, "supervisor.fitness": FITNESS[objective.fitness],
-                      "supervisor.prune_above": limit}
+    candidate = _candidate(values, overrides, objective, index, bound)
+    if isinstance(candidate, Evaluation):
+        return candidate
+    run_values = candidate.values
+    if candidate.limit is not None:
+        run_values = {**run_values, "supervisor.fitness": FITNESS[candidate.objective.fitness],
+                      "supervisor.prune_above": candidate.limit}
     outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel).run()
     if outcome.status == "pruned":
         return Evaluation(index, overrides, outcome.report["fitness"], "pruned",
-                          time.perf_counter() - started, message=outcome.message)
+                          candidate.elapsed(), message=outcome.message)
     indices = {}
     if bag.exists():
         try:
             indices = score_series(read_series(bag), read_parameters(bag))
         except BagError as exc:
             outcome.message += f"; {exc}"
-    elapsed = time.perf_counter() - started
+    elapsed = candidate.elapsed()
     if outcome.status != "completed" or not indices:
         status = outcome.status if outcome.status != "completed" else "failed"
         return Evaluation(index, overrides, PENALTY, status, elapsed, indices, outcome.message)
-    value, status, message = objective_of(objective).score(indices)
+    value, status, message = candidate.objective.score(indices)
     return Evaluation(index, overrides, value, status, elapsed, indices, message)
 
 
@@ -361,12 +380,12 @@ class EvaluationLog:
     def line(record: Evaluation) -> str:
         return jsontext.dumps(asdict(record)) + "\n"
 
-    def cached(self, index: int, params: dict[str, Any]) -> Evaluation | None:
+    def cached(self, index: int, overrides: dict[str, Any]) -> Evaluation | None:
         record = self.done.get(index)
         if record is None:
             return None
-        if record.params.keys() != params.keys() or not np.allclose(
-                list(record.params.values()), list(params.values()), rtol=1e-12, atol=0.0):
+        if record.params.keys() != overrides.keys() or not np.allclose(
+                list(record.params.values()), list(overrides.values()), rtol=1e-12, atol=0.0):
             raise ScenarioError(f"{self.path}: evaluation {index} was made with other settings; "
                                 "resume with the same algorithm, seed and --params")
         return record
@@ -417,14 +436,7 @@ class Tuner:
     def __init__(self, values: dict[str, Any], settings: TuningSettings, out: Path,
                  resume: bool = False, evaluate: Callable[..., Evaluation] | None = None,
                  progress: bool = True):
-        if settings.algorithm not in ALGORITHMS:
-            raise ScenarioError(f"unknown algorithm {settings.algorithm!r}; known: "
-                                f"{', '.join(ALGORITHMS)}")
-        if settings.fitness not in FITNESS:
-            raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
-                                f"{', '.join(FITNESS)}")
-        if settings.cluster and settings.keep_bags:
-            raise ScenarioError("--keep-bags keeps bags on this host; not with --cluster")
+        _check_settings(settings)
         self.values, self.settings, self.out = values, settings, out
         self.progress = progress
         try:
@@ -437,15 +449,7 @@ class Tuner:
         described = jsontext.dumps({**settings.describe(), "conditions": self.conditions},
                                    indent=2)
         if resume and settings_file.exists():
-            try:
-                before = json.loads(settings_file.read_text())
-            except json.JSONDecodeError:
-                raise ScenarioError(f"{settings_file} is not valid JSON; tune into a new "
-                                    "--out") from None
-            if before != json.loads(described):
-                raise ScenarioError(f"{out} holds a tuning with other settings or conditions "
-                                    "(scenario, files, --set); resume it with the same options "
-                                    "or tune into a new --out")
+            _check_same_tuning(out, settings_file, described)
         self.log = EvaluationLog(out / "evaluations.jsonl", resume, self.conditions)
         self.summary = _finished_summary(out, self.conditions, len(self.log.done)) \
             if resume else None
@@ -454,15 +458,7 @@ class Tuner:
             settings_file.write_text(described)
             self.log.start()
         self.in_process_pool = evaluate is None and settings.in_process
-        if evaluate is not None:
-            self.evaluate = evaluate
-        elif settings.in_process:
-            self.evaluate = functools.partial(evaluate_in_process, timeout=settings.timeout)
-        elif settings.cluster:  # a remote worker cannot reach this tuner's OUT/runs
-            self.evaluate = functools.partial(evaluate_in_stack_anywhere,
-                                              timeout=settings.timeout)
-        else:
-            self.evaluate = self._evaluate_in_stack
+        self.evaluate = evaluate if evaluate is not None else self._evaluator()
         self.client = self.local_cluster = None
         algorithm = create(settings.algorithm, **settings.options)
         # Pruning: a fitness that only grows, an algorithm that bounds its candidates
@@ -484,6 +480,15 @@ class Tuner:
         """Resumed, and the tuning had finished: nothing to run (summary.json says how
         it ended)."""
         return self.summary is not None
+
+    def _evaluator(self) -> Callable[..., Evaluation]:
+        """How the settings run a candidate: in a worker process, through the stack on
+        any host of a Dask cluster, or through the stack here with its bag in OUT/runs."""
+        if self.settings.in_process:
+            return functools.partial(evaluate_in_process, timeout=self.settings.timeout)
+        if self.settings.cluster:  # a remote worker cannot reach this tuner's OUT/runs
+            return functools.partial(evaluate_in_stack_anywhere, timeout=self.settings.timeout)
+        return self._evaluate_in_stack
 
     def _stamped(self, record: Evaluation) -> Evaluation:
         record.conditions = self.conditions
@@ -687,6 +692,32 @@ class Tuner:
                   f"# Run it: python scripts/run_stack.py --scenario {self.out / 'best.yaml'}\n")
         document = {"base": base, **ros_parameter_file(best_values, set(changed))}
         return header + yaml.safe_dump(document, sort_keys=False)
+
+
+def _check_settings(settings: TuningSettings) -> None:
+    """A ScenarioError for an unknown algorithm or fitness, or bags kept from a cluster."""
+    if settings.algorithm not in ALGORITHMS:
+        raise ScenarioError(f"unknown algorithm {settings.algorithm!r}; known: "
+                            f"{', '.join(ALGORITHMS)}")
+    if settings.fitness not in FITNESS:
+        raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
+                            f"{', '.join(FITNESS)}")
+    if settings.cluster and settings.keep_bags:
+        raise ScenarioError("--keep-bags keeps bags on this host; not with --cluster")
+
+
+def _check_same_tuning(out: Path, settings_file: Path, described: str) -> None:
+    """A resumed OUT's tuning.json must describe this tuning: the same settings under
+    the same conditions."""
+    try:
+        before = json.loads(settings_file.read_text())
+    except json.JSONDecodeError:
+        raise ScenarioError(f"{settings_file} is not valid JSON; tune into a new "
+                            "--out") from None
+    if before != json.loads(described):
+        raise ScenarioError(f"{out} holds a tuning with other settings or conditions "
+                            "(scenario, files, --set); resume it with the same options "
+                            "or tune into a new --out")
 
 
 def at_bounds(space: SearchSpace, x: np.ndarray) -> list[str]:
