@@ -487,15 +487,15 @@ def _gain(run: Run, name: str, changes: list[LiveChange]) -> str:
 
 def identity(run: Run) -> dict[str, str]:
     """What the run was: scenario, train, target, controller and its gains, line."""
-    p = run.parameters
-    if not p:
+    values = run.parameters
+    if not values:
         return {"scenario": "-", "parameters": "none in the bag (not recorded by this stack)"}
     described = {"scenario": scenario_name(run)}
-    described["train"] = (p.get("plant.train") or "the scenario's own plant.* values") + \
-        f" ({p.get('plant.mass', math.nan):g} t; speed sensor noise " \
-        f"{p.get('plant.speed_noise', 0.0):g} m/s)"
+    described["train"] = (values.get("plant.train") or "the scenario's own plant.* values") + \
+        f" ({values.get('plant.mass', math.nan):g} t; speed sensor noise " \
+        f"{values.get('plant.speed_noise', 0.0):g} m/s)"
     for registry in (PROFILES, CONTROLLERS):
-        kind = p.get(registry.kind_parameter.name, "")
+        kind = values.get(registry.kind_parameter.name, "")
         try:
             component = registry[kind]
         except ScenarioError:
@@ -506,12 +506,12 @@ def identity(run: Run) -> dict[str, str]:
             changes = live_changes(run)
             described["gains"] = ", ".join(_gain(run, spec.name, changes)
                                            for spec in component.parameters
-                                           if spec.name in p) or "-"
-    described["limits"] = (f"u in [{p.get('controller.u_min', math.nan):g}, "
-                           f"{p.get('controller.u_max', math.nan):g}] N/kN, rate "
-                           f"{p.get('controller.max_rate', math.nan):g} N/kN/s, preview "
-                           f"{p.get('controller.preview', 0)} steps")
-    line = run_line(p)
+                                           if spec.name in values) or "-"
+    described["limits"] = (f"u in [{values.get('controller.u_min', math.nan):g}, "
+                           f"{values.get('controller.u_max', math.nan):g}] N/kN, rate "
+                           f"{values.get('controller.max_rate', math.nan):g} N/kN/s, preview "
+                           f"{values.get('controller.preview', 0)} steps")
+    line = run_line(values)
     if line is None:
         described["line"] = "open track (no line file)"
     else:
@@ -520,8 +520,8 @@ def identity(run: Run) -> dict[str, str]:
             f"{line.name}: {line.length / 1000:g} km, stop at {line.stop_position:g} m"
             + (f", planned run time {line.planned_run_time:g} s" if line.planned_run_time
                else "") + (f"; stations {stations}" if stations else ""))
-    described["run"] = (f"{p.get('run.duration', math.nan):g} s in steps of "
-                        f"{p.get('run.period', math.nan):g} s"
+    described["run"] = (f"{values.get('run.duration', math.nan):g} s in steps of "
+                        f"{values.get('run.period', math.nan):g} s"
                         + (f"; partial: {run.partial}" if run.partial else ""))
     return described
 

@@ -311,14 +311,14 @@ def _decoded_series(t, clock_role, usable, picks, keep, raws) -> dict[str, np.nd
 
 def _checked_parameters(path: Path) -> dict | None:
     """The run's parameters, with the line the bag carries readable (else one line)."""
-    parameters = read_parameters(path)
-    if parameters:
+    values = read_parameters(path)
+    if values:
         try:
-            run_line(parameters)
+            run_line(values)
         except (ScenarioError, ValueError) as exc:  # bad base64 is a ValueError too
             raise BagError(f"{path}: the run's line kept in the bag is unreadable "
                            f"({str(exc).splitlines()[0]})") from None
-    return parameters
+    return values
 
 
 def _columns(fields, messages) -> dict[str, np.ndarray]:
@@ -387,13 +387,13 @@ def read_parameters(bag: str | Path) -> dict | None:
         return None
     where = f"{bag}: the run's parameters kept in metadata.yaml"
     try:
-        parameters = json.loads(text)
+        values = json.loads(text)
     except (TypeError, ValueError) as exc:
         raise BagError(f"{where} are not JSON ({exc})") from None
-    if not isinstance(parameters, dict):
-        raise BagError(f"{where} are a JSON {type(parameters).__name__}, not an object")
+    if not isinstance(values, dict):
+        raise BagError(f"{where} are a JSON {type(values).__name__}, not an object")
     try:
-        return {name: _checked_value(name, value, where) for name, value in parameters.items()}
+        return {name: _checked_value(name, value, where) for name, value in values.items()}
     except ScenarioError as exc:
         raise BagError(str(exc)) from None
 
