@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark seed 001's GPC: controller cost per step, QP solvers, stack rate.
 
-    python scripts/benchmark_gpc.py [--scenario seed001-crh380al] [--duration 600]
+    python benchmarks/benchmark_gpc.py [--duration 600] [--no-stack]
 
 1. Controller cost per step (median, p99, max), the controller stage's `run_ready_steps()` timed
    around every call of a whole in-process run: the code the controller node runs
@@ -22,18 +22,19 @@ from pathlib import Path
 import _cli
 import numpy as np
 
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run import loop
-from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.run.stages import ControllerStage
+from ato_nodes.studies import Variant, prepare_variants
 
-VARIANTS = {  # name: (scenario, overrides)
-    "gpc lssvm (adaptive)": ("seed001-crh380al", []),
-    "gpc lssvm (fixed)": ("seed001-crh380al", ["gpc.correction=false"]),
-    "gpc multimodel": ("seed001-crh380al", ["gpc.prediction=multimodel"]),
-    "gpc mechanistic": ("seed001-crh380al", ["gpc.prediction=mechanistic"]),
-    "gpc lssvm unconstrained": ("seed001-crh380al", ["gpc.constrained=false"]),
-    "han_adrc": ("seed001-crh380al-adrc", []),
-    "pid": ("seed001-crh380al-pid", []),
+VARIANTS = {
+    "gpc lssvm (adaptive)": Variant("seed001-crh380al"),
+    "gpc lssvm (fixed)": Variant("seed001-crh380al", ["gpc.correction=false"]),
+    "gpc multimodel": Variant("seed001-crh380al", ["gpc.prediction=multimodel"]),
+    "gpc mechanistic": Variant("seed001-crh380al", ["gpc.prediction=mechanistic"]),
+    "gpc lssvm unconstrained": Variant("seed001-crh380al", ["gpc.constrained=false"]),
+    "han_adrc": Variant("seed001-crh380al-adrc"),
+    "pid": Variant("seed001-crh380al-pid"),
 }
 
 
@@ -108,9 +109,10 @@ def main() -> None:
                         help="simulated seconds of each run (default 600)")
     parser.add_argument("--no-stack", action="store_true", help="skip the stack runs")
     args = parser.parse_args()
-    runs = {name: apply_overrides(load_scenario(scenario), [
-        *overrides, f"run.duration={args.duration}"]) for name, (scenario, overrides)
-        in VARIANTS.items()}
+    try:
+        runs = prepare_variants(VARIANTS, [f"run.duration={args.duration}"])
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
     print(f"controller cost per step, in-process, {args.duration:g} s runs "
           f"({round(args.duration / runs['pid']['run.period'])} steps):")
     for name, values in runs.items():

@@ -24,8 +24,8 @@ External libraries (benchmark-only, requirements-bench.txt), budgets made equal:
 * niapy KrillHerd, its defaults (50 krill, as the project KH); Task(max_evals=budget).
 The counted evaluations of every run are checked against the budget.
 
-    python scripts/benchmark_optimizers.py                 # full run (~11 min, 2 cores)
-    python scripts/benchmark_optimizers.py --quick         # smoke check
+    python benchmarks/benchmark_optimizers.py                 # full run (~11 min, 2 cores)
+    python benchmarks/benchmark_optimizers.py --quick         # smoke check
 """
 
 from __future__ import annotations

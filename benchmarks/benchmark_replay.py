@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Speed of bag replay on this machine (prints figures; asserts nothing).
 
-    python scripts/benchmark_replay.py [--bag BAG]
+    python benchmarks/benchmark_replay.py [--bag BAG]
 
 Records (or takes) a full 2400 s seed-000 bag, replays it at maximum rate and
 reports messages per second, then replays 10 s of it at --rate 1 and --rate 2

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Speed of tuning on this machine (prints figures; asserts nothing).
 
-    python scripts/benchmark_tuning.py [--candidates 4] [--baspso [--baspso-reference DIR]]
+    python benchmarks/benchmark_tuning.py [--candidates 4] [--baspso [--baspso-reference DIR]]
 
 Measures: the per-candidate overhead of relaunching the node graph (a one-step
 run, start to exit), stack-mode candidates per minute on the full seed-000 run
@@ -30,7 +30,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from pathlib import Path
 
-import _cli  # noqa: F401  (repo on sys.path)
+import _cli
 
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import Stack
@@ -104,14 +104,8 @@ def best_so_far(tuning: Path) -> list[list[str]]:
     return [row[:drop] + row[drop + 1:] for row in rows]
 
 
-def main() -> None:
-    parser = _cli.argument_parser(__doc__)
-    parser.add_argument("--candidates", type=int, default=4, help="stack candidates per setting")
-    parser.add_argument("--baspso", action="store_true", help="also time a 30 x 30 BAS-PSO run")
-    parser.add_argument("--baspso-reference", type=Path, metavar="DIR",
-                        help="the same BAS-PSO tuning without pruning (see above) to compare with")
-    args = parser.parse_args()
-    values = load_scenario("seed000")
+def print_stack_figures(values: dict, candidates_per_setting: int) -> None:
+    """The relaunch overhead of one-step candidates, then stack candidates per minute."""
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         overheads = []
@@ -123,9 +117,13 @@ def main() -> None:
               f"starts the fork server): median {statistics.median(overheads):.2f} s of "
               f"{', '.join(f'{o:.2f}' for o in overheads)} (target <= 0.5 s)")
         for workers in (1, 2):
-            rate = stack_rate(values, args.candidates, workers, tmp)
+            rate = stack_rate(values, candidates_per_setting, workers, tmp)
             print(f"stack mode, full 2400 s seed-000 candidates, {workers} worker(s): "
                   f"{rate:.2f} candidates/min")
+
+
+def print_in_process_figures(values: dict) -> None:
+    """One evaluation's time, evaluations per second, the Dask overhead per task."""
     times = []
     for index in range(6):
         started = time.perf_counter()
@@ -141,29 +139,46 @@ def main() -> None:
     overhead = dask_overhead(values)
     print("Dask overhead per task (LocalCluster, 2 workers): "
           + (f"{overhead * 1000:.1f} ms" if overhead is not None else "dask not installed"))
-    if args.baspso:
-        with tempfile.TemporaryDirectory() as tmp:
-            settings = TuningSettings("bas-pso", "seed000", SearchSpace.parse([SEED000_SPACE]),
-                                      evaluations=30 + 30 * 3 * 30, seed=1, workers=2,
-                                      in_process=True, options={"population_size": 30})
-            started = time.monotonic()
-            result = Tuner(values, settings, Path(tmp), progress=False).run()
-            wall = time.monotonic() - started
-            summary = json.loads((Path(tmp) / "summary.json").read_text())
-            history = best_so_far(Path(tmp))
-        print(f"BAS-PSO 30 particles x 30 iterations ({result.evaluations} evaluations, "
-              f"antennae included), in-process, 2 workers: {wall:.0f} s (target <= 180 s), "
-              f"pruned {summary['pruned_evaluations'] / result.evaluations:.0%}, "
-              f"best ITAE {result.best_f!r}")
-        if args.baspso_reference:
-            reference = json.loads((args.baspso_reference / "summary.json").read_text())
-            same = (reference["best_fitness"] == summary["best_fitness"]
-                    and reference["best_params"] == summary["best_params"]
-                    and best_so_far(args.baspso_reference) == history)
-            print(f"same best, best parameters and best-so-far history as the tuning without "
-                  f"pruning in {args.baspso_reference} ({reference['wall_time']:.0f} s): "
-                  + ("yes" if same else "NO"))
 
+
+def print_baspso_figures(values: dict, reference: Path | None) -> None:
+    """A full BAS-PSO tuning's wall time and pruned share; with `reference` (the same
+    tuning without pruning), whether both found the same."""
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = TuningSettings("bas-pso", "seed000", SearchSpace.parse([SEED000_SPACE]),
+                                  evaluations=30 + 30 * 3 * 30, seed=1, workers=2,
+                                  in_process=True, options={"population_size": 30})
+        started = time.monotonic()
+        result = Tuner(values, settings, Path(tmp), progress=False).run()
+        wall = time.monotonic() - started
+        summary = json.loads((Path(tmp) / "summary.json").read_text())
+        history = best_so_far(Path(tmp))
+    print(f"BAS-PSO 30 particles x 30 iterations ({result.evaluations} evaluations, "
+          f"antennae included), in-process, 2 workers: {wall:.0f} s (target <= 180 s), "
+          f"pruned {summary['pruned_evaluations'] / result.evaluations:.0%}, "
+          f"best ITAE {result.best_f!r}")
+    if reference:
+        expected = json.loads((reference / "summary.json").read_text())
+        same = (expected["best_fitness"] == summary["best_fitness"]
+                and expected["best_params"] == summary["best_params"]
+                and best_so_far(reference) == history)
+        print(f"same best, best parameters and best-so-far history as the tuning without "
+              f"pruning in {reference} ({expected['wall_time']:.0f} s): "
+              + ("yes" if same else "NO"))
+
+
+def main() -> None:
+    parser = _cli.argument_parser(__doc__)
+    parser.add_argument("--candidates", type=int, default=4, help="stack candidates per setting")
+    parser.add_argument("--baspso", action="store_true", help="also time a 30 x 30 BAS-PSO run")
+    parser.add_argument("--baspso-reference", type=Path, metavar="DIR",
+                        help="the same BAS-PSO tuning without pruning (see above) to compare with")
+    args = parser.parse_args()
+    values = load_scenario("seed000")
+    print_stack_figures(values, args.candidates)
+    print_in_process_figures(values)
+    if args.baspso:
+        print_baspso_figures(values, args.baspso_reference)
 
 if __name__ == "__main__":
     main()

@@ -1,7 +1,7 @@
 """Two-process rclpy ping-pong, the reference the benchmark compares the stack to.
 
-    python scripts/pingpong.py echo            # answers every /ping on /pong
-    python scripts/pingpong.py ping N          # sends N pings, prints round trips/s
+    python benchmarks/pingpong.py echo            # answers every /ping on /pong
+    python benchmarks/pingpong.py ping N          # sends N pings, prints round trips/s
 
 benchmark.py starts both, in the environment of the stack's nodes.
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Speed of the stack on this machine (prints figures; asserts nothing).
 
-    python scripts/benchmark.py [--duration 2400] [--round-trips 10000]
+    python benchmarks/benchmark.py [--duration 2400] [--round-trips 10000]
 
 Measures, in one run: the two-process rclpy ping-pong round-trip rate (plain
 rclpy, std_msgs/Float64, the stack's QoS), the stack's lockstep steps per
