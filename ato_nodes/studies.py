@@ -1,12 +1,12 @@
 """Studies: named variants of a run, run side by side and set in one table.
 
-What the study commands (scripts/ablation.py, robustness.py, compare_scenarios.py,
-compare_seed001.py; compare_tuners.py and compare_strategies.py for their pool and
-outputs) share: each variant is a scenario and the overrides that make it, prepared
-(loaded, overridden, checked) before anything runs; the runs go in-process in a pool
-of processes, or through the stack one after another, each scored from its bag and
-checked bit for bit against the same run in-process; the study's Markdown table and
-its JSON report go to its output directory.
+What the study commands share (scripts/ablation.py, robustness.py, compare_scenarios.py,
+compare_seed001.py; compare_strategies.py its pool and outputs, compare_tuners.py its
+outputs, their variants being optimisations): each variant is a scenario and the
+overrides that make it, prepared (loaded, overridden, checked) before anything runs;
+the runs go in-process in a pool of processes, or through the stack one after another,
+each scored from its bag and checked bit for bit against the same run in-process; the
+study's Markdown table and its JSON report go to its output directory.
 """
 
 from __future__ import annotations
