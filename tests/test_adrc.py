@@ -4,12 +4,25 @@ import math
 
 import pytest
 
-from ato_nodes.core.control.adrc import (HanADRCGains, LinearADRC, LinearADRCGains,
-                                         TrackingDifferentiator, eso_update, fal, fal_gain, fhan,
-                                         han_adrc, nlsef)
+from ato_nodes.core.control.adrc import (HanADRCGains, LinearADRCGains, eso_update, fal,
+                                         fal_gain, fhan, han_adrc, linear_adrc_of, nlsef,
+                                         td_update)
+from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.base.spec import settings
+
+
+class TrackingDifferentiator:
+    """Han's discrete TD (td_update): v1 follows the input, v2 its derivative."""
+
+    def __init__(self, r0, h0, period):
+        self.settings = (r0, h0, period)
+        self.v = (0.0, 0.0)
+
+    def update(self, target):
+        self.v = td_update(*self.v, target, *self.settings)
+        return self.v
 
 
 class NonlinearESO:
@@ -173,12 +186,12 @@ class TestNLSEF:
 class TestLinearADRC:
     def test_tracks_a_first_order_plant_with_constant_disturbance(self):
         period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
-        adrc = LinearADRC(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b, feedforward=False,
-                                          delay_aware=False), period,
-                          CommandLimiter(-1e6, 1e6))
+        adrc = linear_adrc_of(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b,
+                                              feedforward=False, delay_aware=False), period,
+                              CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()))
         v = 0.0
         for _ in range(400):
-            out = adrc.step(10.0, v)
+            out = adrc.step(10.0, v, [10.0])
             v += period * (b * out.u + disturbance)
         assert v == pytest.approx(10.0, abs=1e-3)
         assert out.extras[1] == pytest.approx(disturbance, abs=1e-3)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ato_nodes.analysis import markdown_table
-from ato_nodes.core.control.adrc import LinearADRC, LinearADRCGains
+from ato_nodes.core.control.adrc import LinearADRCGains, linear_adrc_of
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.train.line import load_line
@@ -22,7 +22,7 @@ from ato_nodes.core.targets.profiles import AtoCurve, FeasiblePlan, Seed000Profi
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.core.control.train_model import NominalTrain
+from ato_nodes.core.control.train_model import nominal_advance, nominal_predict, nominal_train
 
 PERIOD = 0.1
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,7 +37,8 @@ def metro(**changes) -> TrainParameters:
 def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag():
     train = metro()
     plant = PointMassTrain(train, PERIOD, 4, TrainState(speed=10.0))
-    model, blind = NominalTrain(train, PERIOD), NominalTrain(replace(train, dead_time=0.0), PERIOD)
+    (model, state), (blind, blind_state) = (nominal_train(train, PERIOD),
+                                            nominal_train(replace(train, dead_time=0.0), PERIOD))
     commands = [40.0] * 30 + [-30.0] * 30 + [80.0] * 40
     speeds, worst, worst_blind = [], 0.0, 0.0
     for k, u in enumerate(commands):
@@ -45,8 +46,10 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
         if k >= 60:  # from step 60 the command is held at 80: the prediction's assumption
             ahead = 10
             if k + ahead < len(commands):
-                predicted = model.predict(speeds[-1], 0.0, train.xi, ahead, u)
-                blind_prediction = blind.predict(speeds[-1], 0.0, train.xi, ahead, u)
+                predicted = nominal_predict(model, state, speeds[-1], 0.0, train.xi, ahead, u,
+                                            True)
+                blind_prediction = nominal_predict(blind, blind_state, speeds[-1], 0.0, train.xi,
+                                                   ahead, u, True)
                 future = PointMassTrain(train, PERIOD, 4, TrainState(speed=0.0))
                 future.state = replace(plant.state)
                 future.lag_state, future.delayed = plant.lag_state, plant.delayed.copy()
@@ -54,8 +57,8 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
                     future.step(u)
                 worst = max(worst, abs(predicted - future.state.speed))
                 worst_blind = max(worst_blind, abs(blind_prediction - future.state.speed))
-        model.advance(u, speeds[-1])
-        blind.advance(u, speeds[-1])
+        state = nominal_advance(model, state, u, speeds[-1])[1]
+        blind_state = nominal_advance(blind, blind_state, u, speeds[-1])[1]
         plant.step(u)
     assert worst < 0.01  # Euler over 1 s against RK4: millimetres per second
     assert worst_blind > 5 * worst  # ignoring the dead time is visibly wrong
@@ -64,7 +67,7 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
 def test_the_linear_adrc_without_its_additions_is_the_papers_law():
     gains = LinearADRCGains(omega_o=8.0, omega_c=1.5, b0=0.009, feedforward=False,
                             delay_aware=False)
-    adrc = LinearADRC(gains, PERIOD, CommandLimiter(-1e6, 1e6))
+    adrc = linear_adrc_of(gains, PERIOD, CommandLimiter(-1e6, 1e6), metro())
     z1 = z2 = u_prev = 0.0
     adrc.start(1.0, 0.5)
     z1 = 0.5

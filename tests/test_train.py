@@ -7,7 +7,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ato_nodes.core.control.adrc import DiscreteADRC, DiscreteADRCGains, fal, nladrc_gains
+from ato_nodes.core.control.adrc import (DISCRETE_ADRC_STEPS, DiscreteADRCGains,
+                                         DiscreteADRCSettings, fal, nladrc_gains)
+from ato_nodes.core.control.stepped import SteppedController
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.train.line import parse_line
 from ato_nodes.core.run.loop import simulate
@@ -235,17 +237,18 @@ def test_nladrc_is_han_adrc_with_a_bandwidth_parametrised_observer():
 
 
 def test_the_discrete_adrc_follows_the_printed_equations_for_one_step():
-    g = replace(settings(DiscreteADRCGains, "dadrc", defaults()), b01=0.8, b02=0.2, b03=0.01,
-                b1=30.0, b2=50.0, b0=2e-4)
-    controller = DiscreteADRC(g, 0.1, CommandLimiter(-1e9, 1e9))
+    g = settings(DiscreteADRCGains, "dadrc", defaults())._replace(
+        b01=0.8, b02=0.2, b03=0.01, b1=30.0, b2=50.0, b0=2e-4)
+    controller = SteppedController(DISCRETE_ADRC_STEPS, DiscreteADRCSettings(g, 0.1),
+                                   CommandLimiter(-1e9, 1e9))
     controller.start(1.0, 1.0)
-    controller.z2, controller.z3, controller.u_applied = 0.05, 0.002, 10.0
-    out = controller.step(2.0, 1.2)
+    controller.state = controller.state._replace(z2=0.05, z3=0.002, u_applied=10.0)
+    out = controller.step(2.0, 1.2, [2.0])
     e = 1.0 - 1.2
     z1 = 1.0 + 0.05 - 0.8 * e
     z2 = 0.05 + 0.002 - 0.2 * fal(e, 0.5, 0.01) + 2e-4 * 10.0
     z3 = 0.002 - 0.01 * fal(e, 0.25, 0.01)
-    v1, v2 = controller.td.v1, controller.td.v2
+    v1, v2 = controller.state.v1, controller.state.v2
     u = 30.0 * fal(v1 - z1, 0.75, 0.01) + 50.0 * fal(v2 * 0.1 - z2, 0.5, 0.01) - z3 / 2e-4
     assert out.u == pytest.approx(u) and out.extras[0] == pytest.approx(z1)
     assert out.extras[1] == pytest.approx(z2 / 0.1) and out.extras[2] == pytest.approx(z3 / 0.01)

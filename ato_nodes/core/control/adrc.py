@@ -36,15 +36,17 @@ Discretisation (the papers give continuous-time equations):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 from ..base.kernels import jitable
-from ..base.registry import Component, Controller, ControllerOutput, Output
+from ..base.registry import Component, Output
 from ..base.spec import param, settings
+from ..train.line import Line
+from ..train.plant import TrainParameters
 from .limiter import CommandLimiter, LimiterSettings, limit_command
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
-from .train_model import NominalTrain
+from .train_model import (NominalModel, NominalState, known_resistance, nominal_advance,
+                          nominal_predict, nominal_train)
 
 
 @jitable
@@ -91,18 +93,6 @@ def td_update(v1: float, v2: float, target: float, r0: float, h0: float, h: floa
     """One step of Han's discrete TD."""
     fh = fhan(v1 - target, v2, r0, h0)
     return v1 + h * v2, v2 + h * fh
-
-
-class TrackingDifferentiator:
-    """Han's discrete TD: v1 follows the input, v2 its derivative."""
-
-    def __init__(self, r0: float, h0: float, period: float, v1: float = 0.0, v2: float = 0.0):
-        self.r0, self.h0, self.h = r0, h0, period
-        self.v1, self.v2 = v1, v2
-
-    def update(self, target: float) -> tuple[float, float]:
-        self.v1, self.v2 = td_update(self.v1, self.v2, target, self.r0, self.h0, self.h)
-        return self.v1, self.v2
 
 
 @jitable
@@ -268,8 +258,7 @@ DISCRETE_ADRC_PARAMETERS = (
 )
 
 
-@dataclass(frozen=True)
-class DiscreteADRCGains:
+class DiscreteADRCGains(NamedTuple):
     """Seed 004's gains (dadrc.*), per step (the control period folded in)."""
 
     b01: float
@@ -285,7 +274,35 @@ class DiscreteADRCGains:
     h0: float
 
 
-class DiscreteADRC(Controller):
+class DiscreteADRCSettings(NamedTuple):
+    gains: DiscreteADRCGains
+    period: float  # s
+    # The observer's fal exponents as printed. Settings, not literals in the step: a
+    # literal 0.5 lets the compiler turn |e| ** 0.5 into a square root, whose last bit
+    # can differ from the power the Python step computes.
+    alpha_z2: float = 0.5
+    alpha_z3: float = 0.25
+
+
+class DiscreteADRCState(NamedTuple):
+    z1: float = 0.0         # the observer's speed (m/s), its change per step, and that
+    z2: float = 0.0         # change's change per step
+    z3: float = 0.0
+    v1: float = 0.0         # the tracking differentiator's target (m/s) and derivative
+    v2: float = 0.0
+    u_applied: float = 0.0  # the command the observer is told: the last one let through
+
+
+@jitable
+def discrete_adrc_start(settings: DiscreteADRCSettings, state: DiscreteADRCState,
+                        target: float, measured: float) -> DiscreteADRCState:
+    return DiscreteADRCState(measured, state.z2, state.z3, target, state.v2, state.u_applied)
+
+
+@jitable
+def discrete_adrc_step(settings: DiscreteADRCSettings, state: DiscreteADRCState,
+                       target: float, measured: float, horizon, last: float,
+                       limits: LimiterSettings):
     """Seed 004's discrete second-order ADRC, the ESO exactly as printed:
 
         e = z1 - y;  z1 += z2 - b01 e;  z2 += z3 - b02 fal(e, 0.5) + b0 u;
@@ -293,31 +310,22 @@ class DiscreteADRC(Controller):
 
     With the step folded into the gains, z2 is the speed change per step and z3
     its change per step, so the TD's v2 (m/s^2) enters e2 = v2 h - z2 in the same
-    per-step unit (the paper leaves this implicit: our reading). The recorded z2
-    and z3 are converted back to m/s^2 and m/s^3.
-    """
+    per-step unit (the paper leaves this implicit: our reading). The outputs z2
+    and z3 are converted back to m/s^2 and m/s^3."""
+    g, h = settings.gains, settings.period
+    e = state.z1 - measured
+    z1 = state.z1 + state.z2 - g.b01 * e
+    z2 = state.z2 + state.z3 - g.b02 * fal(e, settings.alpha_z2, g.delta) \
+        + g.b0 * state.u_applied
+    z3 = state.z3 - g.b03 * fal(e, settings.alpha_z3, g.delta)
+    v1, v2 = td_update(state.v1, state.v2, target, g.r0, g.h0, h)
+    u0 = g.b1 * fal(v1 - z1, g.alpha1, g.delta) + g.b2 * fal(v2 * h - z2, g.alpha2, g.delta)
+    u = limit_command(u0 - z3 / g.b0, target, measured, last, limits)
+    return u, (z1, z2 / h, z3 / (h * h), v1, v2), DiscreteADRCState(z1, z2, z3, v1, v2, u)
 
-    def __init__(self, gains: DiscreteADRCGains, period: float, limiter: CommandLimiter):
-        self.gains, self.h, self.limiter = gains, period, limiter
-        self.td = TrackingDifferentiator(gains.r0, gains.h0, period)
-        self.z1, self.z2, self.z3 = 0.0, 0.0, 0.0
-        self.u_applied = 0.0
 
-    def start(self, target: float, measured: float) -> None:
-        self.td.v1, self.z1 = target, measured
-
-    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
-        g, h = self.gains, self.h
-        e = self.z1 - measured
-        z1 = self.z1 + self.z2 - g.b01 * e
-        z2 = self.z2 + self.z3 - g.b02 * fal(e, 0.5, g.delta) + g.b0 * self.u_applied
-        z3 = self.z3 - g.b03 * fal(e, 0.25, g.delta)
-        self.z1, self.z2, self.z3 = z1, z2, z3
-        v1, v2 = self.td.update(target)
-        u0 = g.b1 * fal(v1 - z1, g.alpha1, g.delta) + g.b2 * fal(v2 * h - z2, g.alpha2, g.delta)
-        u = self.limiter.apply(u0 - z3 / g.b0, target, measured)
-        self.u_applied = u
-        return ControllerOutput(u, (z1, z2 / h, z3 / (h * h), v1, v2))
+DISCRETE_ADRC_STEPS = ControllerSteps(discrete_adrc_start, discrete_adrc_step,
+                                      DiscreteADRCState)
 
 
 LINEAR_ADRC_PARAMETERS = (
@@ -338,8 +346,7 @@ LINEAR_ADRC_PARAMETERS = (
 )
 
 
-@dataclass(frozen=True)
-class LinearADRCGains:
+class LinearADRCGains(NamedTuple):
     """Bandwidth parametrisation (ladrc.*): observer bandwidth omega_o, controller omega_c;
     the two model-based additions, off in the papers' settings."""
 
@@ -350,7 +357,32 @@ class LinearADRCGains:
     delay_aware: bool
 
 
-class LinearADRC(Controller):
+class LinearADRCSettings(NamedTuple):
+    gains: LinearADRCGains
+    period: float          # s
+    l1: float              # the observer's gains, 2 omega_o and omega_o^2
+    l2: float
+    model: NominalModel    # the nominal train, read with feedforward or delay_aware
+
+
+class LinearADRCState(NamedTuple):
+    z1: float              # the observer's speed, m/s
+    z2: float              # the observer's total disturbance, m/s^2
+    observer_input: float  # F - w over the last period, N/kN
+    u_applied: float       # the last command let through
+    model: NominalState
+
+
+@jitable
+def linear_adrc_start(settings: LinearADRCSettings, state: LinearADRCState, target: float,
+                      measured: float) -> LinearADRCState:
+    return LinearADRCState(measured, state.z2, state.observer_input, state.u_applied,
+                           state.model)
+
+
+@jitable
+def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, target: float,
+                     measured: float, horizon, last: float, limits: LimiterSettings):
     """First-order linear ADRC for the speed loop (the plant's true relative degree).
 
     ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by the input
@@ -359,59 +391,55 @@ class LinearADRC(Controller):
         u = (omega_c (r - v) + a_r - z2) / b0 + w_r.
     In the papers' setting F is the command, w = w_r = a_r = 0 and v = z1. With
     `feedforward`, a_r is the plan's acceleration at r, w the known resistance now
-    and w_r at r's planned position (core/control/train_model.py); with `delay_aware`, F is
-    the force the nominal actuator applies and v the speed predicted N steps ahead
+    and w_r at r's planned position (core/control/train_model.py); with `delay_aware`, F
+    is the force the nominal actuator applies and v the speed predicted N steps ahead
     (the commands inside the dead time and lag act first), so the law's error is
     the one its command can still change. The ESO is integrated by backward Euler in
-    closed form, stable for any step.
-    """
-
-    def __init__(self, gains: LinearADRCGains, period: float, limiter: CommandLimiter,
-                 model: NominalTrain | None = None):
-        self.gains, self.h = gains, period
-        self.limiter = limiter
-        self.l1, self.l2 = 2.0 * gains.omega_o, gains.omega_o ** 2
-        self.z1, self.z2 = 0.0, 0.0
-        self.model = model
-        self.observer_input = 0.0  # F - w over the last period, N/kN
-        self.u_applied = 0.0
-
-    def start(self, target: float, measured: float) -> None:
-        self.z1 = measured
-
-    def step(self, target: float, measured: float, horizon=None) -> ControllerOutput:
-        g, h, model = self.gains, self.h, self.model
-        e = (self.z1 - measured + h * (self.z2 + g.b0 * self.observer_input)) / (
-            1.0 + h * self.l1 + h * h * self.l2)
-        self.z2 -= h * self.l2 * e
-        self.z1 = measured + e
-        ahead = len(horizon) - 1 if horizon is not None else 0
-        speed = self.z1
-        if g.delay_aware and ahead:
-            speed = model.predict(self.z1, self.z2, g.b0, ahead, self.u_applied,
-                                  g.feedforward)
-        law = (g.omega_c * (target - speed) - self.z2) / g.b0
-        resistance = 0.0  # known to the observer over the coming period
-        if g.feedforward:
-            planned = (horizon[-1] - horizon[-2]) / h if ahead else 0.0
-            law += planned / g.b0 + model.known_resistance(
-                target, model.position + h * sum(horizon[:-1]))
-            resistance = model.known_resistance(measured, model.position)
-        u = self.limiter.apply(law, target, measured)
-        self.u_applied = u
-        force = model.advance(u, measured) if model is not None else u
-        self.observer_input = (force if g.delay_aware else u) - resistance
-        return ControllerOutput(u, (self.z1, self.z2))
+    closed form, stable for any step. Outputs z1, z2."""
+    g, h, model = settings.gains, settings.period, settings.model
+    e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
+        1.0 + h * settings.l1 + h * h * settings.l2)
+    z2 = state.z2 - h * settings.l2 * e
+    z1 = measured + e
+    ahead = len(horizon) - 1
+    speed = z1
+    if g.delay_aware and ahead:
+        speed = nominal_predict(model, state.model, z1, z2, g.b0, ahead, state.u_applied,
+                                g.feedforward)
+    law = (g.omega_c * (target - speed) - z2) / g.b0
+    resistance = 0.0  # known to the observer over the coming period
+    if g.feedforward:
+        planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
+        travelled = 0.0  # sum(horizon[:-1]), left to right
+        for i in range(ahead):
+            travelled += horizon[i]
+        law += planned / g.b0 + known_resistance(model, target,
+                                                 state.model.position + h * travelled)
+        resistance = known_resistance(model, measured, state.model.position)
+    u = limit_command(law, target, measured, last, limits)
+    force, nominal = u, state.model
+    if g.feedforward or g.delay_aware:
+        force, nominal = nominal_advance(model, state.model, u, measured)
+    observer_input = (force if g.delay_aware else u) - resistance
+    return u, (z1, z2), LinearADRCState(z1, z2, observer_input, u, nominal)
 
 
-def linear_adrc(values, context, limiter: CommandLimiter) -> LinearADRC:
-    gains = settings(LinearADRCGains, "ladrc", values)
-    model = None
-    if gains.feedforward or gains.delay_aware:
-        model = NominalTrain(context.train, context.period, values["plant.initial_position"],
-                             context.line)
-    return LinearADRC(gains, context.period, limiter, model)
+LINEAR_ADRC_STEPS = ControllerSteps(linear_adrc_start, linear_adrc_step, LinearADRCState)
 
+
+def linear_adrc_of(gains: LinearADRCGains, period: float, limiter: CommandLimiter,
+                   train: TrainParameters, position: float = 0.0, line: Line | None = None
+                   ) -> SteppedController:
+    """The linear ADRC with the nominal model of `train` on `line` from `position`."""
+    model, nominal = nominal_train(train, period, position, line)
+    return SteppedController(LINEAR_ADRC_STEPS, LinearADRCSettings(
+        gains, period, 2.0 * gains.omega_o, gains.omega_o ** 2, model), limiter,
+        LinearADRCState(0.0, 0.0, 0.0, 0.0, nominal))
+
+
+def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
+    return linear_adrc_of(settings(LinearADRCGains, "ladrc", values), context.period, limiter,
+                          context.train, values["plant.initial_position"], context.line)
 
 
 HAN_ADRC = Component(
@@ -436,13 +464,13 @@ NLADRC = Component(
 
 DISCRETE_ADRC = Component(
     "discrete_adrc", "seed 004: discrete ADRC", DISCRETE_ADRC_PARAMETERS,
-    lambda values, context, limiter: DiscreteADRC(settings(DiscreteADRCGains, "dadrc", values),
-                                                  context.period, limiter),
+    lambda values, context, limiter: SteppedController(DISCRETE_ADRC_STEPS, DiscreteADRCSettings(
+        settings(DiscreteADRCGains, "dadrc", values), context.period), limiter),
     OBSERVER_OUTPUTS,
     observer_gain=lambda values: values["dadrc.b0"] / values["run.period"] ** 2,  # per step^2
     search_space=(("dadrc.b01", 0.1, 2.5), ("dadrc.b02", 0.001, 1.0),
                   ("dadrc.b03", 0.00001, 0.1), ("dadrc.b1", 1.0, 300.0), ("dadrc.b2", 1.0, 1000.0)),
-    state_paths=("td.v1", "td.v2", "z1", "z2", "z3", "u_applied"))
+    state_paths=STATE_PATHS, steps=DISCRETE_ADRC_STEPS)
 
 LINEAR_ADRC = Component(
     "linear_adrc", "first-order linear ADRC", LINEAR_ADRC_PARAMETERS,
@@ -451,4 +479,4 @@ LINEAR_ADRC = Component(
      Output("z2", "m/s^2", "ESO total-disturbance estimate")),
     search_space=(("ladrc.omega_o", 2.0, 40.0), ("ladrc.omega_c", 0.3, 6.0),
                   ("ladrc.b0", 0.006, 0.013)),
-    state_paths=("z1", "z2", "model", "observer_input", "u_applied"))
+    state_paths=STATE_PATHS, steps=LINEAR_ADRC_STEPS)

@@ -30,9 +30,11 @@ STATE_PATHS = ("state",)  # what a live retune carries over (Component.state_pat
 
 
 class SteppedController(Controller):
-    def __init__(self, steps: ControllerSteps, settings: NamedTuple, limiter: CommandLimiter):
+    def __init__(self, steps: ControllerSteps, settings: NamedTuple, limiter: CommandLimiter,
+                 state: NamedTuple | None = None):
+        """`state` the state before the first step (default: the state type's defaults)."""
         self.steps, self.settings, self.limiter = steps, settings, limiter
-        self.state = steps.state_type()
+        self.state = steps.state_type() if state is None else state
 
     def start(self, target: float, measured: float) -> None:
         self.state = self.steps.start(self.settings, self.state, target, measured)

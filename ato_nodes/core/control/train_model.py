@@ -14,6 +14,8 @@ measures:
 
 It predicts the speed some steps ahead from the commands already sent (then the
 last one held), which is what a controller facing dead time and lag must act on.
+The model is a NominalModel (what the run fixes) and a NominalState (what moves),
+stepped by jitable functions that the Python and the compiled loop both call.
 The real train may differ (core/train/plant.py's plant.*_factor): the controller's
 observer estimates what this model does not explain.
 """
@@ -21,75 +23,108 @@ observer estimates what this model does not explain.
 from __future__ import annotations
 
 import math
-from collections import deque
+from typing import NamedTuple
 
-from ..train.line import Line
-from ..train.plant import TrainParameters
+import numpy as np
+
+from ..base.kernels import jitable
+from ..train.line import Line, LineTables, belt_resistance, in_neutral_section, line_arrays
+from ..train.plant import TrainConstants, TrainParameters, basic_resistance, force_limits
 from .limiter import clamp
 
 
-class NominalTrain:
-    def __init__(self, train: TrainParameters, period: float, position: float = 0.0,
-                 line: Line | None = None):
-        self.train, self.h, self.line = train, period, line
-        self.pending = deque([0.0] * round(train.dead_time / period))
-        lag = train.actuator_lag
-        self.decay = math.exp(-period / lag) if lag > 0.0 else 0.0
-        self.spread = lag * (1.0 - self.decay) / period if lag > 0.0 else 0.0  # step mean
-        self.limited = train.limited
-        self.neutral = line is not None and bool(line.neutral_sections)
-        self.lag_state = 0.0  # N/kN, the lag's output before the envelope
-        self.position = position
+class NominalModel(NamedTuple):
+    """What the ATO knows of its train and line before the run."""
 
-    def _act(self, lag_state: float, command: float, speed: float, position: float
-             ) -> tuple[float, float]:
-        """One period with `command` reaching the lag: (next lag state, mean force N/kN)."""
-        if self.neutral and command > 0.0 and self.line.in_neutral_section(
-                position - self.train.pantograph_offset):
-            command, powered = 0.0, False
-        else:
-            powered = True
-        if self.limited:
-            low, high = self.train.force_limits(speed)
-            command = clamp(command, low, high)
-        mean = command + (lag_state - command) * self.spread
-        if self.limited:
-            mean = clamp(mean, low, high)
-        if not powered and mean > 0.0:
-            mean = 0.0
-        return command + (lag_state - command) * self.decay, mean
+    train: TrainConstants      # the nominal train
+    pantograph_offset: float   # m behind the head
+    period: float              # s
+    decay: float               # the lag's decay over a period (0: no lag)
+    spread: float              # the lag's mean over a period, as a share of the change
+    line: LineTables           # the line's (empty: the open track)
+    on_line: bool
+    neutral: bool              # the line has neutral sections
 
-    def advance(self, command: float, speed: float) -> float:
-        """The period that starts now, `command` just sent and `speed` just measured:
-        the mean force the train will apply over it, N/kN (the model moves on)."""
-        if self.pending:
-            self.pending.append(command)
-            command = self.pending.popleft()
-        self.lag_state, mean = self._act(self.lag_state, command, speed, self.position)
-        self.position += self.h * speed
-        return mean
 
-    def known_resistance(self, speed: float, position: float) -> float:
-        """Basic plus line resistance the model knows at `speed` and `position`, N/kN."""
-        resistance = self.train.resistance(speed)
-        if self.line is not None:
-            resistance += self.line.additional_resistance(position, self.train.length)
-        return resistance
+class NominalState(NamedTuple):
+    lag_state: float           # N/kN, the lag's output before the envelope
+    position: float            # m, dead-reckoned
+    pending: np.ndarray        # the commands inside the dead time (a ring, oldest first
+    oldest: int                # at `oldest`)
 
-    def predict(self, speed: float, unexplained: float, gain: float, steps: int,
-                held: float, resisted: bool = True) -> float:
-        """The speed `steps` periods from now, from `speed` now: the commands inside the
-        dead time act in turn, then `held`; acceleration gain (force - known
-        resistance) + `unexplained` (m/s^2, an observer's estimate of the rest; without
-        `resisted` it holds the resistance too, and the model's is left out)."""
-        h, lag_state, position = self.h, self.lag_state, self.position
-        queued = iter(self.pending)
-        for _ in range(steps):
-            command = next(queued, held)
-            lag_state, mean = self._act(lag_state, command, speed, position)
-            if resisted:
-                mean -= self.known_resistance(speed, position)
-            acceleration = gain * mean + unexplained
-            position += h * speed
-            speed += h * acceleration
-        return speed
+
+def nominal_train(train: TrainParameters, period: float, position: float = 0.0,
+                  line: Line | None = None) -> tuple[NominalModel, NominalState]:
+    """The model of `train` on `line` and its state at the start, at `position`."""
+    lag = train.actuator_lag
+    decay = math.exp(-period / lag) if lag > 0.0 else 0.0
+    spread = lag * (1.0 - decay) / period if lag > 0.0 else 0.0  # the step's mean
+    model = NominalModel(train.constants(), train.pantograph_offset, period, decay, spread,
+                         line_arrays(line), line is not None,
+                         line is not None and bool(line.neutral_sections))
+    return model, NominalState(0.0, position, np.zeros(round(train.dead_time / period)), 0)
+
+
+@jitable
+def nominal_act(model: NominalModel, lag_state: float, command: float, speed: float,
+                position: float) -> tuple[float, float]:
+    """One period with `command` reaching the lag: (next lag state, mean force N/kN)."""
+    train = model.train
+    powered = True
+    if model.neutral and command > 0.0 and in_neutral_section(
+            model.line, position - model.pantograph_offset):
+        command, powered = 0.0, False
+    low, high = 0.0, 0.0
+    if train.limited:
+        low, high = force_limits(speed, train.envelope)
+        command = clamp(command, low, high)
+    mean = command + (lag_state - command) * model.spread
+    if train.limited:
+        mean = clamp(mean, low, high)
+    if not powered and mean > 0.0:
+        mean = 0.0
+    return command + (lag_state - command) * model.decay, mean
+
+
+@jitable
+def nominal_advance(model: NominalModel, state: NominalState, command: float, speed: float
+                    ) -> tuple[float, NominalState]:
+    """The period that starts now, `command` just sent and `speed` just measured: (the
+    mean force the train will apply over it, N/kN; the model's state after it)."""
+    pending, oldest = state.pending, state.oldest
+    if len(pending):
+        command, pending[oldest] = pending[oldest], command
+        oldest = (oldest + 1) % len(pending)
+    lag_state, mean = nominal_act(model, state.lag_state, command, speed, state.position)
+    return mean, NominalState(lag_state, state.position + model.period * speed, pending, oldest)
+
+
+@jitable
+def known_resistance(model: NominalModel, speed: float, position: float) -> float:
+    """Basic plus line resistance the model knows at `speed` and `position`, N/kN."""
+    train = model.train
+    resistance = basic_resistance(speed, train.davis_a, train.davis_b, train.davis_c)
+    if model.on_line:
+        resistance += belt_resistance(model.line, position, train.length)
+    return resistance
+
+
+@jitable
+def nominal_predict(model: NominalModel, state: NominalState, speed: float,
+                    unexplained: float, gain: float, steps: int, held: float,
+                    resisted: bool) -> float:
+    """The speed `steps` periods from now, from `speed` now: the commands inside the
+    dead time act in turn, then `held`; acceleration gain (force - known resistance) +
+    `unexplained` (m/s^2, an observer's estimate of the rest; without `resisted` it
+    holds the resistance too, and the model's is left out)."""
+    h, lag_state, position = model.period, state.lag_state, state.position
+    pending = state.pending
+    for i in range(steps):
+        command = pending[(state.oldest + i) % len(pending)] if i < len(pending) else held
+        lag_state, mean = nominal_act(model, lag_state, command, speed, position)
+        if resisted:
+            mean -= known_resistance(model, speed, position)
+        acceleration = gain * mean + unexplained
+        position += h * speed
+        speed += h * acceleration
+    return speed
