@@ -175,3 +175,24 @@ def test_a_line_run_in_one_step_chunks_gives_the_bits_of_a_run_in_one_call(monke
     whole, chunked = (chunked_run(monkeypatch, values, first) for first in (10**9, 1))
     for name in whole:
         assert np.array_equal(whole[name], chunked[name]), name
+
+
+def test_a_change_to_any_core_source_drops_the_compiled_cache(tmp_path):
+    """numba itself only compares the compiled function's own file with its cache; the
+    loop inlines formulas from the whole core."""
+    source = tmp_path / "module.py"
+    namespace = {}
+    exec(compile("def looped():\n    pass\n", str(source), "exec"), namespace)
+    looped = namespace["looped"]
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    machine_code = [cache / "module.looped-1.py311.nbi", cache / "module.looped-1.py311.1.nbc"]
+    for path in machine_code:
+        path.write_text("compiled")
+    (cache / "module.looped.sources").write_text(kernels.sources_digest())
+    kernels._drop_stale_cache(looped)
+    assert all(path.exists() for path in machine_code)  # the same sources: kept
+    (cache / "module.looped.sources").write_text("the digest of other sources")
+    kernels._drop_stale_cache(looped)
+    assert not any(path.exists() for path in machine_code)
+    assert (cache / "module.looped.sources").read_text() == kernels.sources_digest()

@@ -11,14 +11,19 @@ Without numba nothing is compiled and every run takes the Python path.
 
 Compiling takes seconds (the loop of core/run/fast_loop.py: 3-5 s here); the machine
 code is then cached beside the source (`__pycache__`, cache=True), and every later
-process of the checkout loads it in a fraction of that. `announced` tells the
-user when a compilation really happens.
+process of the checkout loads it in a fraction of that. numba checks only the
+compiled function's own file to decide whether its cache is stale, while the loop
+inlines formulas from all over the core: `compiled` therefore keeps a digest of
+every core source beside the cache and drops the cache when any of them changed.
+`announced` tells the user when a compilation really happens.
 """
 
 from __future__ import annotations
 
+import hashlib
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 
 try:
     import numba
@@ -35,9 +40,43 @@ def jitable(function):
 
 
 def compiled(function):
-    """`function` compiled by numba (machine code cached on disk beside the source),
-    or None without numba."""
-    return numba.njit(cache=True, nogil=True)(function) if AVAILABLE else None
+    """`function` compiled by numba (machine code cached on disk beside the source, and
+    recompiled when any core source changed), or None without numba."""
+    if not AVAILABLE:
+        return None
+    _drop_stale_cache(function)
+    return numba.njit(cache=True, nogil=True)(function)
+
+
+CORE = Path(__file__).resolve().parents[1]  # ato_nodes/core
+
+
+def sources_digest() -> str:
+    """sha256 over every core source file, by path and content."""
+    digest = hashlib.sha256()
+    for path in sorted(CORE.rglob("*.py")):
+        digest.update(str(path.relative_to(CORE)).encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()
+
+
+def _drop_stale_cache(function) -> None:
+    """Remove `function`'s numba cache files when the core's sources differ from those
+    it was compiled from (a digest kept beside them); best effort: a cache folder that
+    cannot be written is numba's to handle."""
+    source = Path(function.__code__.co_filename)
+    cache = source.parent / "__pycache__"
+    stem = f"{source.stem}.{function.__qualname__}"
+    stamp = cache / f"{stem}.sources"
+    digest = sources_digest()
+    try:
+        if stamp.is_file() and stamp.read_text() == digest:
+            return
+        for stale in cache.glob(f"{stem}-*.nb[ic]"):
+            stale.unlink(missing_ok=True)
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass
 
 
 @contextmanager
