@@ -46,18 +46,7 @@ def main() -> None:
 
 def run_stack() -> None:
     args = parse_args()
-    try:
-        overrides = list(args.set)
-        if args.duration is not None:
-            overrides.append(f"run.duration={args.duration}")
-        if args.real_time:
-            overrides.append("run.real_time=true")
-        values = prepare(args.scenario, overrides)
-        check_launcher_free(values)
-    except ScenarioError as exc:
-        cli.fail(str(exc))
-    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-        cli.fail(f"--domain-id {args.domain_id} is outside 0-232")
+    values = checked_values(args)
     name = Path(args.scenario).stem
     bag = args.out or Path("bags") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cli.new_directory(bag)
@@ -75,20 +64,7 @@ def run_stack() -> None:
     for number in (signal.SIGINT, signal.SIGTERM):
         signal.signal(number, lambda *_: pressed.append(True))
     outcome = stack.run()  # interrupted by either signal meanwhile (its own handlers)
-
-    summary = {"scenario": name, "bag": str(bag), "status": outcome.status,
-               "message": outcome.message, "domain_id": outcome.domain_id,
-               "wall_time": outcome.wall_time, **outcome.report}
-    if bag.exists():
-        summary.update(bag_contents(bag))
-        if "bag_error" in summary:
-            summary["message"] += f"; bag not scored: {summary['bag_error']}"
-        try:
-            (bag / "params.yaml").write_text(stack.params_yaml)
-        except OSError as exc:
-            summary["message"] += f"; params.yaml not written: {exc.strerror or exc}"
-        summary["message"] = "; ".join(filter(None, [summary["message"],
-                                                     write_summary(bag, summary)]))
+    summary = summarized(name, bag, outcome, stack.params_yaml)
     if pressed or outcome.status == "interrupted":
         print(f"interrupted; {summary.get('scored_steps', 0)} steps recorded in {bag}",
               file=sys.stderr)
@@ -103,3 +79,39 @@ def run_stack() -> None:
           f"loop {outcome.report['loop_wall_time']:.2f} s, "
           f"total {outcome.wall_time:.2f} s wall)")
     print(f"bag: {bag}  summary: {bag / 'summary.json'}")
+
+
+def checked_values(args: argparse.Namespace) -> dict:
+    """The run's values from the options, checked; a problem is one line and exit 2."""
+    try:
+        overrides = list(args.set)
+        if args.duration is not None:
+            overrides.append(f"run.duration={args.duration}")
+        if args.real_time:
+            overrides.append("run.real_time=true")
+        values = prepare(args.scenario, overrides)
+        check_launcher_free(values)
+    except ScenarioError as exc:
+        cli.fail(str(exc))
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        cli.fail(f"--domain-id {args.domain_id} is outside 0-232")
+    return values
+
+
+def summarized(name: str, bag: Path, outcome, params_yaml: str) -> dict:
+    """summary.json's contents, written into the bag with params.yaml when there is a
+    bag; what could not be written is said in its message."""
+    summary = {"scenario": name, "bag": str(bag), "status": outcome.status,
+               "message": outcome.message, "domain_id": outcome.domain_id,
+               "wall_time": outcome.wall_time, **outcome.report}
+    if bag.exists():
+        summary.update(bag_contents(bag))
+        if "bag_error" in summary:
+            summary["message"] += f"; bag not scored: {summary['bag_error']}"
+        try:
+            (bag / "params.yaml").write_text(params_yaml)
+        except OSError as exc:
+            summary["message"] += f"; params.yaml not written: {exc.strerror or exc}"
+        summary["message"] = "; ".join(filter(None, [summary["message"],
+                                                     write_summary(bag, summary)]))
+    return summary
