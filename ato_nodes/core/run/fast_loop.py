@@ -166,20 +166,24 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     extras = np.empty((total, len(controller.output_names)))
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
     draws = plant.rng.standard_normal(total) if plant.noise > 0.0 else np.zeros(total)
-    line = line_arrays(train.line)
     inputs = LoopInputs(
-        draws, float(plant.noise), float(plant.quantum), float(train.period),
-        int(train.substeps), train.constants, float(train.p.pantograph_offset),
-        bool(train.lagged), float(plant.max_speed), line, plan, int(controller.preview),
-        float(profile.approach_step), controller.controller.settings, limiter.settings,
-        int(running.kind), float(limit), COLUMNS)
+        draws=draws, noise=float(plant.noise), quantum=float(plant.quantum),
+        period=float(train.period), substeps=int(train.substeps), train=train.constants,
+        pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
+        max_speed=float(plant.max_speed), line=line_arrays(train.line), plan=plan,
+        preview=int(controller.preview), approach_step=float(profile.approach_step),
+        settings=controller.controller.settings, limits=limiter.settings,
+        fitness_kind=int(running.kind), fitness_limit=float(limit), columns=COLUMNS)
     state = train.state
     loop = LoopState(
-        0, int(train.steps), float(state.time), float(state.position), float(state.speed),
-        float(state.force), float(train.lag_state), float(train.acting), bool(train.powered),
-        np.array(train.delayed, dtype=float), 0, float(profile.last_position), math.nan,
-        controller.controller.state, float(limiter.last), float(running.value),
-        float(running.last_t), float(running.last_w), False)
+        step=0, plant_steps=int(train.steps), time=float(state.time),
+        position=float(state.position), speed=float(state.speed), force=float(state.force),
+        lag=float(train.lag_state), acting=float(train.acting), powered=bool(train.powered),
+        delayed=np.array(train.delayed, dtype=float), oldest=0,
+        last_position=float(profile.last_position), stair=math.nan,
+        controller=controller.controller.state, last=float(limiter.last),
+        fitness=float(running.value), fitness_last_t=float(running.last_t),
+        fitness_last_w=float(running.last_w), ended=False)
     chunk = FIRST_CHUNK
     while loop.step < total and not loop.ended:
         check(loop.step)
