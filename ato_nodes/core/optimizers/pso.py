@@ -16,7 +16,7 @@ c1 = c2 = 1.49618, Clerc and Kennedy's constriction coefficients written as an
 inertia weight. Why: at the budgets of a gain tuning (a few hundred
 evaluations per dimension) 0.9 -> 0.4 with c1 = c2 = 2, and the seed-000
 setting, converge too slowly: measured with 500 d evaluations on the
-benchmark functions (scripts/benchmark_optimizers.py, development seeds
+benchmark functions (benchmarks/benchmark_optimizers.py, development seeds
 1000-1009, not the reported ones; velocity_limit 0.2), each lost
 significantly to pyswarms' PSO with these coefficients in 7 of 10
 function/dimension cases; the default lost in none and won 5.
