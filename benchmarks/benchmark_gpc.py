@@ -39,7 +39,8 @@ VARIANTS = {
 
 
 def step_costs(values) -> np.ndarray:
-    """Seconds of every ControllerStage.run_ready_steps() call of one in-process run."""
+    """Seconds of every ControllerStage.run_ready_steps() call of one in-process run of
+    the Python loop (the controller as its node runs it)."""
     costs = []
     original = ControllerStage.run_ready_steps
 
@@ -51,7 +52,7 @@ def step_costs(values) -> np.ndarray:
 
     ControllerStage.run_ready_steps = timed
     try:
-        loop.simulate(values)
+        loop.simulate(values, compiled=False)
     finally:
         ControllerStage.run_ready_steps = original
     return np.array(costs)

@@ -37,9 +37,7 @@ def stages(values):
 
 
 def python_run(monkeypatch, values, prune=None):
-    with monkeypatch.context() as patch:
-        patch.setattr(fast_loop, "AVAILABLE", False)
-        return simulate(values, prune=prune)
+    return simulate(values, prune=prune, compiled=False)
 
 
 @pytest.mark.parametrize("scenario,overrides", VARIANTS)

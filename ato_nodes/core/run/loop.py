@@ -19,7 +19,7 @@ from .stages import SERIES, ControllerStage, PlantStage, ProfileStage
 
 def simulate(values: dict[str, Any], deadline: float | None = None,
              prune: tuple[RunningIndex, float] | None = None,
-             changes: dict[int, dict[str, float]] | None = None
+             changes: dict[int, dict[str, float]] | None = None, compiled: bool = True
              ) -> dict[str, np.ndarray]:
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
@@ -31,13 +31,13 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     value passes `limit`. changes {step: {name: value}}: live controller parameters
     changed before that step, as a run's bag records them (bagio.Run.parameter_changes).
     The runs core/run/fast_loop.py covers run compiled (when numba is installed), to the
-    same bits."""
+    same bits; compiled=False runs the Python loop, the reference, whatever the run."""
     period = values["run.period"]
     line = load_line(values["line.file"]) if values["line.file"] else None
     profile = ProfileStage(NodeValues("profile", values), line)
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)
-    if fast_loop.covers(profile, plant, controller, changes):
+    if compiled and fast_loop.covers(profile, plant, controller, changes):
         rows, extras, horizons = fast_loop.run(profile, plant, controller, prune,
                                                lambda step: _check_deadline(deadline, step))
         return _series(rows, extras, horizons, controller.output_names)
