@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.control import gpc as gpc_module
 from ato_nodes.core.control.gpc import GPC, Arx, GPCSettings
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.run.loop import simulate
@@ -24,7 +25,7 @@ class FixedModel:
         return False
 
 
-ARX = Arx(0.01, (1.6, -0.62), (0.004, 0.001), 2)
+ARX = Arx(0.01, np.array((1.6, -0.62)), np.array((0.004, 0.001)), 2)
 
 
 def controller(arx=ARX, horizon=12, nu=3, constrained=True, rate=0.0, low=-1e6, high=1e6):
@@ -32,8 +33,8 @@ def controller(arx=ARX, horizon=12, nu=3, constrained=True, rate=0.0, low=-1e6, 
     limiter = CommandLimiter(low, high, 0.3, rate)
     gpc = GPC(settings, FixedModel(arx), 0.3, limiter, train=None, envelope=False)
     gpc.start(10.0, 10.0)
-    gpc.speeds = [10.0, 10.1, 10.3, 10.4, 10.6, 10.7, 10.9]
-    gpc.commands = [5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0]
+    gpc.speeds = np.array([10.0, 10.1, 10.3, 10.4, 10.6, 10.7, 10.9])
+    gpc.commands = np.array([5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0])
     return gpc
 
 
@@ -52,7 +53,7 @@ def simulate_arx(arx, speeds, commands, future):
 
 def test_free_and_forced_responses_are_those_of_the_arx_model():
     gpc = controller()
-    free, matrix = gpc._responses(ARX)
+    free, matrix = gpc._responses(ARX, 0.0)
     held = [gpc.commands[-1]] * 12
     np.testing.assert_allclose(free, simulate_arx(ARX, gpc.speeds, gpc.commands, held))
     for i in range(3):  # a unit move at k+i, held after it
@@ -62,20 +63,36 @@ def test_free_and_forced_responses_are_those_of_the_arx_model():
     assert np.all(matrix[:ARX.delay] == 0.0)  # the input delay: no response before it
 
 
+@pytest.mark.skipif(gpc_module.free_and_forced is gpc_module._free_and_forced,
+                    reason="numba is not installed")
+def test_the_compiled_responses_give_the_bits_of_the_python_ones():
+    rng = np.random.default_rng(7)
+    for na, nb, delay, horizon, moves in [(1, 1, 0, 1, 1), (2, 2, 1, 16, 3), (3, 1, 2, 20, 5),
+                                          (2, 3, 0, 12, 12), (1, 2, 3, 8, 2)]:
+        arx = Arx(rng.normal(0.0, 0.1), rng.normal(0.5, 0.3, na), rng.normal(0.0, 0.01, nb),
+                  delay)
+        history = max(na, delay + nb + 1) + 1
+        speeds, commands = rng.uniform(0, 90, history), rng.uniform(-50, 50, history)
+        arguments = (arx.c, arx.a, arx.b, arx.delay, speeds, commands, horizon, moves)
+        for compiled, python in zip(gpc_module.free_and_forced(*arguments),
+                                    gpc_module._free_and_forced(*arguments), strict=True):
+            np.testing.assert_array_equal(compiled, python)
+
+
 def test_the_qp_keeps_the_moves_inside_the_jerk_limit_and_the_command_inside_its_bounds():
     gpc = controller(rate=2.0, low=-20.0, high=12.0)
-    free, matrix = gpc._responses(ARX)
+    free, matrix = gpc._responses(ARX, 0.0)
     hessian = matrix.T @ matrix + 1e-4 * np.eye(3)
     far_above = matrix.T @ (free - (free + 30.0))  # a target far above: wants full traction
-    move = gpc._solve(hessian, far_above, gpc.commands[-1], 10.0)
+    move = gpc._solve(hessian, far_above, gpc.commands[-1], -20.0, 12.0)
     assert move == pytest.approx(2.0 * 0.3)  # the jerk limit binds
     unconstrained = float(np.linalg.solve(hessian, -far_above)[0])
     assert unconstrained > 0.6
     near = matrix.T @ (free - (free + 0.01))  # a small move: no constraint active
-    assert gpc._solve(hessian, near, gpc.commands[-1], 10.0) == pytest.approx(
+    assert gpc._solve(hessian, near, gpc.commands[-1], -20.0, 12.0) == pytest.approx(
         float(np.linalg.solve(hessian, -near)[0]), rel=1e-6)
     gpc.commands[-1] = 11.9  # next to u_max: the QP stops at it
-    assert gpc._solve(hessian, far_above, 11.9, 10.0) == pytest.approx(0.1, abs=1e-6)
+    assert gpc._solve(hessian, far_above, 11.9, -20.0, 12.0) == pytest.approx(0.1, abs=1e-6)
 
 
 def crh380al(*overrides):

@@ -40,9 +40,11 @@ import daqp
 import numpy as np
 
 from ..base.errors import ScenarioError
+from ..base.kernels import compiled
 from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param
 from ..base.units import KMH
+from ..train.plant import force_limits
 from .limiter import CommandLimiter
 
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
@@ -79,8 +81,8 @@ class Arx:
     """y(k+1) = c + sum_j a[j-1] y(k+1-j) + sum_j b[j-1] u(k+1-delay-j)."""
 
     c: float
-    a: tuple[float, ...]
-    b: tuple[float, ...]
+    a: np.ndarray  # float64, a_1 .. a_na
+    b: np.ndarray  # float64, b_1 .. b_nb
     delay: int
 
     def predict(self, speeds, commands) -> float:
@@ -101,16 +103,18 @@ class LearnedModel:
         self.correct, self.threshold = correct, threshold
         self.delay = self.layout.delay
         self.history = max(self.layout.speed_lags, self.layout.history + 1)
+        # x(k+1) from the histories (speeds end with y(k), commands with u(k-1)), u(k),
+        # not chosen yet, taken as u(k-1): the positions from the end it reads
+        self.speed_positions = -np.arange(1, self.layout.speed_lags + 1)
+        self.command_positions = -np.maximum(self.delay + np.arange(self.layout.command_lags), 1)
 
     def linearise(self, speeds, commands) -> Arx:
-        layout = self.layout
-        # x(k+1): speeds end with y(k); u(k), not chosen yet, is taken as u(k-1)
-        x = layout.regressor(speeds, commands + [commands[-1]])
+        x = np.concatenate((speeds[self.speed_positions], commands[self.command_positions]))
         value, gradient = self.model.linearise(x)
-        na = layout.speed_lags
-        a = tuple(float(g) for g in gradient[:na])
-        return Arx(value - float(gradient @ x), (a[0] + 1.0, *a[1:]),
-                   tuple(float(g) for g in gradient[na:]), layout.delay)
+        na = self.layout.speed_lags
+        a = gradient[:na].copy()
+        a[0] += 1.0  # the model learns the increment y(k+1) - y(k)
+        return Arx(value - float(gradient @ x), a, gradient[na:], self.delay)
 
     def observe(self, speeds, commands, error: float) -> bool:
         """y(k) has arrived (speeds end with it, commands with u(k-1)) with the one-step
@@ -142,8 +146,7 @@ class MultiModel:
     def linearise(self, speeds, commands) -> Arx:
         row = self.row(speeds[-1])
         na = self.layout.speed_lags
-        return Arx(float(row[0]), tuple(float(v) for v in row[1:1 + na]),
-                   tuple(float(v) for v in row[1 + na:]), self.layout.delay)
+        return Arx(float(row[0]), row[1:1 + na], row[1 + na:], self.layout.delay)
 
     def observe(self, speeds, commands, error: float) -> bool:
         return False
@@ -177,9 +180,10 @@ class MechanisticModel:
         slope = train.davis_b + 2.0 * train.davis_c * abs(v)  # dw0/dv, N/kN per m/s
         w0 = train.resistance(v) - slope * v  # w0(y) ~ w0 + slope y near v
         if e == 0.0:
-            return Arx(-gain * w0, (1.0 - gain * slope,), (gain,), self.dead)
-        return Arx(-gain * w0 * (1.0 - e), (1.0 + e - gain * slope, -e + e * gain * slope),
-                   (gain * (1.0 - c1), gain * (c1 - e)), self.dead)
+            return Arx(-gain * w0, np.array((1.0 - gain * slope,)), np.array((gain,)), self.dead)
+        return Arx(-gain * w0 * (1.0 - e),
+                   np.array((1.0 + e - gain * slope, -e + e * gain * slope)),
+                   np.array((gain * (1.0 - c1), gain * (c1 - e))), self.dead)
 
     def observe(self, speeds, commands, error: float) -> bool:
         return False
@@ -195,19 +199,61 @@ class GPCSettings:
     bias_filter: float
 
 
+def _free_and_forced(c: float, a: np.ndarray, b: np.ndarray, delay: int, speeds: np.ndarray,
+                     commands: np.ndarray, horizon: int, moves: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """(free response y(k+1..k+P) with u held at u(k-1), step-response matrix
+    G: P x Nu, G[j, i] the response at k+j+1 to a unit move at k+i, held) of the ARX
+    model from the histories (speeds end with y(k), commands with u(k-1)). Plain
+    loops, P (na + nb) products: compiled below when numba is installed."""
+    na, nb, last = len(a), len(b), len(commands) - 1
+    trajectory = np.empty(na + horizon)  # y(k+1-na) .. y(k+P)
+    trajectory[:na] = speeds[len(speeds) - na:]
+    free, step = np.empty(horizon), np.empty(horizon)
+    for j in range(1, horizon + 1):
+        value, response = c, 0.0
+        for i in range(1, na + 1):
+            value += a[i - 1] * trajectory[na + j - 1 - i]
+            if j > i:
+                response += a[i - 1] * step[j - i - 1]
+        for i in range(1, nb + 1):
+            m = j - delay - i  # u(k+m): the held u(k-1) from m = -1 on
+            value += b[i - 1] * commands[last + 1 + m if m < -1 else last]
+            if m >= 0:
+                response += b[i - 1]
+        trajectory[na + j - 1] = value
+        free[j - 1], step[j - 1] = value, response
+    matrix = np.zeros((horizon, moves))
+    for j in range(horizon):
+        for i in range(min(j + 1, moves)):
+            matrix[j, i] = step[j - i]
+    return free, matrix
+
+
+# the same operations in the same order (numba keeps IEEE semantics): the same bits
+free_and_forced = compiled(_free_and_forced) or _free_and_forced
+
+
+def _push(history: np.ndarray, value: float) -> None:
+    """Drop the oldest entry, append the newest."""
+    history[:-1] = history[1:]
+    history[-1] = value
+
+
 class GPC(Controller):
     def __init__(self, settings: GPCSettings, model, period: float, limiter: CommandLimiter,
                  train, envelope: bool):
         if settings.horizon <= model.delay:
             raise ScenarioError(f"gpc.horizon = {settings.horizon} does not reach past the "
                                 f"model's input delay of {model.delay} steps")
-        self.s, self.model, self.h = settings, model, period
-        self.limiter, self.train, self.envelope = limiter, train, envelope
+        self.s, self.model, self.limiter = settings, model, limiter
+        # the nominal train's traction and brake envelope (None: no envelope)
+        self.envelope = train.envelope if envelope else None
         self.nu = min(settings.control_horizon, settings.horizon)
         self.bias_gain = period / (settings.bias_filter + period) if settings.bias_filter else 0.0
-        self.speeds: list[float] = []
-        self.commands: list[float] = []
-        self.last_arx: Arx | None = None
+        self.speeds = np.zeros(0)
+        self.commands = np.zeros(0)
+        self.expected: float | None = None  # the model's prediction of the next y(k)
         self.bias = 0.0
         self.added = 0
         moves = np.arange(self.nu)
@@ -216,85 +262,58 @@ class GPC(Controller):
         rate = limiter.max_change if limiter.max_change > 0 else math.inf
         self.move_limit = np.full(self.nu, min(rate, 1e30))  # |du| per step
         self.reach = rate * np.arange(1, self.nu + 1)  # what the jerk limit can reach
-        # G[j, i] = step[j - i] (response at k+j+1 to a move at k+i), -1 (zero) above
-        lag = np.arange(settings.horizon)[:, None] - moves[None, :]
-        self.toeplitz = np.where(lag >= 0, lag, -1)
 
     def start(self, target: float, measured: float) -> None:
         size = self.model.history + 1
-        self.speeds = [measured] * size
-        self.commands = [0.0] * size
+        self.speeds = np.full(size, float(measured))
+        self.commands = np.zeros(size)
 
-    def _responses(self, arx: Arx) -> tuple[np.ndarray, np.ndarray]:
-        """(free response y(k+1..k+P) with u held at u(k-1), step-response matrix
-        G: P x Nu), from the histories. Plain Python: P (na + nb) products a step."""
-        c, a, b, delay = arx.c, arx.a, arx.b, arx.delay
-        trajectory = self.speeds[-len(a):]
-        commands = self.commands
-        free, step = [], []
-        for j in range(1, self.s.horizon + 1):
-            value, response = c, 0.0
-            for i, coefficient in enumerate(a, 1):
-                value += coefficient * trajectory[-i]
-                if j > i:
-                    response += coefficient * step[j - i - 1]
-            for i, coefficient in enumerate(b, 1):
-                m = j - delay - i  # u(k+m): the held u(k-1) from m = -1 on
-                value += coefficient * commands[m if m < -1 else -1]
-                if m >= 0:
-                    response += coefficient
-            trajectory.append(value)
-            free.append(value)
-            step.append(response)
-        step.append(0.0)  # index -1: no response before the move
-        return np.array(free), np.array(step)[self.toeplitz]
+    def _responses(self, arx: Arx, bias: float) -> tuple[np.ndarray, np.ndarray]:
+        """(free response, step-response matrix) of `arx`, its constant plus `bias`, from
+        the histories."""
+        return free_and_forced(arx.c + bias, arx.a, arx.b, arx.delay, self.speeds,
+                               self.commands, self.s.horizon, self.nu)
 
-    def effective(self, u: float, speed: float) -> float:
-        """The part of a command the train can apply at this speed (the nominal
-        envelope): what the models see, as in identification."""
-        if not self.envelope:
-            return u
-        low, high = self.train.force_limits(speed)
-        return low if u < low else high if u > high else u
-
-    def _bounds(self, speed: float) -> tuple[float, float]:
-        low, high = self.limiter.u_min, self.limiter.u_max
-        if self.envelope:
-            brake, traction = self.train.force_limits(speed)
-            low, high = max(low, brake), min(high, traction)
-        return low, high
+    def force_range(self, speed: float) -> tuple[float, float]:
+        """(brake, traction) the nominal train can apply at this speed, N/kN (unbounded
+        without an envelope)."""
+        if self.envelope is None:
+            return -math.inf, math.inf
+        return force_limits(speed, self.envelope)
 
     def step(self, target: float, measured: float, horizon) -> ControllerOutput:
         s = self.s
         if len(horizon) < s.horizon + 1:
             raise ValueError("the GPC needs controller.preview >= gpc.horizon")
-        self.speeds.append(measured)
-        del self.speeds[0]
+        _push(self.speeds, measured)
         error = 0.0  # the model's own one-step error, without the fed-back bias
-        if self.last_arx is not None:
-            error = measured - self.last_arx.predict(self.speeds[:-1], self.commands)
+        if self.expected is not None:
+            error = measured - self.expected
             self.bias += self.bias_gain * (error - self.bias)
-        if self.last_arx is not None and self.model.observe(self.speeds, self.commands, error):
-            self.added += 1
+            if self.model.observe(self.speeds, self.commands, error):
+                self.added += 1
         model_arx = self.model.linearise(self.speeds, self.commands)
-        arx = Arx(model_arx.c + self.bias, model_arx.a, model_arx.b, model_arx.delay)
-        free, matrix = self._responses(arx)
+        free, matrix = self._responses(model_arx, self.bias)
         reference = np.asarray(horizon[1:s.horizon + 1], dtype=float)
-        hessian = s.q * matrix.T @ matrix + self.move_weight
-        gradient = s.q * matrix.T @ (free - reference)
+        weighted = s.q * matrix.T
+        hessian = weighted @ matrix + self.move_weight
+        gradient = weighted @ (free - reference)
         previous = self.limiter.last
-        move = self._solve(hessian, gradient, previous, measured)
+        brake, traction = self.force_range(measured)
+        move = self._solve(hessian, gradient, previous, max(self.limiter.u_min, brake),
+                           min(self.limiter.u_max, traction))
         u = self.limiter.apply(previous + move, target, measured)
-        self.commands.append(self.effective(u, measured))
-        del self.commands[0]
-        self.last_arx = model_arx
+        # what the models see: the part of the command the train can apply (the nominal
+        # envelope), as in identification
+        _push(self.commands, brake if u < brake else traction if u > traction else u)
+        self.expected = model_arx.predict(self.speeds, self.commands)
         predicted = free[0] + matrix[0, 0] * (u - previous)
         return ControllerOutput(u, (predicted, error, self.bias, float(self.added)))
 
-    def _solve(self, hessian, gradient, previous: float, speed: float) -> float:
+    def _solve(self, hessian, gradient, previous: float, low: float, high: float) -> float:
+        """The first move du(k) of the plan, the command kept in [low, high]."""
         if not self.s.constrained:
             return float(np.linalg.solve(hessian, -gradient)[0])
-        low, high = self._bounds(speed)
         # never infeasible: a bound the jerk limit cannot reach yet widens to what it can
         upper = np.maximum(high, previous - self.reach) - previous
         lower = np.minimum(low, previous + self.reach) - previous
