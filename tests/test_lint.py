@@ -14,3 +14,21 @@ def test_ruff_finds_nothing():
                              "--output-format", "concise", "."],
                             cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+LONGEST_FUNCTION = 50  # lines from `def` to the function's last line
+
+
+def test_no_function_is_longer_than_fifty_lines():
+    """A function that does not fit on a screen does more than its name says."""
+    import ast
+    long = []
+    for folder in ("ato_nodes", "scripts", "benchmarks", "launch"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    length = node.end_lineno - node.lineno + 1
+                    if length > LONGEST_FUNCTION:
+                        long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} "
+                                    f"({length} lines)")
+    assert not long, "; ".join(long)

@@ -118,28 +118,46 @@ class LoopInputs(NamedTuple):
     columns: SeriesColumns     # where each series goes in a row
 
 
+class PlantState(NamedTuple):
+    """What the train carries from one period to the next (PointMassTrain)."""
+
+    steps: int                 # periods run
+    time: float                # s, the plant's clock
+    position: float            # m
+    speed: float               # m/s, true
+    force: float               # N/kN applied
+    lag: float                 # the lag's output before the envelope (lag_state)
+    acting: float              # the command that acted over the last period
+    powered: bool              # traction power over the last sub-step
+    delayed: np.ndarray        # commands inside the dead time (a ring, oldest at `oldest`)
+    oldest: int
+
+
+class ProfileState(NamedTuple):
+    """What the profile carries from one position to the next (ProfileStage)."""
+
+    last_position: float       # m
+    stair: float               # m/s, the stepped approach's stair (NaN: none)
+
+
+class FitnessState(NamedTuple):
+    """A RunningIndex's value, last_t and last_w."""
+
+    value: float
+    last_t: float
+    last_w: float
+
+
 class LoopState(NamedTuple):
     """Everything a step changes, carried from one chunk of steps to the next: a run
     computed in chunks gives the bits of one computed in a single call."""
 
     step: int                  # the next step k
-    plant_steps: int           # periods the train has run (PointMassTrain.steps)
-    time: float                # s, the plant's clock
-    position: float            # m
-    speed: float               # m/s, true
-    force: float               # N/kN applied
-    lag: float                 # the lag's output before the envelope (PointMassTrain.lag_state)
-    acting: float              # the command that acted over the last period
-    powered: bool              # traction power over the last sub-step
-    delayed: np.ndarray        # commands inside the dead time (a ring, oldest at `oldest`)
-    oldest: int
-    last_position: float       # m, the profile's previous position
-    stair: float               # m/s, the stepped approach's stair (NaN: none)
+    plant: PlantState
+    profile: ProfileState
     controller: Any            # the controller kind's state NamedTuple
     last: float                # the limiter's last command
-    fitness: float             # the running fitness (RunningIndex value, last_t, last_w)
-    fitness_last_t: float
-    fitness_last_w: float
+    fitness: FitnessState
     ended: bool                # diverged or pruned: no step follows
 
 
@@ -176,14 +194,17 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
         fitness_kind=int(running.kind), fitness_limit=float(limit), columns=COLUMNS)
     state = train.state
     loop = LoopState(
-        step=0, plant_steps=int(train.steps), time=float(state.time),
-        position=float(state.position), speed=float(state.speed), force=float(state.force),
-        lag=float(train.lag_state), acting=float(train.acting), powered=bool(train.powered),
-        delayed=np.array(train.delayed, dtype=float), oldest=0,
-        last_position=float(profile.last_position), stair=math.nan,
+        step=0,
+        plant=PlantState(
+            steps=int(train.steps), time=float(state.time), position=float(state.position),
+            speed=float(state.speed), force=float(state.force), lag=float(train.lag_state),
+            acting=float(train.acting), powered=bool(train.powered),
+            delayed=np.array(train.delayed, dtype=float), oldest=0),
+        profile=ProfileState(last_position=float(profile.last_position), stair=math.nan),
         controller=controller.controller.state, last=float(limiter.last),
-        fitness=float(running.value), fitness_last_t=float(running.last_t),
-        fitness_last_w=float(running.last_w), ended=False)
+        fitness=FitnessState(float(running.value), float(running.last_t),
+                             float(running.last_w)),
+        ended=False)
     chunk = FIRST_CHUNK
     while loop.step < total and not loop.ended:
         check(loop.step)
@@ -191,8 +212,7 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
         loop = _steps(inputs, loop, min(total, loop.step + chunk), targets, rows, extras)
         elapsed = time.perf_counter() - started
         chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
-    running.value, running.last_t, running.last_w = \
-        loop.fitness, loop.fitness_last_t, loop.fitness_last_w
+    running.value, running.last_t, running.last_w = loop.fitness
     return rows[:loop.step], extras[:loop.step], targets[:loop.step]
 
 
@@ -261,35 +281,13 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
     """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
     (or the step the run ends at); the state after. `targets` holds every step's
     horizon: given (time-indexed plans) or filled in LOOKAHEAD steps ahead."""
-    train, line, column, period = inputs.train, inputs.line, inputs.columns, inputs.period
-    sub = period / inputs.substeps
-    position_indexed = len(inputs.plan.positions) > 0
-    plant_steps, clock, x, v, force = loop.plant_steps, loop.time, loop.position, loop.speed, \
-        loop.force
-    lag, acting, powered, delayed, oldest = loop.lag, loop.acting, loop.powered, \
-        loop.delayed, loop.oldest
-    last_position, stair, controller, last = loop.last_position, loop.stair, \
-        loop.controller, loop.last
-    fitness, fitness_last_t, fitness_last_w = \
-        loop.fitness, loop.fitness_last_t, loop.fitness_last_w
-    k, ended = loop.step, False
+    k, plant, profile, controller, last, fitness = \
+        loop.step, loop.plant, loop.profile, loop.controller, loop.last, loop.fitness
+    ended = False
     while k < stop and not ended:
-        # plant outputs at t_k (PlantStage.outputs)
-        measured = sensor_reading(v, inputs.draws[k], inputs.noise, inputs.quantum)
-        line_resistance = belt_resistance(line, x, train.length)
-        acceleration = rates(clock, v, lag, acting, powered, line_resistance, train)[0]
-        # the horizons the profile publishes for this position (ProfileStage.on_position)
-        if position_indexed:
-            travel = x - last_position if k else 0.0
-            speed = travel / period
-            first = 0 if k == 0 else k + LOOKAHEAD
-            for step in range(first, k + LOOKAHEAD + 1):
-                if step < len(targets):
-                    _plan_horizon(inputs, step, x + LOOKAHEAD * travel if k else x,
-                                  targets[step])
-                    targets[step, 0], stair = _approach(inputs.approach_step, stair,
-                                                        targets[step, 0], speed)
-            last_position = x
+        measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
+        if len(inputs.plan.positions):  # position-indexed: the horizons for this position
+            profile = _publish_horizons(inputs, profile, k, plant.position, targets)
         horizon = targets[k]
         reference = horizon[inputs.preview]
         if k == 0:
@@ -297,48 +295,78 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
         u, outputs, controller = controller_step(inputs.settings, controller, reference,
                                                  measured, horizon, last, inputs.limits)
         last = u
-        row = rows[k]
-        row[column.t], row[column.target], row[column.position] = k * period, horizon[0], x
-        row[column.measured_speed], row[column.speed] = measured, v
-        row[column.acceleration] = acceleration
-        row[column.disturbance] = disturbance(clock, train.disturbance_amplitude,
-                                              train.disturbance_frequency,
-                                              train.disturbance_phase)
-        row[column.force] = force
-        row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b,
-                                                  train.davis_c)
-        row[column.line_resistance] = line_resistance
-        row[column.speed_limit], row[column.command] = _speed_limit(inputs, x), u
+        _record(inputs, rows[k], k, plant, horizon[0], measured, u)
         for i in range(len(outputs)):
             extras[k, i] = outputs[i]
-        speed_k = v
-        # plant.apply(u) (PointMassTrain.step)
-        command = u
-        if len(delayed):
-            command, delayed[oldest] = delayed[oldest], u
-            oldest = (oldest + 1) % len(delayed)
-        start = clock
-        for i in range(inputs.substeps):
-            powered = not in_neutral_section(line, x - inputs.pantograph_offset)
-            x, v, lag = rk4_substep(start + i * sub, x, v, lag, sub, command, powered, train,
-                                    line)
-        acting = command
-        plant_steps += 1
-        clock = plant_steps * period
-        force = achievable(lag if inputs.lagged else command, v, train.limited, train.envelope)
-        if not powered and force > 0.0:
-            force = 0.0
-        if not (abs(v) <= inputs.max_speed):  # PlantStage.diverged
+        speed = plant.speed
+        plant = _plant_step(inputs, plant, u)
+        if not (abs(plant.speed) <= inputs.max_speed):  # PlantStage.diverged
             ended = True
         else:
-            fitness, fitness_last_t, fitness_last_w = running_add(
-                inputs.fitness_kind, fitness, fitness_last_t, fitness_last_w, k * period,
-                horizon[0] - speed_k)
-            ended = fitness > inputs.fitness_limit
+            fitness = FitnessState(*running_add(
+                inputs.fitness_kind, fitness.value, fitness.last_t, fitness.last_w,
+                k * inputs.period, horizon[0] - speed))
+            ended = fitness.value > inputs.fitness_limit
         k += 1
-    return LoopState(k, plant_steps, clock, x, v, force, lag, acting, powered, delayed, oldest,
-                     last_position, stair, controller, last, fitness, fitness_last_t,
-                     fitness_last_w, ended)
+    return LoopState(k, plant, profile, controller, last, fitness, ended)
+
+
+@jitable
+def _publish_horizons(inputs: LoopInputs, profile: ProfileState, k: int, position: float,
+                      targets) -> ProfileState:
+    """ProfileStage.on_position for a position-indexed plan: the horizons of steps 0 .. 2
+    at step 0, of step k + 2 from the extrapolated position after, into `targets`."""
+    travel = position - profile.last_position if k else 0.0
+    speed = travel / inputs.period
+    stair = profile.stair
+    first = 0 if k == 0 else k + LOOKAHEAD
+    for step in range(first, k + LOOKAHEAD + 1):
+        if step < len(targets):
+            _plan_horizon(inputs, step, position + LOOKAHEAD * travel if k else position,
+                          targets[step])
+            targets[step, 0], stair = _approach(inputs.approach_step, stair,
+                                                targets[step, 0], speed)
+    return ProfileState(position, stair)
+
+
+@jitable
+def _record(inputs: LoopInputs, row, k: int, plant: PlantState, target: float,
+            measured: float, command: float) -> None:
+    """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command)."""
+    train, column, x, v = inputs.train, inputs.columns, plant.position, plant.speed
+    line_resistance = belt_resistance(inputs.line, x, train.length)
+    row[column.t], row[column.target], row[column.position] = k * inputs.period, target, x
+    row[column.measured_speed], row[column.speed] = measured, v
+    row[column.acceleration] = rates(plant.time, v, plant.lag, plant.acting, plant.powered,
+                                     line_resistance, train)[0]
+    row[column.disturbance] = disturbance(plant.time, train.disturbance_amplitude,
+                                          train.disturbance_frequency, train.disturbance_phase)
+    row[column.force] = plant.force
+    row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b, train.davis_c)
+    row[column.line_resistance] = line_resistance
+    row[column.speed_limit], row[column.command] = _speed_limit(inputs, x), command
+
+
+@jitable
+def _plant_step(inputs: LoopInputs, plant: PlantState, command: float) -> PlantState:
+    """PointMassTrain.step: the command through the dead time, RK4 over the period."""
+    train, line = inputs.train, inputs.line
+    delayed, oldest = plant.delayed, plant.oldest
+    if len(delayed):
+        command, delayed[oldest] = delayed[oldest], command
+        oldest = (oldest + 1) % len(delayed)
+    sub = inputs.period / inputs.substeps
+    x, v, lag, powered = plant.position, plant.speed, plant.lag, True
+    for i in range(inputs.substeps):
+        powered = not in_neutral_section(line, x - inputs.pantograph_offset)
+        x, v, lag = rk4_substep(plant.time + i * sub, x, v, lag, sub, command, powered, train,
+                                line)
+    steps = plant.steps + 1
+    force = achievable(lag if inputs.lagged else command, v, train.limited, train.envelope)
+    if not powered and force > 0.0:
+        force = 0.0
+    return PlantState(steps, steps * inputs.period, x, v, force, lag, command, powered, delayed,
+                      oldest)
 
 
 _steps = compiled(_steps_source)
