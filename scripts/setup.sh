@@ -32,7 +32,8 @@ echo "setup: installing the pinned packages of requirements.txt into .venv (ROS 
 echo "setup: installing ato_nodes from this checkout, editable"
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e . \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
-# Compiled now, the in-process loop is loaded from its cache (the __pycache__ folders beside each source in ato_nodes/core)
+# Compiled now (one loop per controller kind), the in-process loop is loaded from its
+# cache (ato_nodes/core/run/__pycache__)
 # by every later run, tuning worker and test instead of being compiled by the first.
 echo "setup: compiling the simulation kernels (once per checkout)"
-.venv/bin/python -c "from ato_nodes.core import loop; loop.warm()"
+.venv/bin/python -c "from ato_nodes.core.run import loop; loop.warm()"
