@@ -142,6 +142,25 @@ def test_the_model_file_round_trips(tmp_path):
     np.testing.assert_array_equal(again.lssvm.increment(x[:20]), loaded.lssvm.increment(x[:20]))
 
 
+def test_a_model_loaded_again_is_its_own_copy_of_the_same_solve(tmp_path):
+    x, t = train_like_samples(120)
+    path = save(tmp_path, lssvm.fit(LAYOUT, x, t, mu=300.0, delta=0.6))
+    first = lssvm.load_model(path, window=10)
+    assert first.lssvm.add(x[0] + 5.0, 0.1)  # a correction changes this copy only
+    second = lssvm.load_model(path, window=10)
+    assert second.lssvm.size == 120 and second.lssvm.added == 0
+    lssvm._solved_model.cache_clear()
+    fresh = lssvm.load_model(path, window=10)
+    assert second.lssvm.bias == fresh.lssvm.bias
+    np.testing.assert_array_equal(second.lssvm.alpha, fresh.lssvm.alpha)
+    for point in x[:5]:
+        assert second.lssvm.linearise(point)[0] == fresh.lssvm.linearise(point)[0]
+    with pytest.raises(ValueError, match="read-only"):
+        second.arx_coefficients[0, 0] = 1.0  # shared by every copy
+    save(tmp_path, lssvm.fit(LAYOUT, x[:100], t[:100], mu=300.0, delta=0.6))
+    assert lssvm.load_model(path, window=10).lssvm.size == 100  # a changed file: solved anew
+
+
 def one_line_error(path, match):
     with pytest.raises(ScenarioError, match=match) as caught:
         lssvm.load_model(path)

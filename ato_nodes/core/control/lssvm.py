@@ -31,13 +31,15 @@ update of the factor's trailing block, the corrections' part, O(window^2)).
 
 from __future__ import annotations
 
+import copy
+import functools
 import hashlib
 import io
 import json
 import math
 import os
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -402,8 +404,20 @@ def _read_members(path, data: bytes) -> dict[str, np.ndarray]:
 
 def load_model(path, window: int = 0) -> ModelFile:
     """Read and check a model file: one-line ScenarioError for a missing, corrupt,
-    truncated, oversized or inconsistent one (see MEMBERS, MAX_*)."""
-    fields = _read_members(path, yamlfile.read_bytes(path, "model file", MAX_FILE_BYTES))
+    truncated, oversized or inconsistent one (see MEMBERS, MAX_*). The file is read
+    every time; the same bytes with the same window are solved once per process (a
+    run builds its controller twice, in prepare() and in simulate(); a tuner's runs
+    build it again and again) and each caller gets its own copy of the model."""
+    loaded = _solved_model(path, yamlfile.read_bytes(path, "model file", MAX_FILE_BYTES),
+                           window)
+    return replace(loaded, lssvm=copy.deepcopy(loaded.lssvm))
+
+
+@functools.lru_cache(maxsize=2)  # a model of 900 samples + a window of 500: 17 MB
+def _solved_model(path, data: bytes, window: int) -> ModelFile:
+    """The model file's contents, checked and solved; never changed by a caller (the
+    LSSVM is copied, the multi-model's arrays are read-only)."""
+    fields = _read_members(path, data)
     if str(fields["format"]) != FORMAT:
         raise ScenarioError(f"model file {path}: format {str(fields['format'])!r}, "
                             f"expected {FORMAT!r}")
@@ -442,5 +456,6 @@ def load_model(path, window: int = 0) -> ModelFile:
                        atol=1e-9 * max(1.0, float(np.abs(fields["alpha"]).max()))):
         raise ScenarioError(f"model file {path}: its coefficients do not solve its samples "
                             f"(a changed or corrupt file)")
+    centres.flags.writeable = coefficients.flags.writeable = False
     return ModelFile(model, float(fields["period"]), train, centres,
                      float(fields["arx_width"]), coefficients)
