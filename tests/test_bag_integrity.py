@@ -5,7 +5,6 @@ a killed writer's file is repaired and a directory that is not a bag is named so
 import json
 import struct
 import subprocess
-import sys
 import warnings
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.summary import bag_contents
 from bagfile import write_run_bag
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -93,14 +93,14 @@ def test_repair_keeps_what_was_flushed_before_a_cut_mid_chunk(tmp_path):
 
 
 def test_repair_script_is_one_line_and_exit_2_for_a_non_bag(tmp_path):
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "repair_bag.py"),
+    result = subprocess.run([*invocation("repair_bag"),
                              str(tmp_path / "nothing")], capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     (tmp_path / "empty.mcap").mkdir()
     bag = tmp_path / "junk"
     bag.mkdir()
     (bag / "junk.mcap").write_bytes(b"not an mcap file at all")
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "repair_bag.py"), str(bag)],
+    result = subprocess.run([*invocation("repair_bag"), str(bag)],
                             capture_output=True, text=True)
     assert result.returncode == 2 and "no readable channel" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
@@ -116,14 +116,14 @@ def test_a_bag_whose_kept_line_is_broken_is_one_line_and_exit_2(tmp_path):
         connection = writer.add_connection(topic, "std_msgs/msg/Float64", typestore=TYPESTORE)
         writer.write(connection, 0, float64(1.0))
     writer.close()
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "score_bag.py"), str(bag)],
+    result = subprocess.run([*invocation("score_bag"), str(bag)],
                             capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert "line kept in the bag is unreadable" in result.stderr
 
 
 def score_bag(bag: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(ROOT / "scripts" / "score_bag.py"), str(bag),
+    return subprocess.run([*invocation("score_bag"), str(bag),
                            *args], capture_output=True, text=True, timeout=120)
 
 
@@ -201,7 +201,7 @@ def test_repair_says_what_a_directory_that_is_not_a_bag_holds(tmp_path, holds, w
     directory = Path(holds) if holds.startswith("/") else tmp_path
     if holds == "metadata":
         (tmp_path / "metadata.yaml").write_text("hello: [1, 2]\n")
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "repair_bag.py"),
+    result = subprocess.run([*invocation("repair_bag"),
                              str(directory)], capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert "nothing to repair" not in result.stdout + result.stderr

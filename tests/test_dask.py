@@ -20,6 +20,7 @@ pytest.importorskip("distributed")
 import psutil  # noqa: E402  (a dependency of distributed)
 
 from ato_nodes.tuning import COMPILING  # noqa: E402
+from commands import invocation
 
 pytestmark = pytest.mark.integration
 
@@ -31,7 +32,7 @@ TUNING = ["--algorithm", "pso", "--scenario", "seed000", "--set", "run.duration=
 
 
 def tune(out: Path, *extra: str, evaluations: int = 36) -> dict:
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "tune.py"), *TUNING,
+    result = subprocess.run([*invocation("tune"), *TUNING,
                              "--evaluations", str(evaluations), "--out", str(out), *extra],
                             capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert result.returncode == 0, result.stderr
@@ -97,7 +98,7 @@ def cluster_tuning(directory: Path, out: Path):
 
 def start_tuning(out: Path, *extra: str, evaluations: int = 60) -> subprocess.Popen:
     """tune.py with its progress lines (one per finished evaluation) on stderr."""
-    return subprocess.Popen([sys.executable, str(ROOT / "scripts" / "tune.py"),
+    return subprocess.Popen([*invocation("tune"),
                              *[a for a in TUNING if a != "--quiet"], "--evaluations",
                              str(evaluations), "--out", str(out), *extra], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

@@ -19,9 +19,10 @@ from ato_nodes.core.base.topics import step_topics
 from ato_nodes.launch import DOMAIN_LOCK_PORT, IGNORED_ENVIRONMENT, node_environment
 from test_stack import (ROOT, alive, children, message_counts, run_stack, start_stack,
                         wait_for_children, wait_for_stepping)
+from commands import invocation
 
 pytestmark = pytest.mark.integration
-TUNE = [sys.executable, str(ROOT / "scripts" / "tune.py")]
+TUNE = [*invocation("tune")]
 
 
 def parent(pid: int) -> int:
@@ -287,7 +288,7 @@ def test_replay_into_a_running_runs_domain_is_refused(tmp_path):
     process = start_stack("--duration", "600", "--real-time", "--out", str(tmp_path / "run"))
     domain = domain_of(wait_for_stepping(process)[0])
     try:
-        replay = subprocess.run([sys.executable, str(ROOT / "scripts" / "replay_bag.py"),
+        replay = subprocess.run([*invocation("replay_bag"),
                                  str(tmp_path), "--domain-id", str(domain)],
                                 capture_output=True, text=True, timeout=60)
     finally:
@@ -301,7 +302,7 @@ def test_a_fast_dds_environment_file_of_the_users_changes_nothing(tmp_path):
     nodes from ever matching; the launcher removes it, so the run completes."""
     environment_file = tmp_path / "fastdds.json"
     environment_file.write_text(json.dumps({"ROS_DISCOVERY_SERVER": "127.0.0.1:11888"}))
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
+    result = subprocess.run([*invocation("run_stack"),
                              "--scenario", "seed000-step", "--duration", "2", "--out",
                              str(tmp_path / "run"), "--timeout", "60"],
                             env={**os.environ, "FASTDDS_ENVIRONMENT_FILE": str(environment_file)},
@@ -312,7 +313,7 @@ def test_a_fast_dds_environment_file_of_the_users_changes_nothing(tmp_path):
 def test_runs_stay_on_this_host_whatever_the_environment(tmp_path):
     env = {**os.environ, **{name: "127.0.0.2" for name in IGNORED_ENVIRONMENT},
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_LOCALHOST_ONLY": "0"}
-    process = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"),
+    process = subprocess.Popen([*invocation("run_stack"),
                                 "--duration", "600", "--real-time", "--out",
                                 str(tmp_path / "run")], env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, cwd=ROOT)

@@ -3,10 +3,10 @@ what it may read and expand to (no ROS graph is started here)."""
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = ROOT / "scripts"
@@ -17,7 +17,7 @@ BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
 
 
 def script(name: str, *args, timeout=60):
-    return subprocess.run([sys.executable, str(SCRIPTS / name), *map(str, args)],
+    return subprocess.run([*invocation(name), *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, cwd=ROOT)
 
 

@@ -15,6 +15,7 @@ from ato_nodes.cli import score_bag
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from bagfile import write_run_bag
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 NOT_MEASURED = ("arrival_time", "running_time_error")  # the train is still moving at 30 s
@@ -29,7 +30,7 @@ def strict(text: str):
 
 
 def script(name: str, *args, timeout=300):
-    return subprocess.run([sys.executable, str(ROOT / "scripts" / name), *map(str, args)],
+    return subprocess.run([*invocation(name), *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, cwd=ROOT)
 
 

@@ -1,7 +1,6 @@
 """Line files: validation with file and line, and mass-belt additional resistance."""
 
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -9,6 +8,7 @@ import pytest
 from ato_nodes.core.train.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -103,7 +103,7 @@ def test_a_bad_line_stops_run_stack_with_one_line_and_exit_2(tmp_path):
     scenario = tmp_path / "scenario.yaml"
     scenario.write_text("/**:\n  ros__parameters:\n    profile.kind: ato\n"
                         f"    line.file: {line}\n")
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--scenario",
+    result = subprocess.run([*invocation("run_stack"), "--scenario",
                              str(scenario), "--out", str(tmp_path / "bag")],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2

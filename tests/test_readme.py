@@ -3,13 +3,13 @@ found, a failing command is reported as one, and the quick ones pass."""
 
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
-CHECK = [sys.executable, str(ROOT / "scripts" / "check_readme.py")]
+CHECK = [*invocation("check_readme")]
 
 
 def check(*args, timeout=120):

@@ -14,6 +14,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.base.topics import step_topics
 from ato_nodes.launch import node_environment
+from commands import invocation
 
 pytestmark = pytest.mark.integration
 
@@ -23,7 +24,7 @@ STEP_TOPICS = {topic.name: topic.type for topic in step_topics()}
 
 
 def script(name, *args, timeout=120, **popen):
-    return subprocess.run([PYTHON, str(ROOT / "scripts" / name), *map(str, args)],
+    return subprocess.run([*invocation(name), *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, cwd=ROOT, **popen)
 
 

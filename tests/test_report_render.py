@@ -3,7 +3,6 @@ no network; skipped where no Chromium is installed (CI's setup.sh installs none)
 
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,6 +11,7 @@ from ato_nodes.report import write_report
 from ato_nodes.bagio import Run
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.skipif(
@@ -21,7 +21,7 @@ pytestmark = pytest.mark.skipif(
 
 
 def screenshot(page: Path, out: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(ROOT / "scripts" / "screenshot_report.py"),
+    return subprocess.run([*invocation("screenshot_report"),
                            str(page), "--out", str(out), "--size", "1000x1400", *extra],
                           capture_output=True, text=True, timeout=400)
 

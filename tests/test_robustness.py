@@ -2,7 +2,6 @@
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.stages import ControllerStage, PlantStage
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.config.schema import NodeValues
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 FACTORS = ("plant.mass_factor", "plant.resistance_factor", "plant.lag_factor")
@@ -39,7 +39,7 @@ def test_the_real_train_factors_change_the_plant_and_not_what_the_controller_kno
 
 
 def script(*args):
-    return subprocess.run([sys.executable, str(ROOT / "scripts" / "robustness.py"),
+    return subprocess.run([*invocation("robustness"),
                            *map(str, args)], capture_output=True, text=True, cwd=ROOT,
                           timeout=120)
 

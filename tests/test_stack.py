@@ -31,12 +31,13 @@ from ato_nodes.core.base.topics import step_topics
 from ato_nodes.launch import node_environment, node_processes
 from ato_nodes.nodefork import NODE_START
 from ato_nodes.nodes.base import STANDARD_EXECUTOR
+from commands import invocation
 
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[1]
-RUN_STACK = [sys.executable, str(ROOT / "scripts" / "run_stack.py")]
-SCORE_BAG = [sys.executable, str(ROOT / "scripts" / "score_bag.py")]
+RUN_STACK = [*invocation("run_stack")]
+SCORE_BAG = [*invocation("score_bag")]
 STEP_TOPICS = {topic.name for topic in step_topics()}
 
 

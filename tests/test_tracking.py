@@ -4,7 +4,6 @@ curves, the holding target (ROS-free)."""
 
 import json
 import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,6 +22,7 @@ from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.control.train_model import nominal_advance, nominal_predict, nominal_train
+from commands import invocation
 
 PERIOD = 0.1
 ROOT = Path(__file__).resolve().parents[1]
@@ -194,7 +194,7 @@ def test_the_holding_brake_takes_a_target_below_the_holding_target():
 
 def test_the_ablation_script_undoes_each_addition_and_builds_them_up(tmp_path):
     result = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "ablation.py"), "seed004-metro-ato",
+        [*invocation("ablation"), "seed004-metro-ato",
          "--set", "run.duration=40", "--untuned", "ladrc.omega_c=1.0", "--reference",
          "seed004-metro", "--out", tmp_path / "a"], capture_output=True, text=True, cwd=ROOT,
         timeout=300)
@@ -228,7 +228,7 @@ def test_a_markdown_table_formats_what_each_run_has():
 @pytest.mark.integration
 def test_compare_scenarios_runs_each_through_the_stack_and_checks_it_in_process(tmp_path):
     runs = ["seed004-metro-ato:run.duration=15", "hsr-neutral-ato:run.duration=10"]
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "compare_scenarios.py"),
+    result = subprocess.run([*invocation("compare_scenarios"),
                              *runs, "--out", tmp_path / "c"], capture_output=True, text=True,
                             cwd=ROOT, timeout=300)
     assert result.returncode == 0, result.stderr

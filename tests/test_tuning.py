@@ -4,7 +4,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -16,11 +15,12 @@ from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.launch import node_processes as launched_nodes
 from ato_nodes.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings, evaluate_in_process,
                               evaluate_in_stack)
+from commands import invocation
 
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[1]
-TUNE = [sys.executable, str(ROOT / "scripts" / "tune.py")]
+TUNE = [*invocation("tune")]
 
 
 def short(duration):

@@ -6,16 +6,16 @@ once, and every JSON it writes is strict and read back by --resume."""
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from ato_nodes.core.base import kernels
 from ato_nodes.tuning import COMPILING
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
-TUNE = [sys.executable, str(ROOT / "scripts" / "tune.py")]
+TUNE = [*invocation("tune")]
 SMALL = ["--algorithm", "pso", "--scenario", "seed000-step", "--params", "adrc.mu1=600:60000",
          "--evaluations", "4", "--population", "2", "--in-process", "--set", "run.duration=20"]
 

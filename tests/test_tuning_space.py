@@ -4,7 +4,6 @@ use refused, the warning for line runs without requirements (fast, in-process)."
 import csv
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +16,7 @@ from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
+from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,7 +43,7 @@ def test_a_parameter_of_another_controller_kind_is_refused():
 
 def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_path):
     result = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "tune.py"), "--algorithm", "pso",
+        [*invocation("tune"), "--algorithm", "pso",
          "--scenario", "seed004-metro", "--set", "run.duration=3", "--in-process",
          "--evaluations", "4", "--population", "2", "--out", tmp_path / "t"],
         capture_output=True, text=True, cwd=ROOT, timeout=120)
@@ -51,7 +51,7 @@ def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_pat
     assert "tuning the default search space: dadrc.b01=0.1:2.5" in result.stdout
     assert "warning: tuning on a line without --require" in result.stderr
     refused = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "tune.py"), "--scenario", "seed004-metro",
+        [*invocation("tune"), "--scenario", "seed004-metro",
          "--params", "pid.kp=1:10", "--in-process", "--out", tmp_path / "u"],
         capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
@@ -61,7 +61,7 @@ def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_pat
 def test_best_yaml_is_the_base_scenario_and_its_changes_and_history_is_plain_numbers(tmp_path):
     out = tmp_path / "t"
     result = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "tune.py"), "--algorithm", "pso",
+        [*invocation("tune"), "--algorithm", "pso",
          "--scenario", "seed004-metro-ato", "--set", "run.duration=4", "--in-process",
          "--params", "ladrc.omega_c=0.3:6", "--require", "abs_stopping_error<=3000",
          "--evaluations", "4", "--population", "2", "--quiet", "--out", out],
