@@ -1,1 +1,3 @@
-"""Algorithms of the ATO stack in plain Python/numpy; nothing here imports ROS."""
+"""ROS-free algorithms and configuration, in rooms (docs/architecture.md): base,
+optimizers, train, scoring, control, targets, config, run; each imports only those
+before it."""

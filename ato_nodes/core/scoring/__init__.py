@@ -1,0 +1,1 @@
+"""Indices from a run's series and the catalogue of their names, requirements and fitnesses."""

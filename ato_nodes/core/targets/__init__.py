@@ -1,0 +1,1 @@
+"""Target profiles and seed 002's driving strategies."""

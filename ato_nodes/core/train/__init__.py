@@ -1,0 +1,1 @@
+"""The real train (core.train.plant) and its line (core.train.line)."""
