@@ -194,3 +194,24 @@ def test_a_change_to_any_core_source_drops_the_compiled_cache(tmp_path):
     kernels._drop_stale_cache(looped)
     assert not any(path.exists() for path in machine_code)
     assert (cache / "module.looped.sources").read_text() == kernels.sources_digest()
+
+
+@pytest.mark.parametrize("scenario", ["seed004-metro-ato", "seed002-hsr", "hsr-neutral-ato"])
+def test_a_plan_table_gives_the_plans_own_speeds_and_limits_compiled(scenario):
+    """PlanTable's interpolation, written out for compiled code, against the plan's
+    np.interp and np.searchsorted: at, beside and between the points, beyond both ends."""
+    import numba
+    from ato_nodes.core.config.context import RunContext
+    from ato_nodes.core.targets.profiles import table_limit, table_speed
+    plan = RunContext(load_scenario(scenario)).plan
+    table = plan.table()
+    speed = numba.njit(lambda position: table_speed(table, position))
+    limit = numba.njit(lambda position: table_limit(table, position))
+    points = table.positions
+    positions = np.concatenate([
+        np.random.default_rng(1).uniform(points[0] - 10, points[-1] + 10, 20000), points,
+        np.nextafter(points, np.inf), np.nextafter(points, -np.inf), [np.inf, -np.inf]])
+    for position in positions:
+        assert speed(position) == plan.speed(0.0, position), position
+        if plan.limits_speed:
+            assert limit(position) == plan.limit(position), position

@@ -57,15 +57,55 @@ def table_speed(table: PlanTable, position: float) -> float:
     """The plan's speed at `position`, m/s (as the plan's speed() gives it)."""
     if table.stops_at_end and position >= table.positions[len(table.positions) - 1]:
         return 0.0
-    value = np.interp(position, table.positions, table.values)
+    value = interpolated(position, table.positions, table.values)
     return math.sqrt(max(0.0, value)) if table.squared else value
 
 
 @jitable
 def table_limit(table: PlanTable, position: float) -> float:
     """The plan's own limit with the head at `position`, m/s (AtoCurve.limit)."""
-    cell = np.searchsorted(table.positions, position, side="right") - 1
+    cell = cell_of(table.positions, position)
     return table.limits[min(max(cell, 0), len(table.limits) - 1)]
+
+
+@jitable
+def cell_of(points, x: float) -> int:
+    """The i with points[i] <= x < points[i + 1] (-1 before the first, the last index from
+    the last on): np.searchsorted(points, x, side="right") - 1, for increasing points."""
+    if not x >= points[0]:
+        return -1
+    low, high = 0, len(points)
+    while high - low > 1:  # points[low] <= x < points[high] (points[len] taken as inf)
+        middle = (low + high) // 2
+        if points[middle] <= x:
+            low = middle
+        else:
+            high = middle
+    return low
+
+
+@jitable
+def interpolated(x: float, points, values) -> float:
+    """np.interp(x, points, values) for one x and strictly increasing points, computed as
+    numpy's C code computes it (the same bits): numba's np.interp allocates arrays on
+    every call, ten times the cost of the arithmetic in a compiled loop."""
+    if x != x:  # NaN: numpy's own rules
+        return np.interp(x, points, values)
+    last = len(points) - 1
+    if x >= points[last]:
+        return values[last]
+    if x < points[0]:
+        return values[0]
+    j = cell_of(points, x)
+    if points[j] == x:
+        return values[j]
+    slope = (values[j + 1] - values[j]) / (points[j + 1] - points[j])
+    result = slope * (x - points[j]) + values[j]
+    if result != result:  # numpy tries the other end, then a flat segment's value
+        result = slope * (x - points[j + 1]) + values[j + 1]
+        if result != result and values[j] == values[j + 1]:
+            result = values[j]
+    return result
 
 
 @dataclass(frozen=True)
