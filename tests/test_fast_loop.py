@@ -207,7 +207,7 @@ def test_a_plan_table_gives_the_plans_own_speeds_and_limits_compiled(scenario):
     table = plan.table()
     speed = numba.njit(lambda position: table_speed(table, position))
     limit = numba.njit(lambda position: table_limit(table, position))
-    points = table.positions
+    points = table.grid[0]
     positions = np.concatenate([
         np.random.default_rng(1).uniform(points[0] - 10, points[-1] + 10, 20000), points,
         np.nextafter(points, np.inf), np.nextafter(points, -np.inf), [np.inf, -np.inf]])

@@ -20,6 +20,7 @@ every core source beside the cache and drops the cache when any of them changed.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import sys
 from contextlib import contextmanager
@@ -34,9 +35,20 @@ except ImportError:  # optional: runs are then Python only
 AVAILABLE = numba is not None
 
 
-def jitable(function):
-    """`function` itself, callable from compiled code too when numba is installed."""
-    return register_jitable(function) if AVAILABLE else function
+def jitable(function=None, *, inline: bool = False):
+    """`function` itself, callable from compiled code too when numba is installed; with
+    inline, compiled code inlines it where it is called (worth it for a small function
+    handed arrays many times a step: compiled code counts references to every array it
+    hands to a function it calls, which can cost more than the function's arithmetic)."""
+    if function is None:
+        return functools.partial(jitable, inline=inline)
+    if not AVAILABLE:
+        return function
+    if inline:
+        typing = functools.wraps(function)(lambda *arguments: function)
+        overload(function, inline="always", strict=False)(typing)
+        return function
+    return register_jitable(function)
 
 
 def compiled(function):

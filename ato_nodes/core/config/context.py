@@ -13,7 +13,7 @@ import functools
 import math
 
 from ..base.errors import ScenarioError
-from ..targets.profiles import FeasiblePlan
+from ..targets.profiles import feasible_plan
 from ..train.line import Line, load_line
 from ..train.plant import TrainParameters
 from .components import PROFILES
@@ -43,7 +43,7 @@ class RunContext:
             raise ScenarioError(f"profile.envelope_share and profile.jerk apply to time-indexed "
                                 f"profiles and the ato curve, not to profile.kind "
                                 f"{values['profile.kind']}")
-        return FeasiblePlan(plan, self.train, share, jerk, self.period, self.steps)
+        return feasible_plan(plan, self.train, share, jerk, self.period, self.steps)
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies with the head at `position`, m/s (inf without a line):

@@ -80,10 +80,13 @@ def covers(profile, plant, controller, changes) -> bool:
 @functools.lru_cache(maxsize=4)
 def _horizons(profile_values: str) -> np.ndarray:
     profile = ProfileStage(NodeValues("profile", json.loads(profile_values)))
-    rows = []
-    while len(rows) < profile.total_steps:
-        rows.extend(profile.on_position(0.0))  # time-indexed: the position is not read
-    return np.array(rows, dtype=float)
+    plan, period = profile.context.plan, profile.period
+    # A step's horizon holds the targets at t_k .. t_k+N, exactly as RunContext.horizon
+    # computes them for a time-indexed plan: each time's target once, then windows of it.
+    targets = np.array([plan.speed(j * period, 0.0)
+                        for j in range(profile.total_steps + profile.preview)], dtype=float)
+    windows = np.lib.stride_tricks.sliding_window_view(targets, profile.preview + 1)
+    return windows[:profile.total_steps].copy()
 
 
 def horizons(profile) -> np.ndarray:
@@ -269,9 +272,9 @@ def _approach(step_size: float, stair: float, target: float, speed: float):
 @jitable
 def _speed_limit(inputs: LoopInputs, position: float) -> float:
     """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
-    if len(inputs.plan.limits):
+    if inputs.plan.limits_speed:
         return table_limit(inputs.plan, position)
-    if len(inputs.line.limit_starts):
+    if inputs.line.limits_end > inputs.line.tunnels_end:
         return speed_limit(inputs.line, position)
     return math.inf
 
@@ -286,7 +289,7 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
     ended = False
     while k < stop and not ended:
         measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
-        if len(inputs.plan.positions):  # position-indexed: the horizons for this position
+        if inputs.plan.grid.shape[1]:  # position-indexed: the horizons for this position
             profile = _publish_horizons(inputs, profile, k, plant.position, targets)
         horizon = targets[k]
         reference = horizon[inputs.preview]

@@ -31,41 +31,43 @@ SEED000_PARAMETERS = (
 
 
 class PlanTable(NamedTuple):
-    """A position-indexed plan as compiled code reads it: the speed interpolated in
-    `values` against `positions` (values are speeds, or squared speeds when `squared`),
-    0 from the last position on when `stops_at_end`; the plan's own limits per cell
-    of `positions` when it has them (Plan.limits_speed)."""
+    """A position-indexed plan as compiled code reads it: the speed interpolated in the
+    values against the positions (values are speeds, or squared speeds when `squared`),
+    0 from the last position on when `stops_at_end`; the plan's own limit per cell of the
+    positions when `limits_speed` (Plan.limits_speed). One array, because compiled code
+    pays for every array it hands to a function."""
 
-    positions: np.ndarray  # m, increasing
-    values: np.ndarray     # m/s, or (m/s)^2 when squared
+    grid: np.ndarray       # rows: positions (m, increasing), values, limits (m/s)
     squared: bool
     stops_at_end: bool
-    limits: np.ndarray     # m/s per cell (empty: the line's limits apply)
+    limits_speed: bool
 
 
 def plan_table(positions, values, squared: bool = False, stops_at_end: bool = False,
-               limits=()) -> PlanTable:
-    """A PlanTable of contiguous float arrays (compiled code takes one array layout)."""
-    def array(sequence):
-        return np.ascontiguousarray(sequence, dtype=float)
-
-    return PlanTable(array(positions), array(values), squared, stops_at_end, array(limits))
+               limits=None) -> PlanTable:
+    """A PlanTable (limits: None, the line's apply)."""
+    grid = np.empty((3, len(positions)))
+    grid[0], grid[1] = positions, values
+    grid[2] = limits if limits is not None else np.nan
+    return PlanTable(grid, squared, stops_at_end, limits is not None)
 
 
 @jitable
 def table_speed(table: PlanTable, position: float) -> float:
     """The plan's speed at `position`, m/s (as the plan's speed() gives it)."""
-    if table.stops_at_end and position >= table.positions[len(table.positions) - 1]:
+    positions = table.grid[0]
+    if table.stops_at_end and position >= positions[len(positions) - 1]:
         return 0.0
-    value = interpolated(position, table.positions, table.values)
+    value = interpolated(position, positions, table.grid[1])
     return math.sqrt(max(0.0, value)) if table.squared else value
 
 
 @jitable
 def table_limit(table: PlanTable, position: float) -> float:
     """The plan's own limit with the head at `position`, m/s (AtoCurve.limit)."""
-    cell = cell_of(table.positions, position)
-    return table.limits[min(max(cell, 0), len(table.limits) - 1)]
+    positions = table.grid[0]
+    cell = cell_of(positions, position)
+    return table.grid[2, min(max(cell, 0), len(positions) - 1)]
 
 
 @jitable
@@ -151,6 +153,15 @@ def round_corners(samples: np.ndarray, width: int, after: float) -> np.ndarray:
     past = (sums[i + width + 1] - sums[i + 1]) / width
     centred = (sums[i + width + width // 2 + 1] - sums[i + width // 2 + 1]) / width
     return np.minimum(past, centred)
+
+
+@functools.lru_cache(maxsize=8)
+def feasible_plan(plan, train: TrainParameters, share: float, jerk: float, period: float,
+                  steps: int) -> FeasiblePlan:
+    """One FeasiblePlan per distinct plan and train (its passes cost about a second for a
+    2400 s run; every tuning candidate and robustness sample of the plan shares it, and a
+    FeasiblePlan is never changed once built)."""
+    return FeasiblePlan(plan, train, share, jerk, period, steps)
 
 
 class FeasiblePlan(Plan):

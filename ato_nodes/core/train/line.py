@@ -85,42 +85,36 @@ class Line:
 
 
 class LineTables(NamedTuple):
-    """A line's sections as plain sequences (start, end, and the value each adds: the
-    point resistance in N/kN, the limit in m/s), so that compiled code and Python read
-    them with the same functions."""
+    """A line's sections as three parallel sequences (start m, end m, and the value each
+    adds: the point resistance in N/kN, the limit in m/s), kind after kind: gradients,
+    curves, tunnels, speed limits, neutral sections, each kind's at the rows from the
+    previous kind's end to its own. Compiled code and Python read them with the same
+    functions; three sequences, not one per kind and column, because compiled code
+    pays for every array it hands to a function."""
 
-    gradient_starts: Any
-    gradient_ends: Any
-    gradient_values: Any     # grade, per mille = N/kN
-    curve_starts: Any
-    curve_ends: Any
-    curve_values: Any        # CURVE_CONSTANT / R, N/kN
-    tunnel_starts: Any
-    tunnel_ends: Any
-    tunnel_values: Any       # TUNNEL_CONSTANT * tunnel length, N/kN
-    limit_starts: Any
-    limit_ends: Any
-    limit_values: Any        # m/s
-    neutral_starts: Any
-    neutral_ends: Any
+    starts: Any
+    ends: Any
+    values: Any          # grade (per mille = N/kN), CURVE_CONSTANT / R, TUNNEL_CONSTANT *
+    gradients_end: int   # tunnel length (N/kN), limit (m/s), 0 (neutral sections)
+    curves_end: int
+    tunnels_end: int
+    limits_end: int
+    neutral_end: int
 
 
 def line_tables(line: Line | None, sequence: Callable) -> LineTables:
     """`line`'s LineTables, each column made by `sequence` (tuple, or an array maker);
     the open track (no line) has empty columns."""
-    def columns(sections, point_value):
-        return (sequence(s.start for s in sections), sequence(s.end for s in sections),
-                sequence(point_value(s) for s in sections))
-
-    if line is None:
-        empty = sequence(())
-        return LineTables(*[empty] * len(LineTables._fields))
-    neutral = columns(line.neutral_sections, lambda s: 0.0)[:2]
-    return LineTables(
-        *columns(line.gradients, lambda s: s.value),
-        *columns(line.curves, lambda s: CURVE_CONSTANT / s.value),
-        *columns(line.tunnels, lambda s: TUNNEL_CONSTANT * (s.end - s.start)),
-        *columns(line.speed_limits, lambda s: s.value), *neutral)
+    kinds = () if line is None else (
+        (line.gradients, lambda s: s.value),
+        (line.curves, lambda s: CURVE_CONSTANT / s.value),
+        (line.tunnels, lambda s: TUNNEL_CONSTANT * (s.end - s.start)),
+        (line.speed_limits, lambda s: s.value),
+        (line.neutral_sections, lambda s: 0.0))
+    rows = [(s.start, s.end, value(s)) for sections, value in kinds for s in sections]
+    ends = np.cumsum([len(sections) for sections, _ in kinds] or [0] * 5).tolist()
+    return LineTables(sequence(row[0] for row in rows), sequence(row[1] for row in rows),
+                      sequence(row[2] for row in rows), *ends)
 
 
 def line_arrays(line: Line | None) -> LineTables:
@@ -128,50 +122,49 @@ def line_arrays(line: Line | None) -> LineTables:
     return line_tables(line, lambda values: np.array(list(values), dtype=float))
 
 
-@jitable
+@jitable(inline=True)
 def speed_limit(tables: LineTables, position: float) -> float:
     """The line's speed limit at `position`, m/s (the last one beyond the end)."""
-    for i in range(len(tables.limit_starts)):
-        if tables.limit_starts[i] <= position < tables.limit_ends[i]:
-            return tables.limit_values[i]
-    return tables.limit_values[len(tables.limit_values) - 1]
+    for i in range(tables.tunnels_end, tables.limits_end):
+        if tables.starts[i] <= position < tables.ends[i]:
+            return tables.values[i]
+    return tables.values[tables.limits_end - 1]
 
 
-@jitable
+@jitable(inline=True)
 def in_neutral_section(tables: LineTables, position: float) -> bool:
-    for i in range(len(tables.neutral_starts)):
-        if tables.neutral_starts[i] <= position < tables.neutral_ends[i]:
+    for i in range(tables.limits_end, tables.neutral_end):
+        if tables.starts[i] <= position < tables.ends[i]:
             return True
     return False
 
 
-@jitable
+@jitable(inline=True)
 def belt_resistance(tables: LineTables, head: float, train_length: float) -> float:
     """Gradient + curve + tunnel specific resistance of the mass belt [head - L, head],
     N/kN (0 on the open track)."""
     tail = head - train_length
-    total = _belt_average(tables.gradient_starts, tables.gradient_ends, tables.gradient_values,
-                          tail, head)
-    total += _belt_average(tables.curve_starts, tables.curve_ends, tables.curve_values, tail,
-                           head)
-    total += _belt_average(tables.tunnel_starts, tables.tunnel_ends, tables.tunnel_values,
-                           tail, head)
+    total = _belt_average(tables, 0, tables.gradients_end, tail, head)
+    total += _belt_average(tables, tables.gradients_end, tables.curves_end, tail, head)
+    total += _belt_average(tables, tables.curves_end, tables.tunnels_end, tail, head)
     return total
 
 
 @jitable
-def _belt_average(starts, ends, values, tail: float, head: float) -> float:
-    """Mean over [tail, head] of a piecewise-constant quantity (0 outside sections);
-    the point value when the belt has no length."""
-    if len(starts) == 0:  # none on this line (0 even where the position is not finite)
+def _belt_average(tables: LineTables, first: int, end: int, tail: float, head: float
+                  ) -> float:
+    """Mean over [tail, head] of the piecewise-constant quantity of rows first .. end - 1
+    (0 outside them); the point value when the belt has no length."""
+    if first == end:  # none on this line (0 even where the position is not finite)
         return 0.0
+    starts, ends, values = tables.starts, tables.ends, tables.values
     if head <= tail:
-        for i in range(len(starts)):
+        for i in range(first, end):
             if starts[i] <= head < ends[i]:
                 return values[i]
         return 0.0
     covered = 0.0
-    for i in range(len(starts)):
+    for i in range(first, end):
         overlap = min(head, ends[i]) - max(tail, starts[i])
         if overlap > 0:
             covered += overlap * values[i]
