@@ -16,6 +16,7 @@ from typing import Any, Callable
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, Log, ParameterDescriptor
+from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
@@ -157,10 +158,14 @@ class AtoNode(Node):
         self._outgoing: list[tuple[Any, Topic]] = []
         self._incoming: list[tuple[Any, Topic]] = []
         self.lockstep_inputs: list[tuple[Any, Callable]] = []
+        self.fast_path_unavailable = SubscriptionWaitSet.unavailable()  # why, or ""
+        # what the lockstep wait set serves, the executor leaves alone (LockstepGroup)
+        self.lockstep_group = None if self.fast_path_unavailable else LockstepGroup()
         events = self.topics["events"]
         self.events_out = self.create_publisher(String, events.name, QOS["events"])
         self.events_in = self.create_subscription(String, events.name, self._on_event_message,
-                                                  QOS["events"])
+                                                  QOS["events"],
+                                                  callback_group=self.lockstep_group)
         # on the fast path too: a run's start and end wait on few events, each of which
         # would otherwise wait up to HOUSEKEEPING_PERIOD for the executor
         self.lockstep_inputs.append((self.events_in, self._on_event_message))
@@ -225,7 +230,8 @@ class AtoNode(Node):
         """A per-step input: served on the lockstep fast path."""
         topic = self.topics[key]
         sub = self.create_subscription(message_class(topic.type), topic.name, callback,
-                                       QOS[topic.qos], raw=raw)
+                                       QOS[topic.qos], raw=raw,
+                                       callback_group=self.lockstep_group)
         self._incoming.append((sub, topic))
         self.lockstep_inputs.append((sub, callback))
         return sub
@@ -382,6 +388,22 @@ def spin_lockstep(node: AtoNode, executor: SingleThreadedExecutor) -> None:
         lockstep.take(next_housekeeping - now)
 
 
+class LockstepGroup(CallbackGroup):
+    """The callback group of the subscriptions the lockstep wait set serves (on the fast
+    path): the executor neither waits on them nor runs their callbacks. Left in its view,
+    it took whatever was queued on them at each housekeeping through its own slower path,
+    and waited on a bigger wait set every time."""
+
+    def can_execute(self, entity) -> bool:
+        return False
+
+    def beginning_execution(self, entity) -> bool:
+        return False
+
+    def ending_execution(self, entity) -> None:
+        """Nothing to end: no execution ever begins."""
+
+
 class SubscriptionWaitSet:
     """The private rclpy API of the lockstep fast path, in one place: an rcl wait set of
     subscriptions (rclpy.impl.implementation_singleton's WaitSet), waited on directly,
@@ -447,7 +469,7 @@ class LockstepInputs:
         self.subscriptions = [sub for sub, _ in node.lockstep_inputs]
         self.inputs = [(sub.msg_type, sub.raw, callback) for sub, callback in
                        node.lockstep_inputs]
-        self.fallback = SubscriptionWaitSet.unavailable()  # why not the fast path, or ""
+        self.fallback = node.fast_path_unavailable
         self.wait_set = None if self.fallback else SubscriptionWaitSet(self.subscriptions,
                                                                        node.context)
         self.executor = node.executor  # run_node's (the fallback's)
