@@ -162,7 +162,7 @@ class AtoNode(Node):
         self.topics = topic_map()
         self._outgoing: list[tuple[Any, Topic]] = []
         self._incoming: list[tuple[Any, Topic]] = []
-        self.lockstep_inputs: list[tuple[Any, Callable]] = []
+        self.lockstep_inputs: list[tuple[Any, Callable, Callable[[], bool] | None]] = []
         self.fast_path_unavailable = SubscriptionWaitSet.unavailable()  # why, or ""
         # what the lockstep wait set serves, the executor leaves alone (LockstepGroup)
         self.lockstep_group = None if self.fast_path_unavailable else LockstepGroup()
@@ -173,7 +173,7 @@ class AtoNode(Node):
                                                   callback_group=self.lockstep_group)
         # on the fast path too: a run's start and end wait on few events, each of which
         # would otherwise wait up to HOUSEKEEPING_PERIOD for the executor
-        self.lockstep_inputs.append((self.events_in, self._on_event_message))
+        self.lockstep_inputs.append((self.events_in, self._on_event_message, None))
         self._ready_timer = None
         self._wall_clock = Clock(clock_type=ClockType.STEADY_TIME)
         fault = parse_fault(self.values["run.fault"])
@@ -231,14 +231,18 @@ class AtoNode(Node):
         self._outgoing.append((pub, topic))
         return pub
 
-    def subscription(self, key: str, callback: Callable, raw: bool = False):
-        """A per-step input: served on the lockstep fast path."""
+    def subscription(self, key: str, callback: Callable, raw: bool = False,
+                     wakes: Callable[[], bool] | None = None):
+        """A per-step input: served on the lockstep fast path. With `wakes`, the node
+        waits for this input only while wakes() is true; otherwise its messages are
+        taken whenever the node wakes for another input (or its housekeeping), each
+        topic's in arrival order as always."""
         topic = self.topics[key]
         sub = self.create_subscription(message_class(topic.type), topic.name, callback,
                                        QOS[topic.qos], raw=raw,
                                        callback_group=self.lockstep_group)
         self._incoming.append((sub, topic))
-        self.lockstep_inputs.append((sub, callback))
+        self.lockstep_inputs.append((sub, callback, wakes))
         return sub
 
     # Readiness gate -------------------------------------------------------
@@ -448,15 +452,18 @@ class SubscriptionWaitSet:
             for name in names if not hasattr(getattr(rclpy_implementation, kind, None), name)]
         return f"rclpy lacks {', '.join(missing)}" if missing else ""
 
-    def wait(self, timeout: float) -> list[bool]:
-        """Wait up to `timeout` s; which subscriptions (in the given order) are ready."""
+    def wait(self, timeout: float, waited: list[bool]) -> list[bool]:
+        """Wait up to `timeout` s for the `waited` subscriptions (flags in the given
+        order); which of them are ready."""
         wait_set = self.wait_set
         wait_set.clear_entities()
-        for handle in self.handles:
-            wait_set.add_subscription(handle)
+        for handle, wanted in zip(self.handles, waited, strict=True):
+            if wanted:
+                wait_set.add_subscription(handle)
         wait_set.wait(int(timeout * 1e9))
         ready = wait_set.get_ready_entities("subscription")
-        return [handle.pointer in ready for handle in self.handles]
+        return [wanted and handle.pointer in ready
+                for handle, wanted in zip(self.handles, waited, strict=True)]
 
     def take(self, index: int, msg_type: type, raw: bool):
         """The next queued message of subscription `index`, or None."""
@@ -466,7 +473,9 @@ class SubscriptionWaitSet:
 
 class LockstepInputs:
     """A node's per-step subscriptions and run events: wait, then take and handle every
-    queued message of each ready one (in arrival order per topic).
+    queued message of each ready one (in arrival order per topic), and of each not
+    waited for (its `wakes` false: see AtoNode.subscription), in the node's order of
+    subscriptions.
 
     On the fast path (SubscriptionWaitSet) the messages are taken straight from rcl.
     Where that path is unavailable (another rclpy release, or $ATO_STANDARD_EXECUTOR=1)
@@ -474,9 +483,10 @@ class LockstepInputs:
     same callbacks, in arrival order per topic, so the same bag; only slower)."""
 
     def __init__(self, node: AtoNode):
-        self.subscriptions = [sub for sub, _ in node.lockstep_inputs]
-        self.inputs = [(sub.msg_type, sub.raw, callback) for sub, callback in
+        self.subscriptions = [sub for sub, _, _ in node.lockstep_inputs]
+        self.inputs = [(sub.msg_type, sub.raw, callback) for sub, callback, _ in
                        node.lockstep_inputs]
+        self.wakes = [wakes for _, _, wakes in node.lockstep_inputs]
         self.fallback = node.fast_path_unavailable
         self.wait_set = None if self.fallback else SubscriptionWaitSet(self.subscriptions,
                                                                        node.context)
@@ -487,8 +497,9 @@ class LockstepInputs:
         if self.wait_set is None:
             return self._take_through_executor(timeout)
         handled = 0
-        for index, ready in enumerate(self.wait_set.wait(timeout)):
-            if not ready:
+        waited = [wakes is None or wakes() for wakes in self.wakes]
+        for index, ready in enumerate(self.wait_set.wait(timeout, waited)):
+            if waited[index] and not ready:
                 continue
             msg_type, raw, callback = self.inputs[index]
             message = self.wait_set.take(index, msg_type, raw)

@@ -37,7 +37,11 @@ class ControllerNode(AtoNode):
         self.changes_pub = self.publisher("parameter_changes")
         self.live = self.stage.component.live_parameters
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self.subscription("target_preview", self.on_horizon)
+        # The horizon of step k comes two steps ahead of y_k (the profile runs ahead):
+        # waited for only when none is queued, the controller wakes once a step, for y_k,
+        # and takes the horizons that came meanwhile first.
+        self.subscription("target_preview", self.on_horizon,
+                          wakes=lambda: not self.stage.horizons)
         self.subscription("measured_speed", self.on_speed)
         self.ready_when_matched()
 

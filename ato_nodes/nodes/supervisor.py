@@ -64,8 +64,11 @@ class SupervisorNode(AtoNode):
         self.speeds: deque[float] = deque()
         self.paired = 0
         self.fitness_out = self.publisher("running_fitness")
-        # on the lockstep fast path (base.spin_lockstep): two messages a step
-        self.subscription("target_speed", lambda msg: self.on_sample(self.targets, msg.data))
+        # on the lockstep fast path (base.spin_lockstep): two messages a step, the target
+        # two steps ahead of the state (the profile runs ahead), so waited for only when
+        # none is queued: the supervisor wakes once a step, for the state
+        self.subscription("target_speed", lambda msg: self.on_sample(self.targets, msg.data),
+                          wakes=lambda: not self.targets)
         self.subscription("state", lambda msg: self.on_sample(self.speeds, msg.linear.x))
 
     def on_sample(self, queue: deque, value: float) -> None:
