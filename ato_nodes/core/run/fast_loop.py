@@ -269,7 +269,7 @@ def _approach(step_size: float, stair: float, target: float, speed: float):
     return min(stair, target), stair
 
 
-@jitable
+@jitable(inline=True)
 def _speed_limit(inputs: LoopInputs, position: float) -> float:
     """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
     if inputs.plan.limits_speed:
@@ -332,7 +332,7 @@ def _publish_horizons(inputs: LoopInputs, profile: ProfileState, k: int, positio
     return ProfileState(position, stair)
 
 
-@jitable
+@jitable(inline=True)
 def _record(inputs: LoopInputs, row, k: int, plant: PlantState, target: float,
             measured: float, command: float) -> None:
     """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command)."""
@@ -350,7 +350,7 @@ def _record(inputs: LoopInputs, row, k: int, plant: PlantState, target: float,
     row[column.speed_limit], row[column.command] = _speed_limit(inputs, x), command
 
 
-@jitable
+@jitable(inline=True)
 def _plant_step(inputs: LoopInputs, plant: PlantState, command: float) -> PlantState:
     """PointMassTrain.step: the command through the dead time, RK4 over the period."""
     train, line = inputs.train, inputs.line

@@ -142,33 +142,39 @@ def in_neutral_section(tables: LineTables, position: float) -> bool:
 @jitable(inline=True)
 def belt_resistance(tables: LineTables, head: float, train_length: float) -> float:
     """Gradient + curve + tunnel specific resistance of the mass belt [head - L, head],
-    N/kN (0 on the open track)."""
-    tail = head - train_length
-    total = _belt_average(tables, 0, tables.gradients_end, tail, head)
-    total += _belt_average(tables, tables.gradients_end, tables.curves_end, tail, head)
-    total += _belt_average(tables, tables.curves_end, tables.tunnels_end, tail, head)
-    return total
+    N/kN (0 on the open track, without a call that would hand compiled code the arrays)."""
+    if tables.tunnels_end == 0:  # no gradient, curve or tunnel (the open track)
+        return 0.0
+    return _belt_sum(tables, head, train_length)
 
 
 @jitable
-def _belt_average(tables: LineTables, first: int, end: int, tail: float, head: float
-                  ) -> float:
-    """Mean over [tail, head] of the piecewise-constant quantity of rows first .. end - 1
-    (0 outside them); the point value when the belt has no length."""
-    if first == end:  # none on this line (0 even where the position is not finite)
-        return 0.0
+def _belt_sum(tables: LineTables, head: float, train_length: float) -> float:
+    """Per kind, the mean over the belt of its piecewise-constant value (0 outside its
+    sections), or the point value when the belt has no length; summed. One pass over the
+    rows, so that compiled code makes no call per kind."""
     starts, ends, values = tables.starts, tables.ends, tables.values
-    if head <= tail:
-        for i in range(first, end):
-            if starts[i] <= head < ends[i]:
-                return values[i]
-        return 0.0
-    covered = 0.0
-    for i in range(first, end):
-        overlap = min(head, ends[i]) - max(tail, starts[i])
-        if overlap > 0:
-            covered += overlap * values[i]
-    return covered / (head - tail)
+    tail = head - train_length
+    kind_ends = (tables.gradients_end, tables.curves_end, tables.tunnels_end)
+    total, first = 0.0, 0
+    for kind in range(3):
+        end = kind_ends[kind]
+        average = 0.0
+        if first < end and head <= tail:
+            for i in range(first, end):
+                if starts[i] <= head < ends[i]:
+                    average = values[i]
+                    break
+        elif first < end:
+            covered = 0.0
+            for i in range(first, end):
+                overlap = min(head, ends[i]) - max(tail, starts[i])
+                if overlap > 0:
+                    covered += overlap * values[i]
+            average = covered / (head - tail)
+        total = average if kind == 0 else total + average
+        first = end
+    return total
 
 
 # ---------------------------------------------------------------- loading ----

@@ -209,7 +209,7 @@ def rates(t: float, v: float, force: float, command: float, powered: bool,
     return acceleration, dforce
 
 
-@jitable
+@jitable(inline=True)
 def rk4_substep(t: float, x: float, v: float, f: float, h: float, command: float,
                 powered: bool, constants: TrainConstants, line: LineTables
                 ) -> tuple[float, float, float]:
