@@ -32,6 +32,7 @@ from ato_nodes.core.config.scenario import complete, train_preset
 from ato_nodes.core.config.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.base.topics import Topic, topic_map
+from ato_nodes.nodes.timing import install as install_timing
 
 QOS = {
     "data": QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
@@ -560,6 +561,7 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
     try:
         node = factory()
         holder.append(node)
+        install_timing(node)  # nothing unless $ATO_NODE_TIMING is set
         node.stop_requested = node.stop_requested or bool(pending)
         # rclpy.experimental.EventsExecutor (7.1.6) fires no timers and ignores SIGINT here.
         executor = SingleThreadedExecutor()

@@ -1,0 +1,83 @@
+"""Where a node's time goes, part by part: off unless $ATO_NODE_TIMING names a folder.
+
+With it, each node writes FOLDER/ROLE.json as it exits: for each part of its loop (the
+lockstep wait, the takes, the handling of each per-step input, each topic's publishes,
+the bag writes, the executor's housekeeping passes) the wall and thread-CPU nanoseconds
+summed and the count, and the CPU time of the whole process (DDS's threads included)
+between the run's 'start' and 'finished' events. `benchmarks/benchmark.py --profile`
+prints them per step. The parts are wrapped in place before the node spins, so a node
+without the variable runs exactly its usual code.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import os
+import time
+from pathlib import Path
+from typing import Callable
+
+VARIABLE = "ATO_NODE_TIMING"
+
+
+def _timing(function: Callable, totals: list[int]) -> Callable:
+    """`function`, adding its wall and CPU time and one call to `totals`."""
+    def timed(*args, **kwargs):
+        wall, cpu = time.perf_counter_ns(), time.thread_time_ns()
+        try:
+            return function(*args, **kwargs)
+        finally:
+            totals[0] += time.perf_counter_ns() - wall
+            totals[1] += time.thread_time_ns() - cpu
+            totals[2] += 1
+    return timed
+
+
+def install(node) -> None:
+    """Time `node`'s parts (an AtoNode's, before it spins) if $ATO_NODE_TIMING is set."""
+    folder = os.environ.get(VARIABLE)
+    if not folder:
+        return
+    from ato_nodes.nodes import base  # which imports this module
+    parts: dict[str, list[int]] = {}
+
+    def part(name: str) -> list[int]:
+        return parts.setdefault(name, [0, 0, 0])  # wall ns, CPU ns, calls
+
+    def wrap(owner, attribute: str, name: str) -> None:
+        setattr(owner, attribute, _timing(getattr(owner, attribute), part(name)))
+
+    wrap(base.SubscriptionWaitSet, "wait", "wait")
+    wrap(base.SubscriptionWaitSet, "take", "take")
+    wrap(base, "_housekeeping", "housekeeping")
+    for publisher, topic in node._outgoing:
+        wrap(publisher, "publish", f"publish {topic.name}")
+    names = {subscription: topic.name for subscription, topic in node._incoming}
+    names[node.events_in] = node.topics["events"].name
+    node.lockstep_inputs[:] = [
+        (subscription, _timing(callback, part(f"handle {names[subscription]}")), wakes)
+        for subscription, callback, wakes in node.lockstep_inputs]
+    if getattr(node, "writer", None) is not None:  # the recorder's bag
+        wrap(node.writer, "write", "bag write")
+    loop: dict[str, tuple] = {}  # at 'start', 'finished': (process CPU ns, steps, parts)
+    on_event = node.on_event
+
+    def noting_the_loop(word: str, argument: str) -> None:
+        if word in ("start", "finished"):
+            loop[word] = (time.process_time_ns(),
+                          int(argument.split()[0]) if word == "finished" else 0,
+                          {name: list(totals) for name, totals in parts.items()})
+        on_event(word, argument)
+    node.on_event = noting_the_loop
+
+    def write() -> None:
+        """The loop's share (from 'start' to 'finished'), if the node heard both."""
+        if len(loop) < 2:
+            return
+        (cpu_start, _, start), (cpu_end, steps, end) = loop["start"], loop["finished"]
+        Path(folder, f"{node.role}.json").write_text(json.dumps({
+            "steps": steps, "process_cpu_ns": cpu_end - cpu_start,
+            "parts": {name: [a - b for a, b in zip(end[name], start[name], strict=True)]
+                      for name in parts}}))
+    atexit.register(write)
