@@ -31,6 +31,7 @@ from ato_nodes.core.base.topics import step_topics
 from ato_nodes.launch import node_environment, node_processes
 from ato_nodes.nodefork import NODE_START
 from ato_nodes.nodes.base import STANDARD_EXECUTOR
+from ato_nodes.nodes.timing import VARIABLE as TIMING
 from commands import invocation
 
 pytestmark = pytest.mark.integration
@@ -416,6 +417,28 @@ def test_the_standard_executor_fallback_records_the_fast_paths_bag(tmp_path, ros
     recorded = read_series(fallback)
     for name in ("target", "speed", "command", "z3"):
         np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)
+
+
+def test_nodes_timing_their_parts_write_the_loops_figures(tmp_path):
+    """$ATO_NODE_TIMING (benchmark.py --profile): each node writes, as it exits, its parts'
+    time over the loop (from 'start' to 'finished'), and the run records every step."""
+    timing, bag = tmp_path / "timing", tmp_path / "bag"
+    timing.mkdir()
+    result = subprocess.run([*RUN_STACK, "--duration", "5", "--quiet", "--out", str(bag)],
+                            capture_output=True, text=True, timeout=120, cwd=ROOT,
+                            env={**os.environ, TIMING: str(timing)})
+    assert result.returncode == 0, result.stderr
+    assert set(message_counts(bag).values()) == {100}
+    figures = {role: json.loads((timing / f"{role}.json").read_text()) for role in NODES}
+    for role, figure in figures.items():
+        assert figure["steps"] == 100 and figure["process_cpu_ns"] > 0, role
+        assert {"wait", "take", "housekeeping"} <= set(figure["parts"]), role
+    # [wall ns, CPU ns, calls]: the plant steps from 'start' to 'finished'; another node's
+    # loop begins when it hears 'start', maybe some steps late, and the recorder writes the
+    # last steps after 'finished'
+    assert figures["plant"]["parts"]["publish /clock"][2] == 100
+    assert 0 < figures["controller"]["parts"]["publish /ato/traction_command"][2] <= 100
+    assert 0 < figures["recorder"]["parts"]["bag write"][2] <= 9 * 100
 
 
 def shares_a_socket(child, parent):

@@ -3,10 +3,12 @@
 With it, each node writes FOLDER/ROLE.json as it exits: for each part of its loop (the
 lockstep wait, the takes, the handling of each per-step input, each topic's publishes,
 the bag writes, the executor's housekeeping passes) the wall and thread-CPU nanoseconds
-summed and the count, and the CPU time of the whole process (DDS's threads included)
-between the run's 'start' and 'finished' events. `benchmarks/benchmark.py --profile`
-prints them per step. The parts are wrapped in place before the node spins, so a node
-without the variable runs exactly its usual code.
+summed and the count, and the CPU time of the whole process (DDS's threads included),
+from the run's 'start' to its 'finished' as the node hears them (another node than the
+plant may hear 'start' a few steps late: over a long run, the figures per step are what
+a step costs). `benchmarks/benchmark.py --profile` prints them per step. The parts are
+wrapped in place before the node spins, so a node without the variable runs exactly its
+usual code.
 """
 
 from __future__ import annotations
