@@ -38,11 +38,12 @@ class ControllerNode(AtoNode):
         self.live = self.stage.component.live_parameters
         self.add_on_set_parameters_callback(self.on_set_parameters)
         # The horizon of step k comes two steps ahead of y_k (the profile runs ahead):
-        # waited for only when none is queued, the controller wakes once a step, for y_k,
-        # and takes the horizons that came meanwhile first.
+        # waited for only when none is queued, the controller wakes once a step, for y_k.
+        # Inputs are handled in the order subscribed: y_k first, so u_k goes out with the
+        # horizon already queued before the horizons that came meanwhile are taken.
+        self.subscription("measured_speed", self.on_speed)
         self.subscription("target_preview", self.on_horizon,
                           wakes=lambda: not self.stage.horizons)
-        self.subscription("measured_speed", self.on_speed)
         self.ready_when_matched()
 
     def live_parameters(self, values) -> tuple[str, ...]:
