@@ -561,7 +561,9 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
     try:
         node = factory()
         holder.append(node)
-        install_timing(node)  # nothing unless $ATO_NODE_TIMING is set
+        install_timing(node, {  # nothing unless $ATO_NODE_TIMING is set
+            "wait": (SubscriptionWaitSet, "wait"), "take": (SubscriptionWaitSet, "take"),
+            "housekeeping": (sys.modules[__name__], "_housekeeping")})
         node.stop_requested = node.stop_requested or bool(pending)
         # rclpy.experimental.EventsExecutor (7.1.6) fires no timers and ignores SIGINT here.
         executor = SingleThreadedExecutor()

@@ -36,12 +36,14 @@ def _timing(function: Callable, totals: list[int]) -> Callable:
     return timed
 
 
-def install(node) -> None:
-    """Time `node`'s parts (an AtoNode's, before it spins) if $ATO_NODE_TIMING is set."""
+def install(node, shared: dict[str, tuple[object, str]]) -> None:
+    """Time `node`'s parts (an AtoNode's, before it spins) if $ATO_NODE_TIMING is set:
+    its publishers, lockstep handlers and bag writer, and the `shared` parts (name ->
+    the object and attribute to wrap: the wait set's wait and take, the housekeeping),
+    which nodes/base.py hands in (this module imports nothing of it)."""
     folder = os.environ.get(VARIABLE)
     if not folder:
         return
-    from ato_nodes.nodes import base  # which imports this module
     parts: dict[str, list[int]] = {}
 
     def part(name: str) -> list[int]:
@@ -50,9 +52,8 @@ def install(node) -> None:
     def wrap(owner, attribute: str, name: str) -> None:
         setattr(owner, attribute, _timing(getattr(owner, attribute), part(name)))
 
-    wrap(base.SubscriptionWaitSet, "wait", "wait")
-    wrap(base.SubscriptionWaitSet, "take", "take")
-    wrap(base, "_housekeeping", "housekeeping")
+    for name, (owner, attribute) in shared.items():
+        wrap(owner, attribute, name)
     for publisher, topic in node._outgoing:
         wrap(publisher, "publish", f"publish {topic.name}")
     names = {subscription: topic.name for subscription, topic in node._incoming}
