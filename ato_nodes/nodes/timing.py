@@ -56,23 +56,34 @@ def install(node, shared: dict[str, tuple[object, str]]) -> None:
         wrap(owner, attribute, name)
     for publisher, topic in node._outgoing:
         wrap(publisher, "publish", f"publish {topic.name}")
+    loop: dict[str, tuple] = {}  # at 'start', 'finished': (process CPU ns, steps, parts)
+
+    def noting_the_loop(handle: Callable) -> Callable:
+        """The run events' handler, noting the totals as the handling of 'start' and of
+        'finished' begins: the loop is what comes between, in the parts and the process
+        CPU alike ('start' logged, and the plant's step 0, in; 'finished' out)."""
+        def handling(msg) -> None:
+            word, _, argument = msg.data.partition(" ")
+            if word in ("start", "finished"):
+                loop[word] = (time.process_time_ns(),
+                              int(argument.split()[0]) if word == "finished" else 0,
+                              {name: list(totals) for name, totals in parts.items()})
+            handle(msg)
+        return handling
+
     names = {subscription: topic.name for subscription, topic in node._incoming}
     names[node.events_in] = node.topics["events"].name
     node.lockstep_inputs[:] = [
         (subscription, _timing(callback, part(f"handle {names[subscription]}")), wakes)
         for subscription, callback, wakes in node.lockstep_inputs]
+    events = next(index for index, (subscription, _, _) in enumerate(node.lockstep_inputs)
+                  if subscription is node.events_in)
+    subscription, handle, wakes = node.lockstep_inputs[events]
+    node.lockstep_inputs[events] = (subscription, noting_the_loop(handle), wakes)
+    # where the standard executor serves the inputs (no fast path): its callback
+    node.events_in.callback = noting_the_loop(node.events_in.callback)
     if getattr(node, "writer", None) is not None:  # the recorder's bag
         wrap(node.writer, "write", "bag write")
-    loop: dict[str, tuple] = {}  # at 'start', 'finished': (process CPU ns, steps, parts)
-    on_event = node.on_event
-
-    def noting_the_loop(word: str, argument: str) -> None:
-        if word in ("start", "finished"):
-            loop[word] = (time.process_time_ns(),
-                          int(argument.split()[0]) if word == "finished" else 0,
-                          {name: list(totals) for name, totals in parts.items()})
-        on_event(word, argument)
-    node.on_event = noting_the_loop
 
     def write() -> None:
         """The loop's share (from 'start' to 'finished'), if the node heard both."""
