@@ -36,6 +36,45 @@ def _timing(function: Callable, totals: list[int]) -> Callable:
     return timed
 
 
+class _NodeTiming:
+    """A node's parts' totals (wall ns, CPU ns, calls), and the totals and the process
+    CPU as the handling of 'start' and of 'finished' begins: the loop is what comes
+    between, in the parts and the process CPU alike ('start' logged, and the plant's
+    step 0, in; 'finished' out)."""
+
+    def __init__(self, role: str, folder: str):
+        self.role, self.folder = role, folder
+        self.parts: dict[str, list[int]] = {}
+        self.loop: dict[str, tuple] = {}  # 'start', 'finished': (CPU ns, steps, parts)
+
+    def part(self, name: str) -> list[int]:
+        return self.parts.setdefault(name, [0, 0, 0])
+
+    def wrap(self, owner, attribute: str, name: str) -> None:
+        setattr(owner, attribute, _timing(getattr(owner, attribute), self.part(name)))
+
+    def noting_the_loop(self, handle: Callable) -> Callable:
+        """The run events' handler `handle`, noting the totals at 'start' and 'finished'."""
+        def handling(msg) -> None:
+            word, _, argument = msg.data.partition(" ")
+            if word in ("start", "finished"):
+                self.loop[word] = (time.process_time_ns(),
+                                   int(argument.split()[0]) if word == "finished" else 0,
+                                   {name: list(totals) for name, totals in self.parts.items()})
+            handle(msg)
+        return handling
+
+    def write(self) -> None:
+        """The loop's share (from 'start' to 'finished'), if the node heard both."""
+        if len(self.loop) < 2:
+            return
+        (cpu_start, _, start), (cpu_end, steps, end) = self.loop["start"], self.loop["finished"]
+        Path(self.folder, f"{self.role}.json").write_text(json.dumps({
+            "steps": steps, "process_cpu_ns": cpu_end - cpu_start,
+            "parts": {name: [a - b for a, b in zip(end[name], start[name], strict=True)]
+                      for name in self.parts}}))
+
+
 def install(node, shared: dict[str, tuple[object, str]]) -> None:
     """Time `node`'s parts (an AtoNode's, before it spins) if $ATO_NODE_TIMING is set:
     its publishers, lockstep handlers and bag writer, and the `shared` parts (name ->
@@ -44,54 +83,22 @@ def install(node, shared: dict[str, tuple[object, str]]) -> None:
     folder = os.environ.get(VARIABLE)
     if not folder:
         return
-    parts: dict[str, list[int]] = {}
-
-    def part(name: str) -> list[int]:
-        return parts.setdefault(name, [0, 0, 0])  # wall ns, CPU ns, calls
-
-    def wrap(owner, attribute: str, name: str) -> None:
-        setattr(owner, attribute, _timing(getattr(owner, attribute), part(name)))
-
+    timing = _NodeTiming(node.role, folder)
     for name, (owner, attribute) in shared.items():
-        wrap(owner, attribute, name)
+        timing.wrap(owner, attribute, name)
     for publisher, topic in node._outgoing:
-        wrap(publisher, "publish", f"publish {topic.name}")
-    loop: dict[str, tuple] = {}  # at 'start', 'finished': (process CPU ns, steps, parts)
-
-    def noting_the_loop(handle: Callable) -> Callable:
-        """The run events' handler, noting the totals as the handling of 'start' and of
-        'finished' begins: the loop is what comes between, in the parts and the process
-        CPU alike ('start' logged, and the plant's step 0, in; 'finished' out)."""
-        def handling(msg) -> None:
-            word, _, argument = msg.data.partition(" ")
-            if word in ("start", "finished"):
-                loop[word] = (time.process_time_ns(),
-                              int(argument.split()[0]) if word == "finished" else 0,
-                              {name: list(totals) for name, totals in parts.items()})
-            handle(msg)
-        return handling
-
+        timing.wrap(publisher, "publish", f"publish {topic.name}")
     names = {subscription: topic.name for subscription, topic in node._incoming}
     names[node.events_in] = node.topics["events"].name
     node.lockstep_inputs[:] = [
-        (subscription, _timing(callback, part(f"handle {names[subscription]}")), wakes)
+        (subscription, _timing(callback, timing.part(f"handle {names[subscription]}")), wakes)
         for subscription, callback, wakes in node.lockstep_inputs]
     events = next(index for index, (subscription, _, _) in enumerate(node.lockstep_inputs)
                   if subscription is node.events_in)
     subscription, handle, wakes = node.lockstep_inputs[events]
-    node.lockstep_inputs[events] = (subscription, noting_the_loop(handle), wakes)
+    node.lockstep_inputs[events] = (subscription, timing.noting_the_loop(handle), wakes)
     # where the standard executor serves the inputs (no fast path): its callback
-    node.events_in.callback = noting_the_loop(node.events_in.callback)
+    node.events_in.callback = timing.noting_the_loop(node.events_in.callback)
     if getattr(node, "writer", None) is not None:  # the recorder's bag
-        wrap(node.writer, "write", "bag write")
-
-    def write() -> None:
-        """The loop's share (from 'start' to 'finished'), if the node heard both."""
-        if len(loop) < 2:
-            return
-        (cpu_start, _, start), (cpu_end, steps, end) = loop["start"], loop["finished"]
-        Path(folder, f"{node.role}.json").write_text(json.dumps({
-            "steps": steps, "process_cpu_ns": cpu_end - cpu_start,
-            "parts": {name: [a - b for a, b in zip(end[name], start[name], strict=True)]
-                      for name in parts}}))
-    atexit.register(write)
+        timing.wrap(node.writer, "write", "bag write")
+    atexit.register(timing.write)
