@@ -18,7 +18,7 @@ import time
 import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.config.scenario import prepare, scenario_names
+from ato_nodes.core.config.scenario import apply_overrides, prepare, scenario_names
 from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run import fast_loop
 from ato_nodes.core.run.loop import simulate
@@ -54,8 +54,9 @@ def main() -> None:
     try:
         runs = {}
         for name in args.scenarios or scenario_names():
-            duration = prepare(name)["run.duration"]
-            runs[name] = prepare(name, {"run.duration": min(args.seconds, duration)})
+            values = prepare(name)
+            runs[name] = apply_overrides(values, {
+                "run.duration": min(args.seconds, values["run.duration"])})
     except ScenarioError as exc:
         _cli.fail(str(exc))
     print(f"{'scenario':24s} {'us/step':>9s}  steps  loop")

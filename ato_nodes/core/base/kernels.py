@@ -63,8 +63,10 @@ def compiled(function):
 CORE = Path(__file__).resolve().parents[1]  # ato_nodes/core
 
 
+@functools.lru_cache(maxsize=1)
 def sources_digest() -> str:
-    """sha256 over every core source file, by path and content."""
+    """sha256 over every core source file, by path and content (once per process: every
+    compiled function's cache check at import reads the same files)."""
     digest = hashlib.sha256()
     for path in sorted(CORE.rglob("*.py")):
         digest.update(str(path.relative_to(CORE)).encode() + b"\0" + path.read_bytes())
