@@ -261,8 +261,10 @@ class TableProfile(Plan):
         return float(np.interp(x, self.points, self.speeds))
 
     def table(self) -> PlanTable | None:
-        if not self.position_indexed:
-            return None
+        return self._table if self.position_indexed else None
+
+    @functools.cached_property
+    def _table(self) -> PlanTable:  # built once: simulate() asks for it twice per run
         return plan_table(self.points, self.speeds)
 
 
@@ -287,6 +289,10 @@ class StrategyProfile(Plan):
         return math.sqrt(max(0.0, float(np.interp(position, self.positions, self.energies))))
 
     def table(self) -> PlanTable:
+        return self._table
+
+    @functools.cached_property
+    def _table(self) -> PlanTable:  # built once: simulate() asks for it twice per run
         return plan_table(self.positions, self.energies, squared=True)
 
     def _stage(self, position: float) -> int:
@@ -476,6 +482,12 @@ class AtoCurve(Plan):
         return float(np.interp(position, self.positions, self.speeds))
 
     def table(self) -> PlanTable:
+        return self._table
+
+    @functools.cached_property
+    def _table(self) -> PlanTable:
+        """Built once per curve (a curve is shared by every run of its parameters, and
+        simulate() asks for it twice per run: 1-2 ms for a long line)."""
         return plan_table(self.positions, self.speeds, stops_at_end=True, limits=self.limits)
 
     def limit(self, position: float) -> float:
