@@ -1,0 +1,442 @@
+"""On-board estimation of the real train's mass and running resistance (ROS-free).
+
+What it estimates, and why in this form
+---------------------------------------
+The plant (core/train/plant.py) makes the real train differ from the nominal one by
+three factors, and they enter differently:
+
+* plant.resistance_factor r scales the basic (Davis) resistance: w0 = r (a + b v + c v^2),
+  N/kN. The estimator carries r itself (a resistance scale), not a, b and c: over a
+  run the regressors 1, v and v^2 are nearly collinear (on seed004-metro-ato's nominal
+  run, moving steps, the normalised information matrix of (a, b, c) has a condition
+  number of 913, seed003-maglev-ato's 1.8e3; v and v^2 correlate at 0.99), so three free
+  coefficients wander along the poorly seen directions while one scale on the nominal
+  curve is seen at every speed; it is also exactly how the studies vary the train.
+* plant.mass_factor m enters only through the envelope. Forces are specific (N/kN):
+  a command within the envelope is delivered as that specific force whatever the load
+  (the traction is load-compensated), so dv/dt = xi (F - w0 - w_line) has no mass in it.
+  The envelope is in kN and kW, so the real limits are the nominal ones (N/kN) over m.
+  The estimator carries the inverse mass factor theta = 1/m: the applied force is then
+  clamp(demand, low theta, high theta), linear in theta where the envelope binds (a
+  factor m would divide); 1/m is also the one that enters Newton's law linearly.
+  Consequence: the mass is seen only while the real train is at its envelope. On the
+  shipped ATO runs only a heavy train gets there (metro, m = 1.3: ~11 s at full
+  traction; maglev: ~21 s); a light or nominal train never does (the ATO plans at 90 %
+  of the nominal envelope), so its mass estimate stays the load weighing's, with the
+  load weighing's sigma: that is honest, not a fault (and all a controller needs: the
+  envelope it may use is not below the nominal one).
+* plant.lag_factor is not estimated (the actuator model keeps the nominal lag; its
+  error counts as unexplained acceleration).
+
+Filter: an extended Kalman filter on x = (v, theta, r), the speed a state (m/s),
+theta and r random walks. Against recursive least squares with exponential forgetting:
+RLS's covariance grows by 1/lambda every step whatever the data, so during a dwell,
+a cruise or a coast (no mass information for most of a run) it winds up exponentially
+and the next saturation makes the estimate jump; the KF's process noise adds a stated
+drift per second (linear growth), takes the load weighing as a proper prior, and
+freezing is simply skipping the update. The speed as a state, not a differentiated
+acceleration: the sensor's noise (0.01 m/s) and resolution (0.01 m/s) over a 0.1 s period
+are ~0.15 m/s^2 of acceleration noise against a 20 % resistance error of ~0.015 m/s^2;
+the filter compares the measured speed with the speed the model integrates (a
+regression on speed increments, optimally weighted), so the noise does not grow with
+the differencing and the innovations stay white. The uncertainty is the covariance
+diagonal (sigma of theta and r; mass_sigma ~ theta_sigma / theta^2).
+
+Per control period (estimator_step): the command just sent enters the estimator's own
+copy of the ATO's actuator model (train_model.nominal_advance: dead time, lag, traction
+cut in neutral sections, dead-reckoned position), without the nominal envelope; the
+estimated envelope (nominal / m) is applied to its mean force, and to the lag's state as
+the plant's lag input is. The next step's measured speed closes the period: predict
+(v + h xi (F(theta) - r w0(v) - w_line), midpoint in v), then update. Frozen (no update,
+no drift; the speed state reset to the measurement): a period that starts or ends below
+estimator.min_speed (standstill, holding brake, the last metres of a stop: the
+brakes, not the model, set the acceleration) or whose pantograph comes within
+estimator.neutral_margin of a neutral section's edge (whether traction was cut is then
+unsure by the dead reckoning's error).
+
+Units: speeds m/s, forces and resistances N/kN (specific, as the whole core), positions
+m, theta and r dimensionless; the covariance is over (v m/s, theta, r).
+
+Interface for the controllers and the target planner (wiring is not done here)
+--------------------------------------------------------------------------------
+* Build once: settings = estimator_settings(values, train, period, line) (values the
+  run's estimator.* values, train the nominal TrainParameters, as the run context has
+  them); reading = load_weighing(real_mass_factor, error, seed) (the plant side's load
+  cell: the one place the real mass is read); state = estimator_start(settings, reading,
+  position).
+* Each period, after the command u is sent (where the linear ADRC calls
+  nominal_advance): state = estimator_step(settings, state, u, measured_speed).
+* Read: estimated_mass_factor(state) and estimated_resistance_scale(state) -> (value,
+  sigma); estimated_resistance(settings, state, speed, position) (N/kN, basic * r + line:
+  for known_resistance in the ADRC/PID feedforward and GPC's mechanistic model);
+  estimated_force_limits(settings, state, speed) ((low, high) N/kN: the envelope the
+  GPC's constraints and the target planner's envelope share should use).
+* estimate_series(settings, state, commands, measured_speeds) runs it over recorded
+  series (tests, studies); compiled_estimate_rows is the same loop compiled.
+Integration needs: registering PARAMETERS in the schema (node "controller"; the profile
+node too if the planner uses it live), the load weighing wired from the plant's
+plant.mass_factor at departure (a new reading at every departure: the load changes at
+stops), and the state carried in the controller's state NamedTuple.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ..base.kernels import compiled, jitable
+from ..base.spec import param
+from ..train.line import Line, belt_resistance, in_neutral_section
+from ..train.plant import Envelope, TrainParameters, basic_resistance, force_limits
+from .limiter import clamp
+from .train_model import NominalModel, NominalState, nominal_act, nominal_train
+
+PARAMETERS = (
+    param("estimator.enabled", False, "estimate the real train's mass and running resistance "
+          "on board (off: the nominal train is used)", "controller"),
+    param("estimator.load_weighing.error", 0.03, "relative error (1 sigma) of the load "
+          "weighing's mass reading at departure, the estimator's prior", "controller",
+          0.0, 0.5),
+    param("estimator.load_weighing.seed", 0, "seed of the load weighing's error (same seed, "
+          "same reading)", "controller", 0, 2**31 - 1),
+    param("estimator.resistance_sigma", 0.2, "prior uncertainty (1 sigma) of the running "
+          "resistance over the nominal", "controller", 0.001, 5.0),
+    param("estimator.speed_noise", 0.01, "speed sensor noise and resolution together, "
+          "1 sigma, m/s", "controller", 1e-5, 10.0),
+    param("estimator.acceleration_noise", 0.02, "acceleration the model does not explain "
+          "(lag, dead time, envelope within the period), 1 sigma, m/s^2", "controller",
+          1e-6, 10.0),
+    param("estimator.mass_drift", 1e-4, "random-walk drift of the inverse mass factor, "
+          "per square-root second", "controller", 0.0, 1.0),
+    param("estimator.resistance_drift", 1e-3, "random-walk drift of the resistance scale, "
+          "per square-root second", "controller", 0.0, 1.0),
+    param("estimator.min_speed", 1.0, "below this speed (standstill, holding brake, the "
+          "last metres of a stop) the estimates are frozen, m/s", "controller", 0.0, 100.0),
+    param("estimator.neutral_margin", 5.0, "estimates frozen while the pantograph is this "
+          "close to a neutral section's edge, m", "controller", 0.0, 1000.0),
+)
+
+# Bounds on the estimates: the schema's range of plant.mass_factor and resistance_factor.
+LOWEST_FACTOR, HIGHEST_FACTOR = 0.1, 10.0
+SPEED, INVERSE_MASS, RESISTANCE = 0, 1, 2  # the covariance's rows
+
+
+class EstimatorSettings(NamedTuple):
+    """What the run fixes for the estimator."""
+
+    actuator: NominalModel     # the nominal train and line, its actuator without envelope
+    envelope: Envelope         # the nominal envelope (kN, kW; weight kN)
+    limited: bool              # the train has an envelope
+    speed_variance: float      # (m/s)^2, of a speed reading
+    speed_drift: float         # (m/s)^2 per period, the unexplained acceleration's
+    inverse_mass_drift: float  # per period, variance added to theta
+    resistance_drift: float    # per period, variance added to r
+    min_speed: float           # m/s, below it frozen
+    neutral_margin: float      # m, frozen this close to a neutral section's edge
+    dead_time_steps: int       # periods a command waits before it acts
+
+
+class EstimatorState(NamedTuple):
+    """What the estimator carries from one period to the next."""
+
+    speed: float               # m/s, filtered speed at the start of the open period
+    inverse_mass: float        # theta = 1 / mass factor (nominal mass over the real)
+    resistance_scale: float    # r = real basic resistance over the nominal
+    covariance: np.ndarray     # 3 x 3 over (speed m/s, theta, r)
+    actuator: NominalState     # dead time, lag (N/kN), dead-reckoned position (m)
+    demand: float              # N/kN, mean lagged command over the open period (no envelope
+                               # at the lag's output)
+    demand_by_mass: float      # N/kN, its derivative by theta (where the envelope cut the input)
+    lag_by_mass: float         # N/kN, the lag state's derivative by theta
+    line_resistance: float     # N/kN, gradient + curve + tunnel at the open period's start
+    informative: bool          # the open period started moving and clear of neutral edges
+    updates: int               # periods that updated the estimates so far
+
+
+def load_weighing(mass_factor: float, relative_error: float, seed: int) -> float:
+    """The load-weighing reading at departure: the real mass factor (plant.mass_factor)
+    with a relative error drawn from a normal of sigma `relative_error`, seeded."""
+    draw = float(np.random.default_rng(seed).standard_normal())
+    return mass_factor * max(1.0 + relative_error * draw, LOWEST_FACTOR)
+
+
+def estimator_settings(values, train: TrainParameters, period: float,
+                       line: Line | None = None) -> EstimatorSettings:
+    """From the run's estimator.* `values` and the nominal `train` (what the ATO knows)."""
+    unlimited = dataclasses.replace(train, **{name: math.inf for name in (
+        "max_traction_force", "max_traction_power", "max_brake_force", "max_brake_power")})
+    actuator, start = nominal_train(unlimited, period, 0.0, line)
+    return EstimatorSettings(
+        actuator, train.envelope, train.limited, values["estimator.speed_noise"] ** 2,
+        (values["estimator.acceleration_noise"] * period) ** 2,
+        values["estimator.mass_drift"] ** 2 * period,
+        values["estimator.resistance_drift"] ** 2 * period,
+        values["estimator.min_speed"], values["estimator.neutral_margin"], len(start.pending))
+
+
+def estimator_start(settings: EstimatorSettings, mass_reading: float, relative_error: float,
+                    resistance_sigma: float, position: float = 0.0) -> EstimatorState:
+    """The state at departure from `position` (m): the mass prior from the load weighing
+    (`mass_reading`, its `relative_error` 1 sigma), the resistance prior the nominal one
+    with `resistance_sigma`, nothing yet known of the speed (the first step sets it)."""
+    inverse_mass = 1.0 / mass_reading
+    covariance = np.zeros((3, 3))
+    covariance[SPEED, SPEED] = settings.speed_variance
+    covariance[INVERSE_MASS, INVERSE_MASS] = (relative_error * inverse_mass) ** 2
+    covariance[RESISTANCE, RESISTANCE] = resistance_sigma ** 2
+    ring = np.zeros(settings.dead_time_steps)
+    return EstimatorState(0.0, inverse_mass, 1.0, covariance,
+                          NominalState(0.0, position, ring, 0), 0.0, 0.0, 0.0, 0.0, False, 0)
+
+
+def estimator_of(values, train: TrainParameters, period: float, mass_reading: float,
+                 line: Line | None = None, position: float = 0.0
+                 ) -> tuple[EstimatorSettings, EstimatorState]:
+    """Settings and departure state from the run's estimator.* `values`, the nominal
+    `train` and the load weighing's `mass_reading` (load_weighing)."""
+    settings = estimator_settings(values, train, period, line)
+    return settings, estimator_start(settings, mass_reading,
+                                     values["estimator.load_weighing.error"],
+                                     values["estimator.resistance_sigma"], position)
+
+
+@jitable
+def estimator_step(settings: EstimatorSettings, state: EstimatorState, command: float,
+                   measured_speed: float) -> EstimatorState:
+    """One control period: `measured_speed` (m/s) closes the period the last command
+    acted over (an update, or frozen), then `command` (N/kN, just sent) opens the next."""
+    if state.informative and measured_speed >= settings.min_speed:
+        speed, inverse_mass, resistance_scale, covariance = _closed_period(
+            settings, state, measured_speed)
+        updates = state.updates + 1
+    else:  # no information: the estimates and their covariance kept, the speed measured
+        speed, inverse_mass, resistance_scale = (measured_speed, state.inverse_mass,
+                                                 state.resistance_scale)
+        covariance = _frozen_covariance(settings, state.covariance)
+        updates = state.updates
+    actuator, lag_by_mass, demand, demand_by_mass, line_resistance, informative = (
+        _open_period(settings, state, command, speed, inverse_mass))
+    return EstimatorState(speed, inverse_mass, resistance_scale, covariance, actuator, demand,
+                          demand_by_mass, lag_by_mass, line_resistance, informative, updates)
+
+
+@jitable
+def estimated_mass_factor(state: EstimatorState) -> tuple[float, float]:
+    """(real mass over the nominal, its sigma): 1 / theta, sigma_theta / theta^2."""
+    theta = state.inverse_mass
+    return 1.0 / theta, math.sqrt(state.covariance[INVERSE_MASS, INVERSE_MASS]) / (theta * theta)
+
+
+@jitable
+def estimated_resistance_scale(state: EstimatorState) -> tuple[float, float]:
+    """(real basic resistance over the nominal, its sigma)."""
+    return state.resistance_scale, math.sqrt(state.covariance[RESISTANCE, RESISTANCE])
+
+
+@jitable
+def estimated_resistance(settings: EstimatorSettings, state: EstimatorState, speed: float,
+                         position: float) -> float:
+    """Basic (scaled by the estimate) plus line resistance at `speed` (m/s) with the head
+    at `position` (m), N/kN: what train_model.known_resistance gives for the nominal."""
+    train = settings.actuator.train
+    resistance = state.resistance_scale * basic_resistance(speed, train.davis_a, train.davis_b,
+                                                           train.davis_c)
+    if settings.actuator.on_line:
+        resistance += belt_resistance(settings.actuator.line, position, train.length)
+    return resistance
+
+
+@jitable
+def estimated_force_limits(settings: EstimatorSettings, state: EstimatorState, speed: float
+                           ) -> tuple[float, float]:
+    """(most negative, most positive) specific force the real train can apply at `speed`
+    as estimated (the nominal envelope over the mass factor), N/kN; infinite without one."""
+    if not settings.limited:
+        return -math.inf, math.inf
+    low, high = force_limits(speed, settings.envelope)
+    return low * state.inverse_mass, high * state.inverse_mass
+
+
+@jitable
+def _applied(settings: EstimatorSettings, inverse_mass: float, demand: float,
+             demand_by_mass: float, speed: float) -> tuple[float, float]:
+    """(the force the estimated envelope lets `demand` apply at `speed`, N/kN; its
+    derivative by theta: the nominal limit where the envelope binds, else the demand's)."""
+    if not settings.limited:
+        return demand, 0.0
+    low, high = force_limits(speed, settings.envelope)
+    if demand > high * inverse_mass:
+        return high * inverse_mass, high
+    if demand < low * inverse_mass:
+        return low * inverse_mass, low
+    return demand, demand_by_mass
+
+
+@jitable
+def _predict(settings: EstimatorSettings, state: EstimatorState
+             ) -> tuple[float, float, float, float]:
+    """The speed at the end of the open period and its derivatives by (v, theta, r) at the
+    start: the acceleration taken at the period's midpoint speed (the resistance and the
+    power limit move with the speed within it)."""
+    train = settings.actuator.train
+    h, xi = settings.actuator.period, train.xi
+    theta, scale, speed = state.inverse_mass, state.resistance_scale, state.speed
+    force, _ = _applied(settings, theta, state.demand, state.demand_by_mass, speed)
+    basic = basic_resistance(speed, train.davis_a, train.davis_b, train.davis_c)
+    middle = speed + 0.5 * h * xi * (force - scale * basic - state.line_resistance)
+    force, force_by_theta = _applied(settings, theta, state.demand, state.demand_by_mass,
+                                      middle)
+    basic = basic_resistance(middle, train.davis_a, train.davis_b, train.davis_c)
+    slope = train.davis_b + 2.0 * train.davis_c * abs(middle)  # d w0 / dv
+    predicted = speed + h * xi * (force - scale * basic - state.line_resistance)
+    return predicted, 1.0 - h * xi * scale * slope, h * xi * force_by_theta, -h * xi * basic
+
+
+@jitable
+def _closed_period(settings: EstimatorSettings, state: EstimatorState, measured: float
+                   ) -> tuple[float, float, float, np.ndarray]:
+    """The Kalman filter's prediction over the period and its update by the `measured`
+    speed: (speed, theta, r, covariance). Written out for the 3 x 3 (the transition only
+    has a first row to fill), so Python and compiled code do the same operations."""
+    predicted, by_speed, by_mass, by_resistance = _predict(settings, state)
+    p = state.covariance
+    row = np.empty(3)  # first row of A P
+    for j in range(3):
+        row[j] = by_speed * p[SPEED, j] + by_mass * p[INVERSE_MASS, j] + by_resistance * p[
+            RESISTANCE, j]
+    prior = p.copy()
+    prior[SPEED, SPEED] = (row[SPEED] * by_speed + row[INVERSE_MASS] * by_mass
+                           + row[RESISTANCE] * by_resistance + settings.speed_drift)
+    for i in (INVERSE_MASS, RESISTANCE):
+        prior[SPEED, i] = row[i]
+        prior[i, SPEED] = row[i]
+    prior[INVERSE_MASS, INVERSE_MASS] += settings.inverse_mass_drift
+    prior[RESISTANCE, RESISTANCE] += settings.resistance_drift
+    innovation_variance = prior[SPEED, SPEED] + settings.speed_variance
+    gain = np.empty(3)
+    for i in range(3):
+        gain[i] = prior[i, SPEED] / innovation_variance
+    posterior = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):  # the upper triangle, mirrored: symmetric to the bit
+            posterior[i, j] = prior[i, j] - gain[i] * prior[SPEED, j]
+            posterior[j, i] = posterior[i, j]
+    innovation = measured - predicted
+    inverse_mass = clamp(state.inverse_mass + gain[INVERSE_MASS] * innovation,
+                         1.0 / HIGHEST_FACTOR, 1.0 / LOWEST_FACTOR)
+    resistance_scale = clamp(state.resistance_scale + gain[RESISTANCE] * innovation,
+                             LOWEST_FACTOR, HIGHEST_FACTOR)
+    return predicted + gain[SPEED] * innovation, inverse_mass, resistance_scale, posterior
+
+
+@jitable
+def _frozen_covariance(settings: EstimatorSettings, covariance: np.ndarray) -> np.ndarray:
+    """The parameters' covariance kept, the speed's that of a reading and unrelated."""
+    frozen = covariance.copy()
+    for i in range(3):
+        frozen[SPEED, i] = 0.0
+        frozen[i, SPEED] = 0.0
+    frozen[SPEED, SPEED] = settings.speed_variance
+    return frozen
+
+
+@jitable
+def _open_period(settings: EstimatorSettings, state: EstimatorState, command: float,
+                 speed: float, inverse_mass: float
+                 ) -> tuple[NominalState, float, float, float, float, bool]:
+    """`command` sent at `speed` opens the next period: (the actuator model stepped over
+    it, its lag's derivative by theta, its mean force before the output's envelope N/kN,
+    that one's derivative, the line resistance at its start N/kN, whether it may inform)."""
+    model = settings.actuator
+    actuator, lag_by_mass, demand, demand_by_mass = _actuator_period(
+        settings, state.actuator, state.lag_by_mass, command, speed, inverse_mass)
+    position = state.actuator.position
+    line_resistance = 0.0
+    if model.on_line:
+        line_resistance = belt_resistance(model.line, position, model.train.length)
+    informative = speed >= settings.min_speed and not _near_neutral_edge(
+        settings, position, speed)
+    return actuator, lag_by_mass, demand, demand_by_mass, line_resistance, informative
+
+
+@jitable
+def _actuator_period(settings: EstimatorSettings, actuator: NominalState, lag_by_mass: float,
+                     command: float, speed: float, inverse_mass: float
+                     ) -> tuple[NominalState, float, float, float]:
+    """train_model.nominal_advance with the estimated envelope at the lag's input (where
+    the plant cuts the command): (the actuator after the period, its lag's derivative by
+    theta, the mean force before the envelope at the output N/kN, its derivative)."""
+    model = settings.actuator
+    pending, oldest = actuator.pending.copy(), actuator.oldest  # the state's is not changed
+    if len(pending):
+        command, pending[oldest] = pending[oldest], command
+        oldest = (oldest + 1) % len(pending)
+    input_by_mass = 0.0
+    if settings.limited:
+        low, high = force_limits(speed, settings.envelope)
+        if command > high * inverse_mass:
+            command, input_by_mass = high * inverse_mass, high
+        elif command < low * inverse_mass:
+            command, input_by_mass = low * inverse_mass, low
+    lag_state, demand = nominal_act(model, actuator.lag_state, command, speed,
+                                    actuator.position)
+    if model.neutral and command > 0.0 and in_neutral_section(
+            model.line, actuator.position - model.pantograph_offset):
+        input_by_mass = 0.0  # traction cut: nominal_act took the command to 0
+    # the lag's exact discretisation, derived by theta (decay and spread 0 without a lag)
+    demand_by_mass = input_by_mass + (lag_by_mass - input_by_mass) * model.spread
+    if demand == 0.0:  # cut in a neutral section: no force, nothing to derive
+        demand_by_mass = 0.0
+    lag_by_mass = input_by_mass + (lag_by_mass - input_by_mass) * model.decay
+    after = NominalState(lag_state, actuator.position + model.period * speed, pending, oldest)
+    return after, lag_by_mass, demand, demand_by_mass
+
+
+@jitable
+def _near_neutral_edge(settings: EstimatorSettings, position: float, speed: float) -> bool:
+    """Whether a neutral section's edge lies within the margin of the pantograph's path
+    over the period (then whether traction was cut is unsure)."""
+    model = settings.actuator
+    if not model.neutral:
+        return False
+    start = position - model.pantograph_offset
+    end = start + model.period * speed
+    margin = settings.neutral_margin
+    inside = in_neutral_section(model.line, start)
+    return (in_neutral_section(model.line, start - margin) != inside
+            or in_neutral_section(model.line, end) != inside
+            or in_neutral_section(model.line, end + margin) != inside)
+
+
+ESTIMATE_COLUMNS = ("mass_factor", "mass_sigma", "resistance_scale", "resistance_sigma")
+
+
+@jitable
+def estimate_rows(settings: EstimatorSettings, state: EstimatorState, commands: np.ndarray,
+                  measured_speeds: np.ndarray, rows: np.ndarray) -> EstimatorState:
+    """The estimator over recorded series (step k: measured_speeds[k], then commands[k]):
+    rows[k] the estimates after step k, ESTIMATE_COLUMNS; returns the last state."""
+    for k in range(len(commands)):
+        state = estimator_step(settings, state, commands[k], measured_speeds[k])
+        rows[k, 0], rows[k, 1] = estimated_mass_factor(state)
+        rows[k, 2], rows[k, 3] = estimated_resistance_scale(state)
+    return state
+
+
+compiled_estimate_rows = compiled(estimate_rows)
+
+
+def estimate_series(settings: EstimatorSettings, state: EstimatorState, commands,
+                    measured_speeds, fast: bool = False
+                    ) -> tuple[dict[str, np.ndarray], EstimatorState]:
+    """({ESTIMATE_COLUMNS name: its value after each step}, the last state) over the
+    series of a run (simulate()'s "command" and "measured_speed"); `fast`: compiled."""
+    commands = np.asarray(commands, dtype=float)
+    rows = np.empty((len(commands), len(ESTIMATE_COLUMNS)))
+    run = compiled_estimate_rows if fast and compiled_estimate_rows is not None else (
+        estimate_rows)
+    state = run(settings, state, commands, np.asarray(measured_speeds, dtype=float), rows)
+    return {name: rows[:, i] for i, name in enumerate(ESTIMATE_COLUMNS)}, state

@@ -1,0 +1,168 @@
+"""The on-board estimator of the real train's mass and running resistance
+(core/control/estimation.py), run over realistic runs of seed004-metro-ato."""
+
+import functools
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.base import kernels
+from ato_nodes.core.config.scenario import prepare
+from ato_nodes.core.control import estimation
+from ato_nodes.core.control.estimation import (
+    PARAMETERS, estimate_series, estimated_force_limits, estimated_mass_factor,
+    estimated_resistance, estimator_of, estimator_step, load_weighing)
+from ato_nodes.core.control.train_model import known_resistance, nominal_train
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.train.line import load_line
+from ato_nodes.core.train.plant import TrainParameters, force_limits
+
+ESTIMATOR = {spec.name: spec.default for spec in PARAMETERS}
+ERROR = ESTIMATOR["estimator.load_weighing.error"]
+SETTLED = 1000.0  # m: past the metro's acceleration, where the heavy train saturates
+
+
+@functools.lru_cache(maxsize=None)
+def metro_run(*overrides):
+    """seed004-metro-ato's values and series with the real train of `overrides`."""
+    values = prepare("seed004-metro-ato", list(overrides))
+    return values, simulate(values)
+
+
+def estimator(values, mass_reading, line=True):
+    return estimator_of(ESTIMATOR, TrainParameters.from_values(values), values["run.period"],
+                        mass_reading, load_line(values["line.file"]) if line else None,
+                        values["plant.initial_position"])
+
+
+def estimated_run(mass_factor=1.0, resistance_factor=1.0, weighing_seed=4):
+    """(the estimates along the run, its series, the last state), the prior the load
+    weighing of the real train with `weighing_seed`."""
+    values, series = metro_run(f"plant.mass_factor={mass_factor}",
+                               f"plant.resistance_factor={resistance_factor}")
+    settings, state = estimator(values, load_weighing(mass_factor, ERROR, weighing_seed))
+    rows, last = estimate_series(settings, state, series["command"], series["measured_speed"])
+    return rows, series, last
+
+
+def test_the_load_weighing_error_is_reproducible_from_its_seed_and_of_the_stated_size():
+    assert load_weighing(1.3, ERROR, 11) == load_weighing(1.3, ERROR, 11)
+    assert load_weighing(1.3, ERROR, 11) != load_weighing(1.3, ERROR, 12)
+    assert load_weighing(1.3, 0.0, 11) == 1.3
+    errors = np.array([load_weighing(0.85, ERROR, seed) / 0.85 - 1.0 for seed in range(400)])
+    assert 0.8 * ERROR < errors.std() < 1.2 * ERROR and abs(errors.mean()) < 0.4 * ERROR
+
+
+@pytest.mark.parametrize("mass_factor,weighing_seed", [(0.85, 4), (1.0, 4), (1.3, 3), (1.3, 8)])
+def test_it_converges_on_light_nominal_and_heavy_trains(mass_factor, weighing_seed):
+    """After 1000 m (~70 s) of the metro run: the resistance scale within 3 %; the heavy
+    train's mass (seen at its envelope) within 1 % from a prior 5-6 % off either way;
+    a light or nominal train's mass (never at its envelope: unobservable) no further
+    from the truth than the load weighing put it, with the load weighing's sigma."""
+    rows, series, _ = estimated_run(mass_factor, weighing_seed=weighing_seed)
+    settled = np.searchsorted(series["position"], SETTLED)
+    prior_error = load_weighing(mass_factor, ERROR, weighing_seed) / mass_factor - 1.0
+    mass_error = rows["mass_factor"][settled:] / mass_factor - 1.0
+    assert np.all(np.abs(rows["resistance_scale"][settled:] - 1.0) < 0.03)
+    if mass_factor > 1.0:
+        assert abs(prior_error) > 0.05 and np.all(np.abs(mass_error) < 0.01)
+    else:
+        assert np.all(np.abs(mass_error) <= abs(prior_error) + 0.005)
+        assert rows["mass_sigma"][-1] > 0.9 * ERROR * mass_factor
+
+
+@pytest.mark.parametrize("resistance_factor", [0.8, 1.2])
+def test_it_finds_a_running_resistance_20_percent_off_the_nominal(resistance_factor):
+    rows, series, _ = estimated_run(resistance_factor=resistance_factor)
+    settled = np.searchsorted(series["position"], SETTLED)
+    assert np.all(np.abs(rows["resistance_scale"][settled:] - resistance_factor) < 0.03)
+    assert rows["resistance_scale"][0] == 1.0  # it started from the nominal
+
+
+def test_the_covariance_shrinks_with_excitation_only():
+    """Moving, the resistance's sigma falls from the prior's 0.2; the mass's only where the
+    train reached its envelope (the heavy one), not for the light one; the covariance
+    stays symmetric and positive definite."""
+    light, series, light_state = estimated_run(0.85)
+    heavy, _, heavy_state = estimated_run(1.3, weighing_seed=3)
+    settled = np.searchsorted(series["position"], SETTLED)
+    prior = ESTIMATOR["estimator.resistance_sigma"]
+    assert light["resistance_sigma"][0] == prior
+    assert np.all(light["resistance_sigma"][settled:] < prior / 4)
+    assert heavy["mass_sigma"][-1] < 0.3 * heavy["mass_sigma"][0]
+    assert light["mass_sigma"][-1] > 0.95 * light["mass_sigma"][0]
+    for state in (light_state, heavy_state):
+        assert np.array_equal(state.covariance, state.covariance.T)
+        assert np.all(np.linalg.eigvalsh(state.covariance) > 0.0)
+
+
+def test_standstill_and_the_holding_brake_freeze_the_estimates():
+    """Stopped (held by the brakes, whatever the command), the estimates, their covariance
+    and the update count stay as they were, to the bit: no information, no drift."""
+    _, _, stopped = estimated_run(1.3, weighing_seed=3)
+    values, _ = metro_run("plant.mass_factor=1.3", "plant.resistance_factor=1.0")
+    settings, _ = estimator(values, 1.3)
+    state = stopped
+    for k in range(600):
+        command = -30.0 if k < 300 else 80.0  # the holding brake, then traction held back
+        state = estimator_step(settings, state, command, 0.0)
+    assert (state.inverse_mass, state.resistance_scale, state.updates) == (
+        stopped.inverse_mass, stopped.resistance_scale, stopped.updates)
+    assert np.array_equal(state.covariance[1:, 1:], stopped.covariance[1:, 1:])
+    moving = estimator_step(settings, state, 80.0, 2.0)
+    moving = estimator_step(settings, moving, 80.0, 2.05)
+    assert moving.updates == stopped.updates + 1
+
+
+def test_the_updates_stop_below_the_minimum_speed_along_a_run():
+    rows, series, last = estimated_run()
+    values, _ = metro_run("plant.mass_factor=1.0", "plant.resistance_factor=1.0")
+    settings, state = estimator(values, 1.0)
+    counts = []
+    for command, speed in zip(series["command"], series["measured_speed"], strict=True):
+        state = estimator_step(settings, state, command, speed)
+        counts.append(state.updates)
+    increments = np.diff(counts, prepend=0) > 0
+    slow = series["measured_speed"] < ESTIMATOR["estimator.min_speed"]
+    assert not np.any(increments & slow) and increments.sum() == last.updates > 1000
+
+
+def test_a_neutral_section_edge_freezes_the_update():
+    values = prepare("hsr-neutral-ato", [])
+    train = TrainParameters.from_values(values)
+    start = 8410.0 + train.pantograph_offset  # the head where the pantograph enters
+    for head, informative in ((start - 200.0, True), (start - 4.0, False),
+                              (start + 100.0, True), (start + 298.0, False)):
+        settings, state = estimator(values, 1.0)
+        state = state._replace(actuator=state.actuator._replace(position=head))
+        assert estimator_step(settings, state, 0.0, 20.0).informative == informative
+
+
+def test_the_estimated_model_is_the_nominal_one_at_the_prior_of_a_nominal_train():
+    values, _ = metro_run("plant.mass_factor=1.0", "plant.resistance_factor=1.0")
+    train, line = TrainParameters.from_values(values), load_line(values["line.file"])
+    settings, state = estimator(values, 1.0)
+    model, _ = nominal_train(train, values["run.period"], 0.0, line)
+    heavy = state._replace(inverse_mass=1.0 / 1.3)
+    for speed, position in ((5.0, 400.0), (20.0, 1500.0)):
+        assert estimated_resistance(settings, state, speed, position) == pytest.approx(
+            known_resistance(model, speed, position), rel=1e-12)
+        assert estimated_force_limits(settings, state, speed) == force_limits(
+            speed, train.envelope)
+        assert estimated_force_limits(settings, heavy, speed)[1] == pytest.approx(
+            force_limits(speed, train.envelope)[1] / 1.3)
+    assert estimated_mass_factor(heavy)[0] == pytest.approx(1.3)
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+def test_the_compiled_estimator_gives_the_python_bits():
+    values, series = metro_run("plant.mass_factor=1.3", "plant.resistance_factor=1.0")
+    settings, state = estimator(values, 1.25)
+    python, python_state = estimate_series(settings, state, series["command"],
+                                           series["measured_speed"])
+    fast, fast_state = estimate_series(settings, state, series["command"],
+                                       series["measured_speed"], fast=True)
+    assert estimation.compiled_estimate_rows is not None
+    for name in python:
+        assert np.array_equal(python[name], fast[name]), name
+    assert np.array_equal(python_state.covariance, fast_state.covariance)
