@@ -178,29 +178,31 @@ def estimator_settings(values, train: TrainParameters, period: float,
 
 
 def estimator_start(settings: EstimatorSettings, mass_reading: float, relative_error: float,
-                    resistance_sigma: float, position: float = 0.0) -> EstimatorState:
-    """The state at departure from `position` (m): the mass prior from the load weighing
-    (`mass_reading`, its `relative_error` 1 sigma), the resistance prior the nominal one
-    with `resistance_sigma`, nothing yet known of the speed (the first step sets it)."""
+                    resistance_sigma: float, position: float = 0.0, speed: float = 0.0
+                    ) -> EstimatorState:
+    """The state at departure from `position` (m) at `speed` (m/s): the mass prior from
+    the load weighing (`mass_reading`, its `relative_error` 1 sigma), the resistance prior
+    the nominal one with `resistance_sigma`."""
     inverse_mass = 1.0 / mass_reading
     covariance = np.zeros((3, 3))
     covariance[SPEED, SPEED] = settings.speed_variance
     covariance[INVERSE_MASS, INVERSE_MASS] = (relative_error * inverse_mass) ** 2
     covariance[RESISTANCE, RESISTANCE] = resistance_sigma ** 2
     ring = np.zeros(settings.dead_time_steps)
-    return EstimatorState(0.0, inverse_mass, 1.0, covariance,
+    return EstimatorState(speed, inverse_mass, 1.0, covariance,
                           NominalState(0.0, position, ring, 0), 0.0, 0.0, 0.0, 0.0, False, 0)
 
 
 def estimator_of(values, train: TrainParameters, period: float, mass_reading: float,
-                 line: Line | None = None, position: float = 0.0
+                 line: Line | None = None, position: float = 0.0, speed: float = 0.0
                  ) -> tuple[EstimatorSettings, EstimatorState]:
-    """Settings and departure state from the run's estimator.* `values`, the nominal
-    `train` and the load weighing's `mass_reading` (load_weighing)."""
+    """Settings and departure state (from `position` m at `speed` m/s) from the run's
+    estimator.* `values`, the nominal `train` and the load weighing's `mass_reading`
+    (load_weighing)."""
     settings = estimator_settings(values, train, period, line)
     return settings, estimator_start(settings, mass_reading,
                                      values["estimator.load_weighing.error"],
-                                     values["estimator.resistance_sigma"], position)
+                                     values["estimator.resistance_sigma"], position, speed)
 
 
 @jitable
@@ -217,8 +219,13 @@ def estimator_step(settings: EstimatorSettings, state: EstimatorState, command: 
                                                  state.resistance_scale)
         covariance = _frozen_covariance(settings, state.covariance)
         updates = state.updates
+    # dead reckoning by the trapezoid, now the period's end speed is known (the
+    # actuator model steps by its start speed: ~1 m behind after an acceleration)
+    ended = state.actuator
+    ended = NominalState(ended.lag_state, ended.position + 0.5 * settings.actuator.period * (
+        speed - state.speed), ended.pending, ended.oldest)
     actuator, lag_by_mass, demand, demand_by_mass, line_resistance, informative = (
-        _open_period(settings, state, command, speed, inverse_mass))
+        _open_period(settings, ended, state.lag_by_mass, command, speed, inverse_mass))
     return EstimatorState(speed, inverse_mass, resistance_scale, covariance, actuator, demand,
                           demand_by_mass, lag_by_mass, line_resistance, informative, updates)
 
@@ -344,16 +351,16 @@ def _frozen_covariance(settings: EstimatorSettings, covariance: np.ndarray) -> n
 
 
 @jitable
-def _open_period(settings: EstimatorSettings, state: EstimatorState, command: float,
-                 speed: float, inverse_mass: float
+def _open_period(settings: EstimatorSettings, actuator: NominalState, lag_by_mass: float,
+                 command: float, speed: float, inverse_mass: float
                  ) -> tuple[NominalState, float, float, float, float, bool]:
     """`command` sent at `speed` opens the next period: (the actuator model stepped over
     it, its lag's derivative by theta, its mean force before the output's envelope N/kN,
     that one's derivative, the line resistance at its start N/kN, whether it may inform)."""
     model = settings.actuator
+    position = actuator.position
     actuator, lag_by_mass, demand, demand_by_mass = _actuator_period(
-        settings, state.actuator, state.lag_by_mass, command, speed, inverse_mass)
-    position = state.actuator.position
+        settings, actuator, lag_by_mass, command, speed, inverse_mass)
     line_resistance = 0.0
     if model.on_line:
         line_resistance = belt_resistance(model.line, position, model.train.length)

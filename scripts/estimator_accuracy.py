@@ -1,0 +1,150 @@
+#!/usr/bin/env python3
+"""Accuracy of the on-board estimator of the train's mass and running resistance
+(ato_nodes/core/control/estimation.py) on light, nominal and heavy trains and on a
+running resistance 20 % off, for seed004-metro-ato and seed003-maglev-ato.
+
+    python scripts/estimator_accuracy.py
+    python scripts/estimator_accuracy.py --weighing-seed 3 --figure /tmp/accuracy.png
+
+Each case runs in-process with the real train changed (plant.mass_factor,
+plant.resistance_factor; the controller keeps the nominal train), then the estimator
+runs over what the ATO had of it (the commands it sent, the measured speeds), its prior
+the load weighing of the real mass (--weighing-error, 1 sigma; --weighing-seed). Prints
+a Markdown table (final errors; errors averaged over the time the train moves, absolute)
+and draws the mass factor's and the resistance scale's errors against the real train
+over time with the +-1 sigma band (--figure, PNG).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import _cli
+import numpy as np
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.control.estimation import (PARAMETERS, estimate_series, estimator_of,
+                                               load_weighing)
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.train.line import load_line
+from ato_nodes.core.train.plant import TrainParameters
+from ato_nodes.studies import Variant, prepare_variants
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ("seed004-metro-ato", "seed003-maglev-ato")
+CASES = {  # label -> (mass factor, resistance factor) of the real train
+    "light (m 0.85)": (0.85, 1.0),
+    "nominal": (1.0, 1.0),
+    "heavy (m 1.3)": (1.3, 1.0),
+    "resistance +20 %": (1.0, 1.2),
+    "resistance -20 %": (1.0, 0.8),
+}
+
+
+def parse_args() -> argparse.Namespace:
+    parser = _cli.argument_parser(__doc__)
+    parser.add_argument("--weighing-error", type=float, default=0.03,
+                        help="load weighing's relative error, 1 sigma (default 0.03)")
+    parser.add_argument("--weighing-seed", type=int, default=4,
+                        help="seed of the load weighing's error (default 4)")
+    parser.add_argument("--figure", type=Path,
+                        default=ROOT / "docs/results/estimation/accuracy.png")
+    args = parser.parse_args()
+    if not (math.isfinite(args.weighing_error) and 0.0 <= args.weighing_error <= 0.5):
+        _cli.fail(f"--weighing-error must be within 0 and 0.5, got {args.weighing_error}")
+    if not 0 <= args.weighing_seed < 2**31:
+        _cli.fail(f"--weighing-seed must be within 0 and 2^31 - 1, got {args.weighing_seed}")
+    if args.figure.suffix.lower() != ".png":
+        _cli.fail(f"--figure must name a .png file, got {args.figure}")
+    return args
+
+
+def estimated(values: dict, reading: float, error: float) -> dict[str, np.ndarray]:
+    """The run's series and the estimator's over them, the errors against the real train."""
+    series = simulate(values)
+    estimator = {spec.name: spec.default for spec in PARAMETERS}
+    estimator["estimator.load_weighing.error"] = error
+    line = load_line(values["line.file"]) if values["line.file"] else None
+    settings, state = estimator_of(estimator, TrainParameters.from_values(values),
+                                   values["run.period"], reading, line,
+                                   values["plant.initial_position"])
+    rows, _ = estimate_series(settings, state, series["command"], series["measured_speed"],
+                              fast=True)
+    mass, resistance = values["plant.mass_factor"], values["plant.resistance_factor"]
+    return {"t": series["t"], "moving": series["speed"] > 0.0,
+            "mass_error": rows["mass_factor"] / mass - 1.0,
+            "mass_sigma": rows["mass_sigma"] / mass,
+            "resistance_error": rows["resistance_scale"] / resistance - 1.0,
+            "resistance_sigma": rows["resistance_sigma"] / resistance}
+
+
+def table_row(scenario: str, label: str, result: dict) -> str:
+    moving = result["moving"]
+    cells = [scenario, label]
+    for name in ("mass", "resistance"):
+        error = result[f"{name}_error"]
+        cells += [f"{100 * error[-1]:+.2f}", f"{100 * result[f'{name}_sigma'][-1]:.2f}",
+                  f"{100 * np.abs(error[moving]).mean():.2f}"]
+    return "| " + " | ".join(cells) + " |"
+
+
+def plot(results: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figure, axes = plt.subplots(len(SCENARIOS), 2, figsize=(13, 7.5), sharex="row")
+    for row, scenario in zip(axes, SCENARIOS, strict=True):
+        for axis, name, what, limit in zip(row, ("mass", "resistance"),
+                                           ("mass factor", "resistance scale"), (8, 25),
+                                           strict=True):
+            for colour, label in enumerate(CASES):
+                result = results[scenario, label]
+                error, sigma = 100 * result[f"{name}_error"], 100 * result[f"{name}_sigma"]
+                axis.plot(result["t"], error, color=f"C{colour}", lw=1.2, label=label)
+                axis.fill_between(result["t"], error - sigma, error + sigma,
+                                  color=f"C{colour}", alpha=0.12, lw=0)
+            axis.axhline(0.0, color="k", lw=0.6)
+            axis.set(title=f"{scenario}: {what}", xlabel="t, s",
+                     ylabel="estimate / real - 1, %", ylim=(-limit, limit))
+            axis.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="upper right")
+    figure.suptitle("On-board estimator: error against the real train, +-1 sigma band")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def main() -> None:
+    args = parse_args()
+    try:
+        runs = prepare_variants({(scenario, label): Variant(scenario, {
+            "plant.mass_factor": mass, "plant.resistance_factor": resistance})
+            for scenario in SCENARIOS for label, (mass, resistance) in CASES.items()})
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    try:
+        args.figure.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _cli.fail(f"--figure {args.figure}: {exc.strerror}")
+    results = {}
+    for (scenario, label), values in runs.items():
+        reading = load_weighing(values["plant.mass_factor"], args.weighing_error,
+                                args.weighing_seed)
+        results[scenario, label] = estimated(values, reading, args.weighing_error)
+    print("| scenario | real train | mass error final % | sigma % | mean abs % | "
+          "resistance error final % | sigma % | mean abs % |")
+    print("|---|---|---|---|---|---|---|---|")
+    for scenario, label in results:
+        print(table_row(scenario, label, results[scenario, label]))
+    try:
+        plot(results, args.figure)
+    except OSError as exc:
+        _cli.fail(f"--figure {args.figure}: {exc.strerror or exc}")
+    print(f"\nload weighing error {args.weighing_error:g} (1 sigma), seed "
+          f"{args.weighing_seed}; figure: {args.figure}")
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)
