@@ -43,10 +43,12 @@ the differencing and the innovations stay white. The uncertainty is the covarian
 diagonal (sigma of theta and r; mass_sigma ~ theta_sigma / theta^2).
 
 Per control period (estimator_step): the command just sent enters the estimator's own
-copy of the ATO's actuator model (train_model.nominal_advance: dead time, lag, traction
-cut in neutral sections, dead-reckoned position), without the nominal envelope; the
-estimated envelope (nominal / m) is applied to its mean force, and to the lag's state as
-the plant's lag input is. The next step's measured speed closes the period: predict
+copy of the ATO's actuator model (train_model.nominal_advance's dead-time ring, then
+nominal_act's lag and traction cut in neutral sections, on a model without the nominal
+envelope), the estimated envelope (nominal / m) cutting it where the plant does, at the
+lag's input, and again at the output's mean; the force's derivative by theta goes through
+the lag with it (a lag that creeps up to the envelope is informative too). The next
+step's measured speed closes the period: predict
 (v + h xi (F(theta) - r w0(v) - w_line), midpoint in v), then update. Frozen (no update,
 no drift; the speed state reset to the measurement): a period that starts or ends below
 estimator.min_speed (standstill, holding brake, the last metres of a stop: the
