@@ -65,7 +65,8 @@ Interface for the controllers and the target planner (wiring is not done here)
   run's estimator.* values, train the nominal TrainParameters, as the run context has
   them); reading = load_weighing(real_mass_factor, error, seed) (the plant side's load
   cell: the one place the real mass is read); state = estimator_start(settings, reading,
-  position).
+  error, resistance_sigma, position, speed), or both at once by estimator_of(values,
+  train, period, reading, line, position, speed).
 * Each period, after the command u is sent (where the linear ADRC calls
   nominal_advance): state = estimator_step(settings, state, u, measured_speed).
 * Read: estimated_mass_factor(state) and estimated_resistance_scale(state) -> (value,
