@@ -30,7 +30,7 @@ setup(
         (f"share/{PACKAGE}/launch", ["launch/stack.launch.py"]),
         *config_files(),
     ],
-    install_requires=["setuptools", "numpy", "scipy", "daqp", "PyYAML", "matplotlib", "rosbags",
+    install_requires=["setuptools", "numpy", "daqp", "PyYAML", "matplotlib", "rosbags",
                       "mcap", "mcap-ros2-support", "plotly"],
     extras_require={"dask": ["dask[distributed]"],  # tune.py --cluster
                     "tables": ["pandas", "pyarrow"],  # bagio.read_frame, export.py --parquet

@@ -24,7 +24,7 @@ if [ ! -x .venv/bin/python ]; then
 fi
 # (pip's notes about configured local index folders that do not exist are noise)
 echo "setup: installing the pinned packages of requirements.txt into .venv (ROS 2 Jazzy" \
-  "wheels, numpy, scipy, numba, Dask, ...)"
+  "wheels, numpy, numba, Dask, ...)"
 .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
 # The package itself, editable: `import ato_nodes` works from any directory, the node

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ato_nodes.core.run import fast_loop, loop
+from ato_nodes.core.run import fast_loop, loop, python_steps
 from ato_nodes.core.base import kernels
 from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.run.loop import simulate
@@ -103,17 +103,26 @@ def test_pruned_and_diverging_runs_end_at_the_same_step_in_chunks(monkeypatch):
     assert np.array_equal(whole["speed"], chunked["speed"], equal_nan=True)
 
 
-# Every shipped scenario whose run the compiled loop covers (the others: controller kinds
-# without compiled steps).
+# Every shipped scenario whose run the compiled loop covers: all of them.
 COVERED = sorted(name for name in scenario_names()
                  if fast_loop.covers(*stages(load_scenario(name))))
 
 
-def test_the_compiled_loop_covers_every_shipped_scenario_of_a_compiled_kind():
-    kinds = {load_scenario(name)["controller.kind"] for name in scenario_names()
-             if name not in COVERED}
-    assert kinds <= {"gpc"}
-    assert {"seed000", "seed002-hsr", "seed003-maglev", "seed001-excitation"} <= set(COVERED)
+def test_the_compiled_loop_covers_every_shipped_scenario():
+    assert COVERED == sorted(scenario_names())
+
+
+@pytest.mark.parametrize("overrides", [["gpc.prediction=mechanistic"],
+                                       ["gpc.prediction=multimodel"],
+                                       ["gpc.constrained=false", "gpc.correction=false"]])
+def test_a_kind_without_compiled_steps_gives_the_python_loops_bits(monkeypatch, overrides):
+    """The GPC's own Python step called from the compiled loop, for each of its models."""
+    values = apply_overrides(load_scenario("seed001-crh380al"), ["run.duration=120",
+                                                                 *overrides])
+    compiled, python = simulate(values), python_run(monkeypatch, values)
+    for name in python:
+        assert np.array_equal(compiled[name], python[name], equal_nan=True), name
+    assert not python_steps.RUNNING  # the run let go of its controller
 
 
 @pytest.mark.parametrize("scenario", COVERED)
@@ -157,7 +166,6 @@ def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):
 
 
 def test_runs_it_does_not_cover_take_the_python_loop():
-    assert not fast_loop.covers(*stages(load_scenario("seed001-crh380al")))  # no GPC steps
     stepped = apply_overrides(load_scenario("seed000"), ["profile.approach_step=0.5"])
     assert not fast_loop.covers(*stages(stepped))  # time-indexed, with the stepped approach
     profile, plant, controller, _ = stages(load_scenario("seed000"))

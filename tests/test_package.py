@@ -28,7 +28,6 @@ ROSDEP_KEYS = {
     "rosbags": ("python3-rosbags-pip",),
     "mcap-ros2-support": ("mcap-ros2-support",),
     "numpy": ("python3-numpy",),
-    "scipy": ("python3-scipy",),
     "pyyaml": ("python3-yaml",),
     "matplotlib": ("python3-matplotlib",),
     "numba": ("python3-numba",),

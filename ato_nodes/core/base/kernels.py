@@ -28,9 +28,10 @@ from pathlib import Path
 
 try:
     import numba
+    from numba import objmode  # noqa: F401 (exported: Python called from compiled code)
     from numba.extending import overload, register_jitable  # noqa: F401 (overload: exported)
 except ImportError:  # optional: runs are then Python only
-    numba = overload = None
+    numba = objmode = overload = None
 
 AVAILABLE = numba is not None
 
@@ -101,12 +102,16 @@ def announced(message: str):
         yield
         return
     from numba.core import event
+    from numba.core.dispatcher import ObjModeLiftedWith
 
     class Announcer(event.Listener):
         said = False
 
         def on_start(self, compilation):
-            if not self.said:
+            # a Python call inside compiled code (objmode) is lifted in every process,
+            # cache or not: ~0.1 s, nothing to announce
+            lifted = isinstance(compilation.data["dispatcher"], ObjModeLiftedWith)
+            if not self.said and not lifted:
                 print(message, file=sys.stderr, flush=True)
                 self.said = True
 

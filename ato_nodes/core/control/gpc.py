@@ -46,6 +46,7 @@ from ..base.spec import param
 from ..base.units import KMH
 from ..train.plant import force_limits
 from .limiter import CommandLimiter
+from .lssvm import load_model
 
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
 
@@ -350,7 +351,6 @@ def _build(values, context, limiter: CommandLimiter) -> GPC:
 def model_for_run(values, context):
     """The model file of a run, checked against it: one line for a missing one, or one
     identified for another train preset or control period."""
-    from .lssvm import load_model  # scipy: half a second of import, for this kind only
     path = values["gpc.model"]
     if not path:
         raise ScenarioError(f"gpc.prediction {values['gpc.prediction']} needs gpc.model (a "

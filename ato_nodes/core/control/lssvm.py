@@ -18,10 +18,15 @@ regularisation mu, the coefficients solve
     [1   Omega + I/mu ] [alpha] = [t],      Omega_ij = K(x_i, x_j)
 
 solved here through the Cholesky factor L of H = Omega + I/mu (H eta = 1,
-H nu = t, b = 1^T nu / 1^T eta, alpha = nu - b eta): no inverse, no pinv.
+H nu = t, b = 1^T nu / 1^T eta, alpha = nu - b eta): no inverse, no pinv. The
+triangular solves are the loops below, compiled: their sums run in a fixed order, so
+a model's bits depend on its numbers alone, not on a BLAS library or its threads
+(a node and simulate() agree on any machine), and the forward half L^-1 [1, t] is
+kept: a new sample extends it by one row.
 
 Online correction (`add`): a new sample is appended to the factor (one
-triangular solve, O(n^2)), never refactorised. The Schur complement of the new
+triangular solve for its row, O(n^2), then the back substitution for the
+coefficients, O(n^2)), never refactorised. The Schur complement of the new
 row, d^2 = 1/mu + 1 - |L^-1 beta|^2, is guarded: below GUARD (relative) the
 sample is numerically a copy of the dictionary and is rejected. The dictionary
 is bounded: the identification samples stay, corrections fill a window of
@@ -43,11 +48,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import cho_solve, solve_triangular
-
 from ..base import yamlfile
 from ..base.errors import ScenarioError
-from ..base.kernels import compiled
+from ..base.kernels import compiled, jitable
 
 GUARD = 1e-10  # relative Schur complement below which a new sample is rejected
 FORMAT = "ato-lssvm-1"
@@ -127,6 +130,53 @@ def _rbf_exponents(z: np.ndarray, support: np.ndarray, width: float, difference:
 compiled_rbf_exponents = compiled(_rbf_exponents)  # None without numba
 
 
+@jitable
+def _dot(a: np.ndarray, b: np.ndarray, count: int) -> float:
+    """a[:count] . b[:count] in four lanes (lane l the entries l, l+4, ..), then the
+    lanes pairwise: a fixed order of sums that keeps the multiplier busy."""
+    lane0 = lane1 = lane2 = lane3 = 0.0
+    blocks = count - count % 4
+    for j in range(0, blocks, 4):
+        lane0 += a[j] * b[j]
+        lane1 += a[j + 1] * b[j + 1]
+        lane2 += a[j + 2] * b[j + 2]
+        lane3 += a[j + 3] * b[j + 3]
+    for j in range(blocks, count):
+        lane0 += a[j] * b[j]
+    return (lane0 + lane1) + (lane2 + lane3)
+
+
+def _forward_substitution(factor: np.ndarray, rhs: np.ndarray, solution: np.ndarray,
+                          start: int, stop: int) -> None:
+    """Rows start .. stop-1 of L y = rhs into `solution` (whose rows before `start`
+    already hold y): row by row, each a dot product with the solved part."""
+    for i in range(start, stop):
+        solution[i] = (rhs[i] - _dot(factor[i], solution, i)) / factor[i, i]
+
+
+def _back_substitution(factor: np.ndarray, first: np.ndarray, second: np.ndarray,
+                       count: int) -> None:
+    """In place, L^T x = y for two vectors (y in, x out), L's rows read whole (the
+    buffer is C-ordered): each solved entry is taken off the entries above it."""
+    for j in range(count - 1, -1, -1):
+        first[j] /= factor[j, j]
+        second[j] /= factor[j, j]
+        row, x1, x2 = factor[j], first[j], second[j]
+        for i in range(j):
+            first[i] -= x1 * row[i]
+            second[i] -= x2 * row[i]
+
+
+def _squared_norm(a: np.ndarray, count: int) -> float:
+    return _dot(a, a, count)
+
+
+# plain loops: slow in Python, so compiled whenever numba is installed
+forward_substitution = compiled(_forward_substitution) or _forward_substitution
+back_substitution = compiled(_back_substitution) or _back_substitution
+squared_norm = compiled(_squared_norm) or _squared_norm
+
+
 class LSSVM:
     """The fitted regression g(x) with its factor, ready for prediction, its gradient
     (the GPC's linearisation) and online correction."""
@@ -146,6 +196,10 @@ class LSSVM:
         # The lower Cholesky factor of H, padded with the identity beyond `size`: the
         # solves then run on the whole (contiguous) buffer, never on a copied slice.
         self._factor = np.eye(capacity)
+        # the right-hand sides [1, t] and the forward half of the solve, L^-1 [1, t]
+        self._ones = np.ones(capacity)
+        self._forward = np.zeros((2, capacity))
+        self._row = np.empty(capacity)  # a new sample's row of the factor
         # linearise's work space: the differences to the dictionary and their weights
         self._difference = np.empty((capacity, layout.size))
         self._weights = np.empty(capacity)
@@ -163,6 +217,7 @@ class LSSVM:
             raise ValueError(f"the kernel matrix is numerically singular for mu = {mu:g}, "
                              f"delta = {delta:g}")
         self.added = self.rejected = self.forgotten = 0
+        self._forward_rows(0)
         self._solve()
 
     # The kernel in scaled coordinates ------------------------------------------
@@ -174,13 +229,17 @@ class LSSVM:
                     - 2.0 * a @ b.T)
         return np.exp(-np.maximum(distance, 0.0) / (2.0 * self.delta ** 2))
 
+    def _forward_rows(self, start: int) -> None:
+        """L^-1 [1, t] from row `start` on (the rows before it are solved)."""
+        for rhs, solution in zip((self._ones, self._t), self._forward, strict=True):
+            forward_substitution(self._factor, rhs, solution, start, self.size)
+
     def _solve(self) -> None:
-        rhs = np.zeros((len(self._t), 2))
-        rhs[:self.size, 0], rhs[:, 1] = 1.0, self._t
-        # the buffer is C-ordered: its transpose is the Fortran-ordered upper factor
-        eta, nu = cho_solve((self._factor.T, False), rhs, check_finite=False).T
+        """The coefficients from the forward half: eta = L^-T L^-1 1, nu = L^-T L^-1 t."""
+        eta, nu = self._forward[:, :self.size].copy()
+        back_substitution(self._factor, eta, nu, self.size)
         self.bias = float(nu.sum() / eta.sum())
-        self.alpha = (nu - self.bias * eta)[:self.size]
+        self.alpha = nu - self.bias * eta
 
     # Prediction ---------------------------------------------------------------
     @property
@@ -222,18 +281,18 @@ class LSSVM:
             self._forget_oldest_correction()
         n = self.size
         z = self.to_unit(np.asarray(x, float))
-        beta = np.zeros(len(self._t))
-        beta[:n] = self._kernel(z[None, :], self.support)[0]
-        row = solve_triangular(self._factor, beta, lower=True, check_finite=False)[:n]
+        beta = self._kernel(z[None, :], self.support)[0]
+        forward_substitution(self._factor, beta, self._row, 0, n)
         pivot = 1.0 + 1.0 / self.mu
-        schur = pivot - row @ row
+        schur = pivot - squared_norm(self._row, n)
         if not schur > GUARD * pivot:
             self.rejected += 1
             return False
-        self._factor[n, :n], self._factor[n, n] = row, math.sqrt(schur)
+        self._factor[n, :n], self._factor[n, n] = self._row[:n], math.sqrt(schur)
         self._z[n], self._t[n] = z, target
         self.size += 1
         self.added += 1
+        self._forward_rows(n)
         self._solve()
         return True
 
@@ -257,6 +316,7 @@ class LSSVM:
         self._z[n - 1], self._t[n - 1] = 0.0, 0.0
         self.size -= 1
         self.forgotten += 1
+        self._forward_rows(i)  # the rows from the dropped one on moved
 
     @property
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
@@ -272,6 +332,13 @@ class LSSVM:
 
     def refit(self) -> LSSVM:
         return self.with_window(0)
+
+
+def warm() -> None:
+    """Compile the solves now (or load them from numba's cache): a tiny fit and one
+    correction."""
+    regressors = np.array([[0.0, 0.0], [1.0, 0.5], [2.0, -0.5]])
+    fit(Layout(), regressors, np.zeros(3), 10.0, 1.0, window=1).add(np.array([1.5, 1.0]), 0.1)
 
 
 def unit_scaling(layout: Layout, regressors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

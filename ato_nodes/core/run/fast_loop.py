@@ -1,15 +1,16 @@
 """The lockstep loop compiled (numba), for the runs that tuning and studies repeat.
 
 simulate() hands a run here when numba is installed and the run is of the kind a
-compiled loop covers: a controller kind whose registry entry names its
-ControllerSteps (core/control/stepped.py), a time-indexed target (its horizons are
+compiled loop covers: any controller kind (compiled when its registry entry names its
+ControllerSteps, core/control/stepped.py; else its own Python step called from the
+compiled loop, core/run/python_steps.py), a time-indexed target (its horizons are
 computed once per plan) or a position-indexed one with a PlanTable (the ATO curve,
 a strategy, a position table: their horizons along the planned trajectory, step by
 step), the point-mass train on the open track or on a line (gradients, curves,
 tunnels, limits, neutral sections as LineTables arrays), dead time, lag, envelopes,
 the noisy, quantised speed sensor and seed 003's stepped approach. Anything else
-(live gain changes, a kind without compiled steps, a time-indexed target with the
-stepped approach) runs the Python loop. The step is the one core/run/stages.py
+(live gain changes, a time-indexed target with the stepped approach or the plan's own
+speed limits; none shipped) runs the Python loop. The step is the one core/run/stages.py
 describes, in the same order, and every formula is the Python path's own jitable
 function (core/base/kernels.py) reading the same NamedTuples by name;
 tests/test_fast_loop.py checks that both paths give the same bits for every shipped
@@ -17,8 +18,9 @@ scenario the loop covers.
 
 The controller kind is chosen by the type of its state: controller_start() and
 controller_step() below resolve, while compiling, to the kind's own functions, so
-one loop serves every kind, compiled once per kind and cached on disk (numba keys
-its cache by the argument types; loop.warm() compiles the common ones).
+one loop serves every kind, compiled once per kind (and once for all the kinds
+without compiled steps) and cached on disk (numba keys its cache by the argument
+types; loop.warm() compiles them all).
 
 A run is computed in chunks of steps, each one call of the compiled loop lasting
 about CHUNK_SECONDS, so that simulate() can check its deadline between them (a
@@ -33,6 +35,7 @@ import functools
 import json
 import math
 import time
+from contextlib import contextmanager
 from typing import Any, Callable, NamedTuple
 
 import numpy as np
@@ -53,15 +56,19 @@ from ..train.plant import (
     rk4_substep,
     sensor_reading,
 )
+from .python_steps import PYTHON_STEPS, PythonController, running
 from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns
 
-# The compiled steps of every controller kind that has them, by the type of its state.
+# The compiled steps of every controller kind by the type of its state; the kinds
+# without them share PYTHON_STEPS (their own Python step, called from compiled code).
 STEPS_BY_STATE = {component.steps.state_type: component.steps
                   for component in CONTROLLERS.components.values() if component.steps}
+STEPS_BY_STATE[PythonController] = PYTHON_STEPS
 
 
 def compiled_kinds() -> list[str]:
-    """One controller kind for each compiled step (loop.warm() compiles each)."""
+    """One controller kind for each compiled step (loop.warm() compiles each; the
+    kinds without compiled steps share one more)."""
     kinds = {component.steps.state_type: kind
              for kind, component in CONTROLLERS.components.items() if component.steps}
     return sorted(kinds.values())
@@ -74,7 +81,7 @@ def covers(profile, plant, controller, changes) -> bool:
         drawable = plan.table() is not None
     else:  # its horizons are computed once, without the stepped approach
         drawable = profile.approach_step <= 0.0 and not plan.limits_speed
-    return AVAILABLE and not changes and controller.component.steps is not None and drawable
+    return AVAILABLE and not changes and drawable
 
 
 @functools.lru_cache(maxsize=4)
@@ -174,29 +181,61 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     (steps x outputs), the horizons). It runs in chunks of steps, each a call of the
     compiled loop lasting about CHUNK_SECONDS; `check(step)` is called before each
     (simulate() raises there once past its deadline)."""
-    context, train, limiter = profile.context, plant.train, controller.limiter
-    total = context.steps
-    plan = context.plan.table() if context.plan.position_indexed else None
+    total = profile.context.steps
+    plan = profile.context.plan.table() if profile.context.plan.position_indexed else None
     if plan is None:  # a copy: the loop's one argument type is a writable array
         targets = horizons(profile).copy()
         plan = plan_table((), ())
     else:  # filled in as the run goes, LOOKAHEAD steps ahead
         targets = np.empty((total, profile.preview + 1))
-    running, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
+    running_index, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
     rows = np.empty((total, len(COLUMNS)))
     extras = np.empty((total, len(controller.output_names)))
+    with _controller_seam(controller) as (settings, controller_state):
+        inputs = _inputs(profile, plant, controller, plan, settings, running_index, limit)
+        loop = _first_state(profile, plant, controller, controller_state, running_index)
+        chunk = FIRST_CHUNK
+        while loop.step < total and not loop.ended:
+            check(loop.step)
+            started = time.perf_counter()
+            loop = _steps(inputs, loop, min(total, loop.step + chunk), targets, rows, extras)
+            elapsed = time.perf_counter() - started
+            chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
+    running_index.value, running_index.last_t, running_index.last_w = loop.fitness
+    return rows[:loop.step], extras[:loop.step], targets[:loop.step]
+
+
+@contextmanager
+def _controller_seam(stage):
+    """(settings, state) the compiled loop steps the stage's controller with: a kind's
+    compiled steps read its own; any other kind is called in Python
+    (core/run/python_steps.py)."""
+    if stage.component.steps is not None:
+        yield stage.controller.settings, stage.controller.state
+        return
+    with running(stage.controller) as slot:
+        yield slot, slot
+
+
+def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index,
+            limit: float) -> LoopInputs:
+    train = plant.train
+    total = profile.context.steps
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
     draws = plant.rng.standard_normal(total) if plant.noise > 0.0 else np.zeros(total)
-    inputs = LoopInputs(
+    return LoopInputs(
         draws=draws, noise=float(plant.noise), quantum=float(plant.quantum),
         period=float(train.period), substeps=int(train.substeps), train=train.constants,
         pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
         max_speed=float(plant.max_speed), line=line_arrays(train.line), plan=plan,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
-        settings=controller.controller.settings, limits=limiter.settings,
-        fitness_kind=int(running.kind), fitness_limit=float(limit), columns=COLUMNS)
-    state = train.state
-    loop = LoopState(
+        settings=settings, limits=controller.limiter.settings,
+        fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
+
+
+def _first_state(profile, plant, controller, controller_state, running_index) -> LoopState:
+    train, state = plant.train, plant.train.state
+    return LoopState(
         step=0,
         plant=PlantState(
             steps=int(train.steps), time=float(state.time), position=float(state.position),
@@ -204,19 +243,10 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
             acting=float(train.acting), powered=bool(train.powered),
             delayed=np.array(train.delayed, dtype=float), oldest=0),
         profile=ProfileState(last_position=float(profile.last_position), stair=math.nan),
-        controller=controller.controller.state, last=float(limiter.last),
-        fitness=FitnessState(float(running.value), float(running.last_t),
-                             float(running.last_w)),
+        controller=controller_state, last=float(controller.limiter.last),
+        fitness=FitnessState(float(running_index.value), float(running_index.last_t),
+                             float(running_index.last_w)),
         ended=False)
-    chunk = FIRST_CHUNK
-    while loop.step < total and not loop.ended:
-        check(loop.step)
-        started = time.perf_counter()
-        loop = _steps(inputs, loop, min(total, loop.step + chunk), targets, rows, extras)
-        elapsed = time.perf_counter() - started
-        chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
-    running.value, running.last_t, running.last_w = loop.fitness
-    return rows[:loop.step], extras[:loop.step], targets[:loop.step]
 
 
 def controller_start(settings, state, target: float, measured: float):
