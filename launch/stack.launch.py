@@ -4,12 +4,14 @@
 
 `scenario` is a shipped scenario's name or a scenario file; every node reads that file
 (its `/**` and own sections) and completes it as `scripts/run_stack.py` does (train
-preset, relative paths), so both give the same run. `out` is the bag directory to
-create (default bags/<scenario>-launch). The run ends when the supervisor ends it: every
-node exits on its 'shutdown' and the launch ends with the last of them (a node still
-running STOP_GRACE s after the supervisor, or one that fails, shuts the launch down, as
-run_stack.py does). The ROS domain is the environment's (ROS_DOMAIN_ID). Without a ROS
-install, `python scripts/run_stack.py --scenario NAME` is the same run.
+preset, relative paths), and gets the values the scenario derives (the load
+weighing's reading, core/config/scenario.DERIVED_PARAMETERS) on top, so both give the
+same run. `out` is the bag directory to create (default bags/<scenario>-launch). The
+run ends when the supervisor ends it: every node exits on its 'shutdown' and the launch
+ends with the last of them (a node still running STOP_GRACE s after the supervisor, or
+one that fails, shuts the launch down, as run_stack.py does). The ROS domain is the
+environment's (ROS_DOMAIN_ID). Without a ROS install, `python scripts/run_stack.py
+--scenario NAME` is the same run.
 """
 
 from pathlib import Path
@@ -22,8 +24,8 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from ato_nodes.core.config.scenario import resolve_scenario
-from ato_nodes.core.config.schema import NODES
+from ato_nodes.core.config.scenario import DERIVED_PARAMETERS, prepare, resolve_scenario
+from ato_nodes.core.config.schema import NODES, SPEC_BY_NAME
 from ato_nodes.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
 
@@ -33,9 +35,14 @@ def nodes(context):
     out = LaunchConfiguration("out").perform(context) or f"bags/{path.stem}-launch"
     report = LaunchConfiguration("report").perform(context)
     run_parameters = {"recorder.output": str(Path(out).resolve()), "supervisor.report": report}
+    values = prepare(str(path))  # the derived values, which a node cannot derive itself
+    derived = {name: values[name] for name in DERIVED_PARAMETERS}
     launched = [Node(package="ato_nodes", executable=role, name=role, output="screen",
-                     parameters=[str(path), {name: value for name, value in
-                                             run_parameters.items() if name.startswith(role)}])
+                     parameters=[str(path), {
+                         **{name: value for name, value in run_parameters.items()
+                            if name.startswith(role)},
+                         **{name: value for name, value in derived.items()
+                            if role in SPEC_BY_NAME[name].nodes}}])
                 for role in NODES]
     # A Shutdown as soon as the supervisor exits would SIGINT nodes that are already
     # exiting on its 'shutdown' (launch then reports them as died, exit code -2): the

@@ -5,11 +5,13 @@
 
 Each sample draws, uniformly in the given ranges, the real train's mass (its load,
 as a share of the nominal plant.mass), running resistance and actuator lag (shares of
-the nominal ones), and a speed-sensor noise seed; the controller and the profile keep
-the nominal train (plant.mass_factor, plant.resistance_factor, plant.lag_factor are the
-plant node's alone). Runs in-process in --workers processes; prints and writes
-(robustness.json, robustness.png) the median and worst of max abs(e), p95 abs(e),
-abs(stopping error), max jerk over 1 s and ITAE.
+the nominal ones), a speed-sensor noise seed and a load-weighing seed; the controller
+and the profile keep the nominal train (plant.mass_factor, plant.resistance_factor,
+plant.lag_factor are the plant node's alone), at the weighed mass when the scenario
+weighs its load (train.load_weighing). Runs in-process in --workers processes; prints
+and writes (robustness.json, robustness.png) the median and worst of max abs(e), p95
+abs(e), abs(stopping error), max jerk over 1 s and ITAE, and how many samples keep
+within 1 km/h, stop within 0.1 m and arrive within 5 s of the planned time.
 """
 
 from __future__ import annotations
@@ -30,6 +32,11 @@ INDICES = (  # key, heading, worst is the largest of
     ("abs_stopping_error", "abs(stop error) m"),
     ("max_jerk", "max jerk (1 s) m/s^3"),
     ("itae", "ITAE"),
+)
+WITHIN = (  # key, bound, what the count says
+    ("max_abs_error_kmh", 1.0, "within 1 km/h"),
+    ("abs_stopping_error", 0.1, "stops within 0.1 m"),
+    ("abs_running_time_error", 5.0, "arrivals within 5 s"),
 )
 
 
@@ -60,10 +67,12 @@ def parse_args() -> argparse.Namespace:
 
 def draw_trains(ranges: dict, samples: int, seed: int) -> list[dict]:
     """Each sample's real train: a share of each nominal value, uniform in its range,
-    and a speed-sensor noise seed."""
-    rng = np.random.default_rng(seed)
+    a speed-sensor noise seed and a load-weighing seed (from a stream of their own, so
+    the trains are those of the same seed before the load weighing)."""
+    rng, weighing = np.random.default_rng(seed), np.random.default_rng([seed, 1])
     return [{**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},
-             "plant.noise_seed": int(rng.integers(0, 2**31 - 1))}
+             "plant.noise_seed": int(rng.integers(0, 2**31 - 1)),
+             "train.load_weighing_seed": int(weighing.integers(0, 2**31 - 1))}
             for _ in range(samples)]
 
 
@@ -72,7 +81,16 @@ def sample_result(draw: dict, indices: dict) -> dict:
     result = {**draw, **{key: float(indices[key]) for key, _ in INDICES if key in indices}}
     if "stopping_error" in indices:
         result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
+    if "running_time_error" in indices:
+        result["running_time_error"] = float(indices["running_time_error"])
+        result["abs_running_time_error"] = abs(result["running_time_error"])
     return result
+
+
+def counts(results: list[dict]) -> dict[str, int]:
+    """How many samples keep each bound of WITHIN (of those that have its index)."""
+    return {text: sum(1 for r in results if key in r and r[key] <= bound)
+            for key, bound, text in WITHIN if any(key in r for r in results)}
 
 
 def main() -> None:
@@ -92,8 +110,9 @@ def main() -> None:
         _cli.fail(str(exc))
     _cli.new_directory(args.out)
     outcomes = run_study(runs, workers=args.workers).values()
-    results = [sample_result(draw, outcome.indices)
-               for draw, outcome in zip(draws, outcomes, strict=True)]
+    results = [{**sample_result(draw, outcome.indices),
+                "train.mass_reading": values["train.mass_reading"]}  # what the ATO knew
+               for draw, outcome, values in zip(draws, outcomes, runs.values(), strict=True)]
     summary = {}
     for key, heading in INDICES:
         column = [r[key] for r in results if key in r]
@@ -101,9 +120,11 @@ def main() -> None:
             summary[key] = {"median": float(np.median(column)), "worst": float(max(column))}
             print(f"{heading:24s} median {summary[key]['median']:.4g}  worst "
                   f"{summary[key]['worst']:.4g}")
+    within = counts(results)
+    print("; ".join(f"{text}: {count} of {len(results)}" for text, count in within.items()))
     write_outputs(args.out, "robustness", report={
         "scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
-        "summary": summary, "samples": results})
+        "summary": summary, "within": within, "samples": results})
     plot(results, args.out / "robustness.png", args.scenario)
     print(f"{args.samples} samples; outputs: {args.out}/robustness.json, robustness.png")
 

@@ -94,6 +94,10 @@ class DeliveredLogger:
         if self._logger.info(text):
             self._publish(Log.INFO, text)
 
+    def warning(self, text: str) -> None:
+        if self._logger.warning(text):
+            self._publish(Log.WARN, text)
+
     def error(self, text: str) -> None:
         if self._logger.error(text):
             self._publish(Log.ERROR, text)
@@ -320,6 +324,14 @@ class AtoNode(Node):
         self.log.error(message)
         if "--disable-stdout-logs" in sys.argv:
             print(f"{self.role}: error: {message}", file=sys.stderr, flush=True)
+
+    def warn(self, message: str) -> None:
+        """Something the run should know at start-up (it runs on): a WARN record on
+        /rosout and, with the node's console logs off, one `node: warning: ...` line on
+        stderr, as error() does."""
+        self.log.warning(message)
+        if "--disable-stdout-logs" in sys.argv:
+            print(f"{self.role}: warning: {message}", file=sys.stderr, flush=True)
 
     def announce(self, text: str) -> None:
         if text.partition(" ")[0] in ANNOUNCED_EVENTS:

@@ -15,6 +15,8 @@ class ProfileNode(AtoNode):
     def __init__(self):
         super().__init__()
         self.stage = ProfileStage(self.values)
+        if self.stage.context.plan.notice:
+            self.warn(self.stage.context.plan.notice)
         self.target_msg, self.limit_msg = Float64(), Float64()
         self.horizon_msg = Float64MultiArray()
         self.horizon_pub = self.publisher("target_preview")

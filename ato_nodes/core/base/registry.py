@@ -56,6 +56,8 @@ class Plan(Protocol):
     shapes_itself: bool = False
     # Has belt limits of its own (limit()), which replace the line's speed limits.
     limits_speed: bool = False
+    # One line the profile node says at start-up (a planned time the plan cannot meet).
+    notice: str | None = None
 
     def speed(self, t: float, position: float = 0.0) -> float:
         """The target at time t (s) with the head at `position` (m), m/s."""

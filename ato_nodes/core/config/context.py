@@ -1,7 +1,8 @@
 """The read-only run context every component receives at construction.
 
-It holds what an ATO knows before the run starts: the control period, the
-nominal train (the preset's parameters, core.plant.TrainParameters), the line,
+It holds what an ATO knows before the run starts: the control period, its train
+(the preset's parameters, core.plant.TrainParameters, at the mass the ATO knows:
+train.mass_reading, the load weighing's when train.load_weighing), the line,
 and the planned target (the chosen profile kind's plan), with the preview of
 that plan over any horizon. Built from the same values in every runner, so a
 component sees the same context in a node and in simulate().
@@ -9,6 +10,7 @@ component sees the same context in a node and in simulate().
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 
@@ -20,12 +22,21 @@ from .components import PROFILES
 from .schema import steps
 
 
+def ato_train(values) -> TrainParameters:
+    """The train the ATO plans and controls with: the nominal one (plant.*) at the mass
+    it knows, plant.mass times train.mass_reading (the nominal train itself at 1)."""
+    nominal = TrainParameters.from_values(values)
+    reading = values["train.mass_reading"]
+    return nominal if reading == 1.0 else dataclasses.replace(nominal,
+                                                              mass=reading * nominal.mass)
+
+
 class RunContext:
     def __init__(self, values, line: Line | None = None):
         self.values = values
         self.period = values["run.period"]
         self.steps = steps(values)
-        self.train = TrainParameters.from_values(values)
+        self.train = ato_train(values)
         if line is None and values["line.file"]:
             line = load_line(values["line.file"])
         self.line = line

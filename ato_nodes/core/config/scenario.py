@@ -18,6 +18,7 @@ import yaml
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import config_dir, resolve_file
+from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
 from ..train.line import load_line
@@ -141,6 +142,7 @@ def complete(given: dict[str, Any], bases: list[Path], where: str = "") -> dict[
         values.update(train_preset(given["plant.train"]))
     values.update(given)
     check_used(given, values, where)
+    check_not_derived(given, values, where)
     for name in FILE_PARAMETERS:
         if given.get(name):
             values[name] = resolve_file(given[name], bases)
@@ -245,6 +247,7 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
         overrides = dict(parse_override(text) for text in overrides)  # the last one wins
         where = "--set"
     check_used(overrides, {**values, **overrides}, where)
+    check_not_derived(overrides, {**values, **overrides}, where)
     for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
         if overrides.get(name):
             overrides[name] = resolve_file(overrides[name], [Path.cwd()])
@@ -268,13 +271,41 @@ def check_launcher_free(values: dict[str, Any]) -> None:
                                 f"--out instead")
 
 
+# Derived from the run's values by validate(), once, for every runner: the nodes that
+# declare them cannot derive them (a profile or controller node does not see the real
+# train's plant.mass_factor), so every launcher passes them (launch.Stack with all the
+# values, launch/stack.launch.py on top of the scenario file).
+DERIVED_PARAMETERS = ("train.mass_reading",)
+
+
+def weighed(values: dict[str, Any]) -> dict[str, Any]:
+    """The values with train.mass_reading the load weighing's reading of the real train
+    (plant.mass_factor, its error drawn from train.load_weighing_seed) when
+    train.load_weighing; else as they are."""
+    if not values["train.load_weighing"]:
+        return values
+    return {**values, "train.mass_reading": load_weighing(
+        values["plant.mass_factor"], values["train.load_weighing_error"],
+        values["train.load_weighing_seed"])}
+
+
+def check_not_derived(given, values: dict[str, Any], where: str = "") -> None:
+    """Refuse a derived parameter given while the run derives it (one line)."""
+    if values["train.load_weighing"] and "train.mass_reading" in given:
+        prefix = f"{where}: " if where else ""
+        raise ScenarioError(f"{prefix}train.mass_reading is the load weighing's reading when "
+                            f"train.load_weighing is true: give one of them")
+
+
 def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
     """Check a run's values as a whole before anything starts, by building what the
     nodes will build (each from the values its node declares, as the run's stages
     do): the line (errors name file and line), the context's plan and the controller
-    (errors name the parameter)."""
+    (errors name the parameter). Returns them with the derived parameters
+    (DERIVED_PARAMETERS) set."""
     if values["run.duration"] < values["run.period"]:
         raise ScenarioError(f"{where}: run.duration must be at least one run.period")
+    values = weighed(values)
     try:
         parse_fault(values["run.fault"])
         Requirement.parse_list(values["report.require"], "report.require")

@@ -95,6 +95,18 @@ BASE: tuple[ParamSpec, ...] = (
        "plant", 0.1, 10.0),
     param("plant.lag_factor", 1.0, "the real actuator lag over the nominal "
        "plant.actuator_lag, unknown to the ATO", "plant", 0.0, 10.0),
+    param("train.load_weighing", False, "the ATO weighs its train at departure (air-spring "
+          "load weighing) and plans and controls with the weighed mass: train.mass_reading is "
+          "then plant.mass_factor read with a relative error (false = the ATO knows the mass "
+          "train.mass_reading gives, the papers' setting)", "plant"),
+    param("train.load_weighing_error", 0.03, "the load weighing's relative error, 1 sigma (a "
+          "seeded normal draw)", "plant", 0.0, 0.5),
+    param("train.load_weighing_seed", 0, "seed of the load weighing's error draw", "plant",
+          0, 2**31 - 1),
+    param("train.mass_reading", 1.0, "the mass the ATO knows, over the nominal plant.mass: the "
+          "plan's envelope share and the controllers' nominal model are the nominal train's at "
+          "this mass; set from the load weighing when train.load_weighing (the launchers pass "
+          "it to the nodes), else as given (1 = the nominal train)", PROFILE_NODES, 0.1, 10.0),
     param("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
        "the scorer from the bag's run parameters", PLANT_NODES, 0.01, 1.0),
     param("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", PLANT_NODES,

@@ -337,6 +337,15 @@ class AtoCurve(Plan):
       most da T / 8 (0.12 m/s for 0.7 m/s^2 at 0.5 m/s^3); the rounded curve is
       kept half the margin under the limits, never clipped to the cap (a clip
       would bring the corner back).
+
+    The running time bisected on is the curve's own time (its rounding and its share
+    included) from start_speed at the departure point to the mark. With `departure`
+    (s, profile.ato.on_time) it counts from standstill to standstill, as the line's
+    planned time does: `departure` before the curve (what the train takes to reach
+    start_speed: its dead time, actuator lag and the rounded start) and the eased stop's
+    last cell as the easing takes it (v = j t^2 / 2 covers d = v t / 3: 3 d / v, where
+    the trapezoid says 2 d / v). A planned time even the fastest curve misses by more
+    than LATE_NOTICE is said in `notice` (one line); the curve then runs at the limits.
     """
 
     position_indexed = True
@@ -347,7 +356,7 @@ class AtoCurve(Plan):
                  start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
                  power_speed: float = math.inf, stop_jerk: float = 0.0,
                  train: TrainParameters | None = None, envelope_share: float = 0.0,
-                 jerk: float = 0.0):
+                 jerk: float = 0.0, departure: float | None = None):
         self.line = line
         stop = line.stop_position
         self.positions = np.arange(0.0, stop + resolution / 2, resolution)
@@ -357,21 +366,31 @@ class AtoCurve(Plan):
         self.power_speed, self.stop_jerk = power_speed, stop_jerk
         self.start_speed = start_speed
         self.caps = np.maximum(self.limits - margin, start_speed)
-        self.margin, self.jerk = margin, jerk
+        self.margin, self.jerk, self.departure = margin, jerk, departure
         self.feasible = (self._feasible(train, envelope_share, train_length)
                          if envelope_share > 0.0 else None)
-        top = float(self.caps.max())
-        if line.planned_run_time is None or self.run_time(top) >= line.planned_run_time:
-            self.cruise = top
-        else:
-            low, high = start_speed, top
-            for _ in range(60):
-                middle = 0.5 * (low + high)
-                low, high = (middle, high) if self.run_time(middle) > line.planned_run_time \
-                    else (low, middle)
-            self.cruise = high
+        self.cruise, self.notice = self._cruise(float(self.caps.max()), envelope_share)
         self.speeds = self.curve(self.cruise)
         self.planned_run_time = self.run_time(self.cruise)
+
+    def _cruise(self, top: float, share: float) -> tuple[float, str | None]:
+        """The lowest cruise speed that meets the line's planned time (bisection), or
+        `top` when even that misses it; and the notice of a planned time missed."""
+        planned, fastest = self.line.planned_run_time, self.run_time(top)
+        if planned is None or fastest >= planned:
+            notice = None
+            if planned is not None and self.departure is not None \
+                    and fastest > planned + LATE_NOTICE:
+                notice = (f"the line's planned running time {planned:g} s cannot be met: the "
+                          f"fastest ato curve (profile.ato.acceleration {self.acceleration:g} "
+                          f"m/s^2, profile.envelope_share {share:g}) takes {fastest:.1f} s; "
+                          f"driving minimum-time")
+            return top, notice
+        low, high = self.start_speed, top
+        for _ in range(60):
+            middle = 0.5 * (low + high)
+            low, high = (middle, high) if self.run_time(middle) > planned else (low, middle)
+        return high, None
 
     @staticmethod
     def _belt_limits(x: np.ndarray, line, train_length: float) -> np.ndarray:
@@ -473,8 +492,13 @@ class AtoCurve(Plan):
         return np.where(distance <= ease_distance, easing, braking)
 
     def run_time(self, cruise: float) -> float:
+        """The running time of the curve for a cruise speed, s (see the class docstring)."""
         v = self.curve(cruise)
-        return float(np.sum(2.0 * np.diff(self.positions) / (v[:-1] + v[1:])))
+        cells = 2.0 * np.diff(self.positions) / (v[:-1] + v[1:])
+        if self.departure is None:
+            return float(np.sum(cells))
+        eased = 0.5 * cells[-1] if self.stop_jerk > 0.0 else 0.0
+        return float(np.sum(cells)) + self.departure + eased
 
     def speed(self, t: float, position: float = 0.0) -> float:
         if position >= self.positions[-1]:
@@ -496,24 +520,39 @@ class AtoCurve(Plan):
         return float(self.limits[min(max(cell, 0), len(self.limits) - 1)])
 
 
-def ato_curve(values: dict, line) -> AtoCurve:
-    """The ATO curve a run's profile.ato.* parameters give on `line`."""
+LATE_NOTICE = 0.05  # s an on-time curve may miss the planned time by without a notice
+
+
+def ato_curve(values: dict, line, train: TrainParameters) -> AtoCurve:
+    """The ATO curve a run's profile.ato.* parameters give on `line` for `train` (the
+    run context's: the train the ATO knows)."""
     return _ato_curve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
                       values["profile.ato.margin"], values["profile.ato.start_speed"],
                       values["plant.length"], values["profile.ato.power_speed"] or math.inf,
                       values["profile.ato.stop_jerk"],
-                      TrainParameters.from_values(values) if values["profile.envelope_share"]
-                      else None, values["profile.envelope_share"], values["profile.jerk"])
+                      train if values["profile.envelope_share"] else None,
+                      values["profile.envelope_share"], values["profile.jerk"],
+                      departure_time(values, train) if values["profile.ato.on_time"] else None)
+
+
+def departure_time(values: dict, train: TrainParameters) -> float:
+    """What a departure takes before the ato curve's start_speed, s: the train's dead time,
+    its actuator lag (a first-order lag delays a ramp by its time constant) and the rise
+    from standstill to start_speed at profile.jerk (else at the planned acceleration)."""
+    start, jerk = values["profile.ato.start_speed"], values["profile.jerk"]
+    rise = (math.sqrt(2.0 * start / jerk) if jerk > 0.0
+            else start / values["profile.ato.acceleration"])
+    return train.dead_time + train.actuator_lag + rise
 
 
 @functools.lru_cache(maxsize=8)
 def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
-               power_speed, stop_jerk, train, envelope_share, jerk) -> AtoCurve:
+               power_speed, stop_jerk, train, envelope_share, jerk, departure) -> AtoCurve:
     """One curve per distinct line and parameters (the profile and the scorer both need
     it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
                     power_speed=power_speed, stop_jerk=stop_jerk, train=train,
-                    envelope_share=envelope_share, jerk=jerk)
+                    envelope_share=envelope_share, jerk=jerk, departure=departure)
 
 
 STEP_PARAMETERS = (
@@ -539,6 +578,11 @@ ATO_PARAMETERS = (
     param("profile.ato.start_speed", 0.3, "ATO curve: target at the departure point (a position-"
           "indexed curve is 0 there and would never start the train), m/s", PROFILE_NODES,
           0.01, 10.0),
+    param("profile.ato.on_time", False, "ATO curve: bisect the cruise speed on the running time "
+          "from standstill to standstill (the train's dead time, actuator lag and rounded "
+          "start before start_speed; the eased stop's last metres), as the line's planned "
+          "time counts it, and say at start-up when even the fastest curve misses that time "
+          "(false = the curve's own time, the papers' setting)", PROFILE_NODES),
 )
 
 
@@ -558,7 +602,7 @@ def _ato(values, context) -> AtoCurve:
     if line.stop_position <= 0.0:
         raise ScenarioError(f"the ato profile needs a stop beyond the departure point; "
                             f"{values['line.file']} stops at 0 m")
-    return ato_curve(values, line)
+    return ato_curve(values, line, context.train)
 
 
 STRATEGY_PARAMETERS = (
