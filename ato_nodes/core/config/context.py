@@ -2,7 +2,8 @@
 
 It holds what an ATO knows before the run starts: the control period, its train
 (the preset's parameters, core.plant.TrainParameters, at the mass the ATO knows:
-train.mass_reading, the load weighing's when train.load_weighing), the line,
+train.mass_reading, the load weighing's when train.load_weighing, if heavier than
+the nominal), the line,
 and the planned target (the chosen profile kind's plan), with the preview of
 that plan over any horizon. Built from the same values in every runner, so a
 component sees the same context in a node and in simulate().
@@ -24,10 +25,14 @@ from .schema import steps
 
 def ato_train(values) -> TrainParameters:
     """The train the ATO plans and controls with: the nominal one (plant.*) at the mass
-    it knows, plant.mass times train.mass_reading (the nominal train itself at 1)."""
+    it knows, plant.mass times train.mass_reading, but never lighter than the nominal
+    train (the nominal one itself up to a reading of 1): a lighter train could give more
+    specific force (N/kN), but the command limits (controller.u_min, u_max, N/kN) are
+    the nominal train's, so a plan at the light train's envelope share would ask for
+    force the limiter does not let through."""
     nominal = TrainParameters.from_values(values)
     reading = values["train.mass_reading"]
-    return nominal if reading == 1.0 else dataclasses.replace(nominal,
+    return nominal if reading <= 1.0 else dataclasses.replace(nominal,
                                                               mass=reading * nominal.mass)
 
 

@@ -105,8 +105,9 @@ BASE: tuple[ParamSpec, ...] = (
           0, 2**31 - 1),
     param("train.mass_reading", 1.0, "the mass the ATO knows, over the nominal plant.mass: the "
           "plan's envelope share and the controllers' nominal model are the nominal train's at "
-          "this mass; set from the load weighing when train.load_weighing (the launchers pass "
-          "it to the nodes), else as given (1 = the nominal train)", PROFILE_NODES, 0.1, 10.0),
+          "this mass, if heavier (the command limits are the nominal's); set from the load "
+          "weighing when train.load_weighing (the launchers pass it to the nodes), else as "
+          "given (1 = the nominal train)", PROFILE_NODES, 0.1, 10.0),
     param("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
        "the scorer from the bag's run parameters", PLANT_NODES, 0.01, 1.0),
     param("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", PLANT_NODES,
