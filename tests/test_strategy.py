@@ -5,6 +5,9 @@ import hashlib
 import numpy as np
 import pytest
 
+from ato_nodes.core.control.adrc import on_plan_side, plan_forces, planned_force
+from ato_nodes.core.run.scoring import score_series
+from ato_nodes.core.scoring.operation import SWITCH_THRESHOLD, _switch_count
 from ato_nodes.core.targets import strategy
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.base.errors import ScenarioError
@@ -207,3 +210,48 @@ def test_a_huge_strategy_file_is_refused_by_its_size_before_it_is_read(tmp_path)
         strategy_run(line_path, path)
     with pytest.raises(ScenarioError, match=f"strategy file {tmp_path} is a directory"):
         strategy_run(line_path, tmp_path)
+
+
+LADRC_PLAN = ("controller.kind=linear_adrc", "controller.holding_target=0.02",
+              "controller.preview=10", "profile.strategy.start_speed=0.1",
+              "ladrc.omega_o=5", "ladrc.omega_c=1", "ladrc.b0=0.008829",
+              "ladrc.feedforward=true", "ladrc.delay_aware=true")
+
+
+def test_the_linear_adrc_reads_the_plans_force_by_stage_and_brakes_on_past_the_stop(
+        tmp_path):
+    line_path, path, result = shipped_like_strategy(tmp_path)
+    plan = RunContext(strategy_run(line_path, path)).plan
+    forces = plan_forces(plan)
+    assert len(forces.positions) == len(result.positions) - 1  # the stop mark is no stage
+    for position in (0.0, 50.0, result.positions[7], result.positions[30] + 12.5, 3150.0):
+        assert planned_force(forces, position) == plan.force(position)
+    last = result.forces[-1]
+    assert last < 0.0
+    assert planned_force(forces, result.positions[-1] + 1.0) == pytest.approx(last, abs=1e-5)
+    assert planned_force(forces, -5.0) == pytest.approx(result.forces[0], abs=1e-5)
+
+
+@pytest.mark.parametrize("u, planned, speed, expected", [
+    (-3.0, 20.0, 10.0, 0.0), (25.0, 20.0, 10.0, 25.0),    # driving: no braking
+    (4.0, -30.0, 10.0, 0.0), (-35.0, -30.0, 10.0, -35.0),  # braking: no traction
+    (4.0, 0.0, 10.0, 0.0), (-4.0, 0.0, 10.0, 0.0),         # coasting: neither
+    (4.0, 0.0, 9.8, 4.0), (-4.0, 0.0, 10.2, -4.0),         # unless beyond the band
+    (-3.0, 20.0, 10.2, -3.0), (4.0, -30.0, 9.8, 4.0)])
+def test_the_command_stays_on_the_plans_side_within_the_band(u, planned, speed, expected):
+    assert on_plan_side(u, planned, speed, 10.0, 0.1) == expected
+
+
+def test_the_plans_force_keeps_the_tracked_strategys_coasting_and_modes(tmp_path):
+    line_path, path, result = shipped_like_strategy(tmp_path)
+    runs_of = {}
+    for plan in ("false", "true"):
+        values = strategy_run(line_path, path, *LADRC_PLAN, f"ladrc.plan_feedforward={plan}")
+        runs_of[plan] = score_series(simulate(values), values)
+    planned = _switch_count(result.forces, SWITCH_THRESHOLD)
+    assert runs_of["true"]["switch_count"] <= min(planned + 2, runs_of["false"]["switch_count"])
+
+
+def test_the_plans_force_needs_a_plan_with_forces():
+    with pytest.raises(ScenarioError, match="needs ladrc.feedforward and a plan with forces"):
+        apply_overrides(load_scenario("hsr-neutral-ato"), ["ladrc.plan_feedforward=true"])

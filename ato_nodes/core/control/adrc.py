@@ -38,6 +38,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
+from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Output
 from ..base.spec import param, settings
@@ -343,6 +346,15 @@ LINEAR_ADRC_PARAMETERS = (
           "actuator applies (dead time, lag, envelope, neutral sections) instead of the "
           "command, and act on the speed predicted controller.preview steps ahead from the "
           "commands already sent (a Smith predictor)", "controller"),
+    param("ladrc.plan_feedforward", False, "linear ADRC with ladrc.feedforward and a plan that "
+          "has forces (profile.kind strategy): the feedforward is the force the plan holds "
+          "where the tracked target is (not its acceleration and resistance), and the command "
+          "stays on that force's side: no braking where the plan drives or cruises, no "
+          "traction where it brakes, none at all where it coasts, unless the (predicted) "
+          "speed is more than ladrc.plan_band off the target", "controller"),
+    param("ladrc.plan_band", 0.5 / 3.6, "linear ADRC with ladrc.plan_feedforward: how far the "
+          "speed may be off the target before the command leaves the plan's side, m/s",
+          "controller", 0.0, 100.0),
 )
 
 
@@ -355,6 +367,51 @@ class LinearADRCGains(NamedTuple):
     b0: float
     feedforward: bool
     delay_aware: bool
+    plan_feedforward: bool = False
+    plan_band: float = 0.0
+
+
+class PlanForces(NamedTuple):
+    """A plan's force by position, as the linear ADRC reads it (ladrc.plan_feedforward):
+    forces[i] over [positions[i], positions[i + 1]), the last stage's from its start on,
+    past the stop too (empty: no plan read)."""
+
+    positions: np.ndarray  # m, increasing
+    forces: np.ndarray     # N/kN: + traction or cruise, 0 coasting, - braking
+
+
+def plan_forces(plan=None) -> PlanForces:
+    """The stages of `plan` (a run context's plan with `positions` and `forces`, a
+    strategy's: its last row is the stop mark, no stage), or none."""
+    if plan is None:
+        return PlanForces(np.zeros(0), np.zeros(0))
+    return PlanForces(np.asarray(plan.positions[:-1], dtype=float),
+                      np.asarray(plan.forces[:-1], dtype=float))
+
+
+@jitable
+def planned_force(plan: PlanForces, position: float) -> float:
+    """The force the plan holds with the head at `position` (its first stage's before
+    the first position), N/kN."""
+    positions = plan.positions
+    low, high = 0, len(positions)
+    while high - low > 1:  # positions[low] <= position < positions[high], or low = 0
+        middle = (low + high) // 2
+        if positions[middle] <= position:
+            low = middle
+        else:
+            high = middle
+    return plan.forces[low]
+
+
+@jitable
+def on_plan_side(u: float, planned: float, speed: float, target: float, band: float) -> float:
+    """`u` kept on the side of the `planned` force (traction, coasting: none, braking)
+    unless `speed` is more than `band` off `target`, then also on the side that closes
+    the gap."""
+    low = -math.inf if planned < 0.0 or speed > target + band else 0.0
+    high = math.inf if planned > 0.0 or speed < target - band else 0.0
+    return low if u < low else high if u > high else u
 
 
 class LinearADRCSettings(NamedTuple):
@@ -363,6 +420,7 @@ class LinearADRCSettings(NamedTuple):
     l1: float              # the observer's gains, 2 omega_o and omega_o^2
     l2: float
     model: NominalModel    # the nominal train, read with feedforward or delay_aware
+    plan: PlanForces       # the plan's forces, read with plan_feedforward
 
 
 class LinearADRCState(NamedTuple):
@@ -409,12 +467,16 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     law = (g.omega_c * (target - speed) - z2) / g.b0
     resistance = 0.0  # known to the observer over the coming period
     if g.feedforward:
-        planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
         travelled = 0.0  # sum(horizon[:-1]), left to right
         for i in range(ahead):
             travelled += horizon[i]
-        law += planned / g.b0 + known_resistance(model, target,
-                                                 state.model.position + h * travelled)
+        there = state.model.position + h * travelled  # where the tracked target is planned
+        if g.plan_feedforward:
+            force = planned_force(settings.plan, there)
+            law = on_plan_side(law + force, force, speed, target, g.plan_band)
+        else:
+            planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
+            law += planned / g.b0 + known_resistance(model, target, there)
         resistance = known_resistance(model, measured, state.model.position)
     u = limit_command(law, target, measured, last, limits)
     force, nominal = u, state.model
@@ -428,18 +490,28 @@ LINEAR_ADRC_STEPS = ControllerSteps(linear_adrc_start, linear_adrc_step, LinearA
 
 
 def linear_adrc_of(gains: LinearADRCGains, period: float, limiter: CommandLimiter,
-                   train: TrainParameters, position: float = 0.0, line: Line | None = None
-                   ) -> SteppedController:
-    """The linear ADRC with the nominal model of `train` on `line` from `position`."""
+                   train: TrainParameters, position: float = 0.0, line: Line | None = None,
+                   plan: PlanForces | None = None) -> SteppedController:
+    """The linear ADRC with the nominal model of `train` on `line` from `position` (and
+    the plan's forces, with plan_feedforward)."""
     model, nominal = nominal_train(train, period, position, line)
     return SteppedController(LINEAR_ADRC_STEPS, LinearADRCSettings(
-        gains, period, 2.0 * gains.omega_o, gains.omega_o ** 2, model), limiter,
+        gains, period, 2.0 * gains.omega_o, gains.omega_o ** 2, model,
+        plan if plan is not None else plan_forces()), limiter,
         LinearADRCState(0.0, 0.0, 0.0, 0.0, nominal))
 
 
 def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
-    return linear_adrc_of(settings(LinearADRCGains, "ladrc", values), context.period, limiter,
-                          context.train, values["plant.initial_position"], context.line)
+    gains = settings(LinearADRCGains, "ladrc", values)
+    plan = plan_forces()
+    if gains.plan_feedforward:
+        if not gains.feedforward or not hasattr(context.plan, "forces"):
+            raise ScenarioError("ladrc.plan_feedforward needs ladrc.feedforward and a plan "
+                                f"with forces (profile.kind strategy), not "
+                                f"{values['profile.kind']}")
+        plan = plan_forces(context.plan)
+    return linear_adrc_of(gains, context.period, limiter, context.train,
+                          values["plant.initial_position"], context.line, plan)
 
 
 HAN_ADRC = Component(
