@@ -45,7 +45,7 @@ from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param
 from ..base.units import KMH
 from ..train.plant import force_limits
-from .limiter import CommandLimiter
+from .limiter import CommandLimiter, holds
 from .lssvm import load_model
 
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
@@ -74,6 +74,15 @@ PARAMETERS = (
           "sample joins the model, m/s (the paper's 2 km/h)", "controller", 0.0, 100.0),
     param("gpc.window", 500, "corrections the model keeps beyond its identification samples "
           "(the oldest leaves first)", "controller", 0, 100000),
+    param("gpc.berthing_speed", 0.0, "berthing mode: the cost counts the predicted speeds up "
+          "to the first planned target at or below this speed (the stop; at least the model's "
+          "input delay + 1 steps), m/s; beyond the stop the linear model rolls the train on "
+          "backwards under the brake, and the whole horizon (0, the paper's) eases the "
+          "braking into the mark", "controller", 0.0, 10.0),
+    param("gpc.hold", False, "while the limiter holds the train at its berth "
+          "(controller.holding_brake, the target at most controller.holding_target, the train "
+          "stopped), the fed-back residual and the online correction do not learn from it: "
+          "standstill under the brake is not a model error", "controller"),
 )
 
 
@@ -198,6 +207,8 @@ class GPCSettings:
     r: float
     constrained: bool
     bias_filter: float
+    berthing_speed: float = 0.0  # m/s, 0: the whole horizon (the paper's)
+    hold: bool = False           # no learning while the limiter holds the train
 
 
 def _free_and_forced(c: float, a: np.ndarray, b: np.ndarray, delay: int, speeds: np.ndarray,
@@ -287,15 +298,12 @@ class GPC(Controller):
         if len(horizon) < s.horizon + 1:
             raise ValueError("the GPC needs controller.preview >= gpc.horizon")
         _push(self.speeds, measured)
-        error = 0.0  # the model's own one-step error, without the fed-back bias
-        if self.expected is not None:
-            error = measured - self.expected
-            self.bias += self.bias_gain * (error - self.bias)
-            if self.model.observe(self.speeds, self.commands, error):
-                self.added += 1
+        error = self._learn(target, measured)
         model_arx = self.model.linearise(self.speeds, self.commands)
         free, matrix = self._responses(model_arx, self.bias)
         reference = np.asarray(horizon[1:s.horizon + 1], dtype=float)
+        if s.berthing_speed > 0.0:
+            free, matrix, reference = self._berthing(free, matrix, reference)
         weighted = s.q * matrix.T
         hessian = weighted @ matrix + self.move_weight
         gradient = weighted @ (free - reference)
@@ -310,6 +318,32 @@ class GPC(Controller):
         self.expected = model_arx.predict(self.speeds, self.commands)
         predicted = free[0] + matrix[0, 0] * (u - previous)
         return ControllerOutput(u, (predicted, error, self.bias, float(self.added)))
+
+    def _learn(self, target: float, measured: float) -> float:
+        """The model's own one-step error (without the fed-back bias), fed back and to
+        the online correction; with `hold`, nothing is learnt while the limiter holds
+        the train (and the next step's error is not taken from a held one)."""
+        if self.s.hold and holds(target, measured, self.limiter.settings):
+            self.expected = None
+            return 0.0
+        error = 0.0
+        if self.expected is not None:
+            error = measured - self.expected
+            self.bias += self.bias_gain * (error - self.bias)
+            if self.model.observe(self.speeds, self.commands, error):
+                self.added += 1
+        return error
+
+    def _berthing(self, free, matrix, reference):
+        """The berthing mode: the predictions and targets up to the first target at or
+        below gpc.berthing_speed (the stop), at least to the first prediction a move
+        reaches. Beyond the stop the linear model rolls a braked train on backwards,
+        and a target of 0 there would ease the braking into the mark."""
+        below = np.flatnonzero(reference <= self.s.berthing_speed)
+        if not len(below):
+            return free, matrix, reference
+        count = max(int(below[0]) + 1, self.model.delay + 1)
+        return free[:count], matrix[:count], reference[:count]
 
     def _solve(self, hessian, gradient, previous: float, low: float, high: float) -> float:
         """The first move du(k) of the plan, the command kept in [low, high]."""
@@ -330,7 +364,8 @@ def _build(values, context, limiter: CommandLimiter) -> GPC:
     kind = values["gpc.prediction"]
     settings = GPCSettings(values["gpc.horizon"], values["gpc.control_horizon"],
                            values["gpc.q"], values["gpc.r"], values["gpc.constrained"],
-                           values["gpc.bias_filter"])
+                           values["gpc.bias_filter"], values["gpc.berthing_speed"],
+                           values["gpc.hold"])
     if values["controller.preview"] < settings.horizon:
         raise ScenarioError(f"gpc.horizon = {settings.horizon} needs controller.preview >= "
                             f"{settings.horizon} (it is {values['controller.preview']})")

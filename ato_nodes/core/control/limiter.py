@@ -44,12 +44,20 @@ def clamp(x: float, low: float, high: float) -> float:
 
 
 @jitable
+def holds(target: float, speed: float, settings: LimiterSettings) -> bool:
+    """Whether the holding brake holds the train at its berth: a holding brake, the
+    target at most holding_target, the train (nearly) stopped."""
+    return settings.holding_brake > 0.0 and target <= settings.holding_target \
+        and speed < STOPPED
+
+
+@jitable
 def limit_command(u: float, target: float, speed: float, last: float,
                   settings: LimiterSettings) -> float:
     """The command the limiter lets through (see CommandLimiter); `last` the previous
     one."""
     s = settings
-    if s.holding_brake > 0.0 and target <= s.holding_target and speed < STOPPED:
+    if holds(target, speed, s):
         u = min(u, -s.holding_brake)
     if s.mode_band > 0.0:
         if speed > target + s.mode_band:
