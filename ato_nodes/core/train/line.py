@@ -83,58 +83,60 @@ class Line:
         return line_tables(self, tuple)
 
 
+START, END, VALUE = 0, 1, 2  # a section's columns in LineTables.sections
+
 
 class LineTables(NamedTuple):
-    """A line's sections as three parallel sequences (start m, end m, and the value each
-    adds: the point resistance in N/kN, the limit in m/s), kind after kind: gradients,
-    curves, tunnels, speed limits, neutral sections, each kind's at the rows from the
-    previous kind's end to its own. Compiled code and Python read them with the same
-    functions; three sequences, not one per kind and column, because compiled code
-    pays for every array it hands to a function."""
+    """A line's sections as compiled code and Python read them, with the same functions:
+    one row per section (START m, END m and the VALUE it adds: the grade in per mille =
+    N/kN, CURVE_CONSTANT / R, TUNNEL_CONSTANT * the tunnel's length, the limit in m/s, 0
+    for a neutral section), kind after kind: gradients, curves, tunnels, speed limits,
+    neutral sections, each kind's at the rows from the previous kind's end to its own.
+    One table (a tuple of rows in Python, an array in compiled code), because compiled
+    code pays for every array it hands to a function."""
 
-    starts: Any
-    ends: Any
-    values: Any          # grade (per mille = N/kN), CURVE_CONSTANT / R, TUNNEL_CONSTANT *
-    gradients_end: int   # tunnel length (N/kN), limit (m/s), 0 (neutral sections)
+    sections: Any
+    gradients_end: int
     curves_end: int
     tunnels_end: int
     limits_end: int
     neutral_end: int
 
 
-def line_tables(line: Line | None, sequence: Callable) -> LineTables:
-    """`line`'s LineTables, each column made by `sequence` (tuple, or an array maker);
-    the open track (no line) has empty columns."""
+def line_tables(line: Line | None, table: Callable) -> LineTables:
+    """`line`'s LineTables, its rows made a table by `table` (tuple, or an array maker);
+    the open track (no line) has no rows."""
     kinds = () if line is None else (
         (line.gradients, lambda s: s.value),
         (line.curves, lambda s: CURVE_CONSTANT / s.value),
         (line.tunnels, lambda s: TUNNEL_CONSTANT * (s.end - s.start)),
         (line.speed_limits, lambda s: s.value),
         (line.neutral_sections, lambda s: 0.0))
-    rows = [(s.start, s.end, value(s)) for sections, value in kinds for s in sections]
+    rows = tuple((s.start, s.end, value(s)) for sections, value in kinds for s in sections)
     ends = np.cumsum([len(sections) for sections, _ in kinds] or [0] * 5).tolist()
-    return LineTables(sequence(row[0] for row in rows), sequence(row[1] for row in rows),
-                      sequence(row[2] for row in rows), *ends)
+    return LineTables(table(rows), *ends)
 
 
 def line_arrays(line: Line | None) -> LineTables:
-    """`line`'s tables as numpy arrays, for compiled code (empty: the open track)."""
-    return line_tables(line, lambda values: np.array(list(values), dtype=float))
+    """`line`'s tables as a numpy array, for compiled code (no rows: the open track)."""
+    return line_tables(line, lambda rows: np.array(rows, dtype=float).reshape(len(rows), 3))
 
 
 @jitable(inline=True)
 def speed_limit(tables: LineTables, position: float) -> float:
     """The line's speed limit at `position`, m/s (the last one beyond the end)."""
+    sections = tables.sections
     for i in range(tables.tunnels_end, tables.limits_end):
-        if tables.starts[i] <= position < tables.ends[i]:
-            return tables.values[i]
-    return tables.values[tables.limits_end - 1]
+        if sections[i][START] <= position < sections[i][END]:
+            return sections[i][VALUE]
+    return sections[tables.limits_end - 1][VALUE]
 
 
 @jitable(inline=True)
 def in_neutral_section(tables: LineTables, position: float) -> bool:
+    sections = tables.sections
     for i in range(tables.limits_end, tables.neutral_end):
-        if tables.starts[i] <= position < tables.ends[i]:
+        if sections[i][START] <= position < sections[i][END]:
             return True
     return False
 
@@ -153,7 +155,7 @@ def _belt_sum(tables: LineTables, head: float, train_length: float) -> float:
     """Per kind, the mean over the belt of its piecewise-constant value (0 outside its
     sections), or the point value when the belt has no length; summed. One pass over the
     rows, so that compiled code makes no call per kind."""
-    starts, ends, values = tables.starts, tables.ends, tables.values
+    sections = tables.sections
     tail = head - train_length
     kind_ends = (tables.gradients_end, tables.curves_end, tables.tunnels_end)
     total, first = 0.0, 0
@@ -162,15 +164,15 @@ def _belt_sum(tables: LineTables, head: float, train_length: float) -> float:
         average = 0.0
         if first < end and head <= tail:
             for i in range(first, end):
-                if starts[i] <= head < ends[i]:
-                    average = values[i]
+                if sections[i][START] <= head < sections[i][END]:
+                    average = sections[i][VALUE]
                     break
         elif first < end:
             covered = 0.0
             for i in range(first, end):
-                overlap = min(head, ends[i]) - max(tail, starts[i])
+                overlap = min(head, sections[i][END]) - max(tail, sections[i][START])
                 if overlap > 0:
-                    covered += overlap * values[i]
+                    covered += overlap * sections[i][VALUE]
             average = covered / (head - tail)
         total = average if kind == 0 else total + average
         first = end
