@@ -223,3 +223,23 @@ def test_a_plan_table_gives_the_plans_own_speeds_and_limits_compiled(scenario):
         assert speed(position) == plan.speed(0.0, position), position
         if plan.limits_speed:
             assert limit(position) == plan.limit(position), position
+
+
+def test_the_compiled_interpolation_is_numpys_on_uneven_points():
+    """interpolated() and cell_of(), as compiled code runs them, against np.interp and
+    np.searchsorted on points far from evenly spaced (the search starts where even points
+    would put x): at, beside and between the points, beyond both ends, NaN."""
+    import numba
+    from ato_nodes.core.targets.profiles import cell_of, interpolated
+    rng = np.random.default_rng(2)
+    points = np.cumsum(rng.exponential(1.0, 400) ** 3)  # dense stretches and wide gaps
+    values = rng.normal(size=len(points))
+    interpolate = numba.njit(lambda x: interpolated(x, points, values))
+    cell = numba.njit(lambda x: cell_of(points, x))
+    positions = np.concatenate([
+        rng.uniform(points[0] - 10, points[-1] + 10, 20000), points,
+        np.nextafter(points, np.inf), np.nextafter(points, -np.inf), [np.inf, -np.inf]])
+    for x in positions:
+        assert interpolate(x) == np.interp(x, points, values), x
+        assert cell(x) == np.searchsorted(points, x, side="right") - 1, x
+    assert np.isnan(interpolate(np.nan)) and cell(np.nan) == -1

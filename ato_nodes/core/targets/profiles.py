@@ -70,14 +70,24 @@ def table_limit(table: PlanTable, position: float) -> float:
     return table.grid[2, min(max(cell, 0), len(positions) - 1)]
 
 
-@jitable
+@jitable(inline=True)
 def cell_of(points, x: float) -> int:
     """The i with points[i] <= x < points[i + 1] (-1 before the first, the last index from
     the last on): np.searchsorted(points, x, side="right") - 1, for increasing points."""
     if not x >= points[0]:
         return -1
-    low, high = 0, len(points)
-    while high - low > 1:  # points[low] <= x < points[high] (points[len] taken as inf)
+    last = len(points) - 1
+    if x >= points[last]:
+        return last
+    low, high = 0, last
+    # First around the cell x falls in if the points are evenly spaced (an ATO curve's are:
+    # x is in that cell or a neighbour), then by halving as long as it takes.
+    guess = min(int((x - points[0]) / (points[last] - points[0]) * last), last - 1)
+    if points[max(guess - 1, 0)] <= x:
+        low = max(guess - 1, 0)
+    if x < points[min(guess + 2, last)]:
+        high = min(guess + 2, last)
+    while high - low > 1:  # points[low] <= x < points[high]
         middle = (low + high) // 2
         if points[middle] <= x:
             low = middle
@@ -86,13 +96,13 @@ def cell_of(points, x: float) -> int:
     return low
 
 
-@jitable
+@jitable(inline=True)
 def interpolated(x: float, points, values) -> float:
     """np.interp(x, points, values) for one x and strictly increasing points, computed as
     numpy's C code computes it (the same bits): numba's np.interp allocates arrays on
     every call, ten times the cost of the arithmetic in a compiled loop."""
-    if x != x:  # NaN: numpy's own rules
-        return np.interp(x, points, values)
+    if x != x:  # NaN: numpy returns it as it is
+        return x
     last = len(points) - 1
     if x >= points[last]:
         return values[last]
