@@ -9,6 +9,7 @@ from ato_nodes.core.control import gpc as gpc_module
 from ato_nodes.core.control.gpc import GPC, Arx, GPCSettings
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 
 
@@ -146,3 +147,40 @@ def test_bad_gpc_input_is_one_line_before_anything_starts(overrides, message):
     with pytest.raises(ScenarioError, match=message) as caught:
         apply_overrides(load_scenario("seed001-crh380al"), overrides)
     assert "\n" not in str(caught.value)
+
+
+def approach(*overrides):
+    """seed001-crh380al-ato's last 50 m from standstill: a short run up and a berth."""
+    return apply_overrides(load_scenario("seed001-crh380al-ato"), [
+        "plant.initial_position=59950", "run.duration=60", *overrides])
+
+
+def test_the_berthing_mode_stops_at_the_mark_and_the_holding_target_holds():
+    values = approach()
+    series = simulate(values)
+    stop = score_series(series, values)["stopping_error"]
+    assert abs(stop) <= 0.1
+    without = approach("gpc.berthing_speed=0")
+    assert abs(score_series(simulate(without), without)["stopping_error"]) > 2 * abs(stop)
+    moving = int(np.argmax(series["speed"]))
+    stopped = moving + np.flatnonzero(series["speed"][moving:] == 0.0)[0]  # held from here on
+    assert np.all(series["speed"][stopped:] == 0.0)
+    assert np.all(series["command"][stopped + 5:] <= -values["controller.holding_brake"])
+    # nothing learnt while held: the residual fed back and the samples stay as they were
+    assert np.all(series["bias"][stopped + 5:] == series["bias"][stopped + 5])
+    assert np.all(series["model_error"][stopped + 5:] == 0.0)
+
+
+def test_the_additions_at_their_defaults_leave_the_paper_configuration_untouched(monkeypatch):
+    values = apply_overrides(load_scenario("seed001-crh380al"), ["run.duration=60"])
+    assert values["gpc.berthing_speed"] == 0.0 and values["gpc.hold"] is False
+    before = simulate(values)
+
+    def entered(*arguments):
+        raise AssertionError("a berthing or holding path ran with the additions off")
+
+    monkeypatch.setattr(GPC, "_berthing", entered)
+    monkeypatch.setattr(gpc_module, "holds", entered)
+    after = simulate(values)
+    for name in before:
+        np.testing.assert_array_equal(before[name], after[name], err_msg=name)
