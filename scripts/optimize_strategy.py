@@ -13,10 +13,14 @@ a cruise-and-coast strategy (one cruise speed, bisected to meet the time, coasti
 the last 15 % of every segment); flatout the minimum-time run. The planned time is the
 flat-out run's time x (1 + --supplement). --ignore-neutral plans as if there were no
 neutral sections (the paper's comparison); the result is still evaluated on the line.
+--share plans at that share of the train's traction and brake envelopes (the switching
+strategies brake at 80 % of the envelope, or at the share if lower).
 
 Writes in --out: strategy.csv (the strategy file: a header of `# key: value` lines,
 then position m, speed m/s, mode 1 traction / 0 cruise or coast / -1 brake, force
-N/kN at each stage start), indices.json, speed_distance.png (speed against distance
+N/kN at each stage start; the header holds --share if below 1 and, for kh, pso, mareco
+and flatout, the switching points, which profile.strategy.replan drives again for a
+weighed train), indices.json, speed_distance.png (speed against distance
 with the caps, the grade profile and the neutral sections shaded), and for kh and pso
 convergence.png.
 """
@@ -53,6 +57,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--ds", type=float, default=100.0, help="stage length, m")
     parser.add_argument("--ignore-neutral", action="store_true")
+    parser.add_argument("--share", type=float, default=1.0, help="share of the train's "
+                        "traction and brake envelopes the plan uses (default 1: all; below 1 "
+                        "the rest is a reserve for a heavier or more resisted train)")
     parser.add_argument("--out", type=Path, required=True)
     return parser.parse_args()
 
@@ -63,6 +70,8 @@ def main() -> None:
         _cli.fail("--supplement must lie in [0, 1]")
     if args.evaluations < 2 or not 10.0 <= args.ds <= 1000.0:
         _cli.fail("--evaluations must be at least 2 and --ds within 10-1000 m")
+    if not 0.1 <= args.share <= 1.0:
+        _cli.fail("--share must lie in [0.1, 1]")
     try:
         line_path = resolve_file(args.line, [Path.cwd()])
         line = load_line(line_path)
@@ -74,7 +83,8 @@ def main() -> None:
         _cli.fail(f"{line_path}: the line has no stop beyond the departure point")
     _cli.seconds(args.time, "--time")
     _cli.new_directory(args.out)
-    problem, planning = strategy.problems(line, values, args.ds, args.ignore_neutral)
+    problem, planning = strategy.problems(line, values, args.ds, args.ignore_neutral,
+                                          args.share)
     try:
         outcome = strategy.evaluate(args.algorithm, problem, planning, args.time,
                                     supplement=args.supplement, evaluations=args.evaluations,
@@ -89,6 +99,10 @@ def main() -> None:
               "line_sha256": hashlib.sha256(Path(line_path).read_bytes()).hexdigest(),
               "train": args.train, "planned_time_s": f"{planned:.3f}",
               "algorithm": args.algorithm, "supplement": args.supplement}
+    if args.share != 1.0:
+        header["share"] = repr(args.share)
+    if result.switching is not None:  # what profile.strategy.replan drives again
+        header["switching"] = ",".join(repr(float(value)) for value in result.switching)
     strategy.write_strategy(args.out / "strategy.csv", header, result)
     summary = {"header": header, "indices": values, "flat_out": outcome.reference}
     if history is not None:

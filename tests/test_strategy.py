@@ -1,5 +1,6 @@
 """Seed 002's energy-optimal limit: dynamic programming over (position, speed)."""
 
+import dataclasses
 import hashlib
 
 import numpy as np
@@ -255,3 +256,87 @@ def test_the_plans_force_keeps_the_tracked_strategys_coasting_and_modes(tmp_path
 def test_the_plans_force_needs_a_plan_with_forces():
     with pytest.raises(ScenarioError, match="needs ladrc.feedforward and a plan with forces"):
         apply_overrides(load_scenario("hsr-neutral-ato"), ["ladrc.plan_feedforward=true"])
+
+
+def test_a_plan_at_an_envelope_share_keeps_the_rest_in_reserve():
+    track = strategy.Track.of(line(body="gradients:\n  - {start: 0, end: 20000, grade: 4.0}\n"),
+                              CRH5, ds=100.0)
+    whole, reserved = (strategy.Problem(track, CRH5, 0.9, share) for share in (1.0, 0.85))
+    speeds = np.array([5.0, 30.0, 60.0])
+    for full, part in zip(whole.limits(speeds), reserved.limits(speeds), strict=True):
+        assert np.allclose(part, 0.85 * full)
+    for problem, share in ((whole, 1.0), (reserved, 0.85)):
+        result = strategy.flat_out(problem)
+        brake, traction = (limit * 1.0 / share for limit in whole.limits(result.speeds[:-1]))
+        assert np.all(result.forces <= share * traction + 1e-9)
+        assert np.all(result.forces >= min(strategy.PLANNED_BRAKING, share) * brake - 1e-9)
+    assert strategy.flat_out(reserved).time > strategy.flat_out(whole).time
+    with pytest.raises(ValueError, match="share"):
+        strategy.Problem(track, CRH5, 0.9, 0.0)
+
+
+def switching_file(tmp_path, share=0.85, time_factor=1.1):
+    """A line, and a MARECO-like strategy file for it at `share` of the envelopes with its
+    switching points in the header, as scripts/optimize_strategy.py writes it."""
+    path = tmp_path / "line.yaml"
+    path.write_text("name: t\nlength: 20000\nspeed_limits:\n"
+                    "  - {start: 0, end: 20000, limit: 69.44}\n"
+                    "gradients:\n  - {start: 0, end: 20000, grade: 3.0}\n"
+                    "neutral_sections:\n  - {start: 9000, end: 9300}\n"
+                    "stations:\n  - {name: A, position: 0}\n  - {name: B, position: 20000}\n")
+    test_line = parse_line(path.read_text())
+    problem = strategy.Problem(strategy.Track.of(test_line, CRH5, 100.0), CRH5, 0.9, share)
+    planned = time_factor * strategy.flat_out(problem).time
+    result = strategy.mareco(problem, planned)
+    header = {"line": str(path), "line_sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+              "train": "crh5", "planned_time_s": f"{planned:.3f}", "algorithm": "mareco",
+              "share": repr(share),
+              "switching": ",".join(repr(float(v)) for v in result.switching)}
+    strategy.write_strategy(tmp_path / "strategy.csv", header, result)
+    return test_line, path, tmp_path / "strategy.csv", result
+
+
+def test_the_strategy_driven_again_for_the_planned_train_is_the_file(tmp_path):
+    test_line, _, path, result = switching_file(tmp_path)
+    plan = strategy.read_strategy(path)
+    again = strategy.for_train(plan, test_line, CRH5, 0.9)
+    assert np.allclose(again.speeds, result.speeds, atol=1e-5)
+    assert np.allclose(again.forces[:-1], result.forces, atol=1e-5)
+
+
+def test_a_heavier_train_gets_its_own_plan_on_time_within_its_reserve(tmp_path):
+    test_line, _, path, result = switching_file(tmp_path)
+    plan = strategy.read_strategy(path)
+    planned = float(plan.header["planned_time_s"])
+    heavy = dataclasses.replace(CRH5, mass=1.15 * CRH5.mass)
+    again = strategy.for_train(plan, test_line, heavy, 0.9)
+    problem = strategy.Problem(strategy.Track.of(test_line, heavy, 100.0), heavy, 0.9, 0.85)
+    brake, traction = problem.limits(again.speeds[:-1])
+    assert np.all(again.forces[:-1] <= traction + 1e-9)  # the heavy train's 85 %
+    assert np.all(again.forces[:-1] >= brake - 1e-9)
+    assert strategy.running_time(again) <= planned + 0.5  # recovered: on time
+    assert again.speeds[-1] == pytest.approx(0.0, abs=1e-9) and again.positions[-1] == 20000
+    assert float(again.header["time_for_train_s"]) > result.time - 1e-6
+    crushed = dataclasses.replace(CRH5, mass=1.6 * CRH5.mass)
+    late = strategy.for_train(plan, test_line, crushed, 0.9, max_share=0.85)  # flat out
+    fastest = strategy.flat_out(strategy.Problem(problem.track, crushed, 0.9, 0.85))
+    assert np.allclose(late.speeds, fastest.speeds) and fastest.time > planned
+    rising = strategy.for_train(plan, test_line, crushed, 0.9)  # up to the whole envelope
+    assert fastest.time > strategy.running_time(rising) > planned - 0.5
+
+
+def test_replan_drives_the_weighed_train_and_needs_switching_points(tmp_path):
+    _, line_path, path, _ = switching_file(tmp_path)
+    nominal = strategy_run(line_path, path, "profile.strategy.replan=true")
+    file_plan = RunContext(nominal).plan
+    assert RunContext(apply_overrides(nominal, ["train.mass_reading=0.9"])).plan.forces is \
+        not None
+    heavy = RunContext(apply_overrides(nominal, ["train.mass_reading=1.2"])).plan
+    assert heavy.forces.max() < file_plan.forces.max()  # the heavier train's 85 %
+    plain = RunContext(apply_overrides(nominal, ["train.mass_reading=1.2",
+                                                 "profile.strategy.replan=false"])).plan
+    assert np.array_equal(plain.forces, file_plan.forces)
+    text = path.read_text().splitlines()
+    path.write_text("\n".join(row for row in text if not row.startswith("# switching")) + "\n")
+    with pytest.raises(ScenarioError, match="switching points"):
+        RunContext(apply_overrides(nominal, ["train.mass_reading=1.2"])).plan  # noqa: B018

@@ -621,6 +621,15 @@ STRATEGY_PARAMETERS = (
           PROFILE_NODES),
     param("profile.strategy.start_speed", 0.3, "strategy target at the departure point, m/s",
           PROFILE_NODES, 0.01, 10.0),
+    param("profile.strategy.replan", False, "when the ATO's train is heavier than the nominal "
+          "one (train.load_weighing), drive the strategy file's switching points again for it "
+          "at the file's envelope share, moved towards flat out until it meets the file's "
+          "planned time (flat out at profile.strategy.max_share at most); false: the file as "
+          "planned", PROFILE_NODES),
+    param("profile.strategy.max_share", 1.0, "with profile.strategy.replan: the highest share "
+          "of the weighed train's envelopes a late plan may rise to (at the file's share or "
+          "below: the file's reserve is kept, a heavy train arrives late)", PROFILE_NODES,
+          0.1, 1.0),
 )
 
 
@@ -646,6 +655,14 @@ def _strategy(values, context) -> StrategyProfile:
     if abs(plan.positions[-1] - context.line.stop_position) > 1.0:
         raise ScenarioError(f"strategy file {path} ends at {plan.positions[-1]:.0f} m, the "
                             f"line's stop is at {context.line.stop_position:.0f} m")
+    if values["profile.strategy.replan"] and context.train != TrainParameters.from_values(
+            values):  # the weighed train, heavier than the one planned for
+        try:
+            plan = strategy.for_train(plan, context.line, context.train,
+                                      values["plant.efficiency"],
+                                      values["profile.strategy.max_share"])
+        except ValueError as exc:
+            raise ScenarioError(f"strategy file {path}: {exc}") from None
     return StrategyProfile(plan, values["profile.strategy.start_speed"])
 
 

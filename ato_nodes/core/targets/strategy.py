@@ -102,6 +102,7 @@ class Strategy:
     energy_kwh: float
     time: float             # s
     lam: float              # kW: the price of a second that met the planned time
+    switching: np.ndarray | None = None  # a switching strategy's decision variables
 
     def traction_in(self, sections) -> float:
         """Largest traction force in any stage that overlaps one of `sections`."""
@@ -114,10 +115,16 @@ class Strategy:
 
 
 class Problem:
-    """The train on the track: stage transitions for every control at every speed."""
+    """The train on the track: stage transitions for every control at every speed. The
+    plan uses `share` of the traction and brake envelopes (1: all of them; below 1 the
+    rest is a reserve for a heavier or more resisted train than the one planned for)."""
 
-    def __init__(self, track: Track, train: TrainParameters, efficiency: float):
+    def __init__(self, track: Track, train: TrainParameters, efficiency: float,
+                 share: float = 1.0):
+        if not 0.0 < share <= 1.0:
+            raise ValueError(f"the envelope share {share:g} is outside (0, 1]")
         self.track, self.train, self.efficiency = track, train, efficiency
+        self.share = share
         self.xi = train.xi
         self.weight = train.mass * train.gravity  # kN
 
@@ -147,6 +154,8 @@ class Problem:
         speed = np.maximum(np.abs(v), 1e-6)
         traction = np.minimum(p.max_traction_force, p.max_traction_power / speed)
         brake = np.minimum(p.max_brake_force, p.max_brake_power / speed)
+        if self.share != 1.0:
+            traction, brake = self.share * traction, self.share * brake
         return -brake * 1000.0 / self.weight, traction * 1000.0 / self.weight
 
     def resistance(self, v: np.ndarray) -> np.ndarray:
@@ -314,13 +323,13 @@ class SwitchingStrategy:
     starts (a fraction of the segment). In a segment the train applies full traction
     up to the cruise speed, cruises (held at the cap where it is lower), coasts from
     the coasting point, and brakes along the braking curve (PLANNED_BRAKING of the
-    envelope) wherever a lower cap ahead or the stop requires it. Traction is off
-    while unpowered."""
+    envelope, or the problem's share if lower) wherever a lower cap ahead or the stop
+    requires it. Traction is off while unpowered."""
 
     def __init__(self, problem: Problem):
         self.problem = problem
         self.segments = segments(problem.track)
-        self.curve = braking_curve(problem, PLANNED_BRAKING)
+        self.curve = braking_curve(problem, min(PLANNED_BRAKING / problem.share, 1.0))
         self.dimension = 2 * len(self.segments)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -362,7 +371,9 @@ class SwitchingStrategy:
                     following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
             return kind, force, following
 
-        return _drive(problem, decide)
+        result = _drive(problem, decide)
+        result.switching = np.array(x, dtype=float)
+        return result
 
 
 def _drive(problem: Problem, decide: Callable[[int, float], tuple[str, float, float]],
@@ -591,15 +602,18 @@ def replay(problem: Problem, planned_result: Strategy) -> Strategy:
     return _drive(problem, decide, planned_result.lam)
 
 
-def problems(line: Line, values: dict, ds: float, ignore_neutral: bool = False):
+def problems(line: Line, values: dict, ds: float, ignore_neutral: bool = False,
+             share: float = 1.0):
     """(the line as it is, the line the plan is made on) for the train of the run values
-    `values` (plant.*): the same problem unless the plan ignores neutral sections."""
+    `values` (plant.*) at `share` of its envelopes: the same problem unless the plan
+    ignores neutral sections."""
     train = TrainParameters.from_values(values)
     track = Track.of(line, train, ds)
-    problem = Problem(track, train, values["plant.efficiency"])
+    problem = Problem(track, train, values["plant.efficiency"], share)
     if not ignore_neutral:
         return problem, problem
-    return problem, Problem(track.without_neutral_sections(), train, values["plant.efficiency"])
+    return problem, Problem(track.without_neutral_sections(), train, values["plant.efficiency"],
+                            share)
 
 
 @dataclass
@@ -635,3 +649,67 @@ def evaluate(algorithm: str, problem: Problem, planning: Problem, planned: float
                   saved_percent=100 * (1 - result.energy_kwh / fastest.energy_kwh),
                   flat_out_energy_kwh=fastest.energy_kwh)
     return Outcome(result, history, values, reference)
+
+
+# The strategy for the train the ATO knows ---------------------------------------------
+RECOVERY_STEPS = 12  # bisection steps along the recovery path (2^-11 of it)
+
+
+def switching_points(plan: StrategyFile) -> np.ndarray:
+    """The decision variables of a switching strategy's file (its `switching` header, as
+    optimize_strategy.py writes it): ValueError (one line) if it has none."""
+    text = plan.header.get("switching", "")
+    try:
+        x = np.array([float(value) for value in text.split(",")])
+    except ValueError:
+        x = np.zeros(0)
+    if not len(x) or not np.all((x >= 0.0) & (x <= 1.0)):
+        raise ValueError(f"the strategy of {plan.header.get('algorithm', '?')} has no "
+                         f"switching points in [0, 1] (header 'switching': {text!r})")
+    return x
+
+
+def running_time(plan: StrategyFile) -> float:
+    """The running time of a strategy file's rows: each stage at its mean speed, s."""
+    speeds = np.maximum(0.5 * (plan.speeds[1:] + plan.speeds[:-1]), 1e-6)
+    return float(np.sum(np.diff(plan.positions) / speeds))
+
+
+def for_train(plan: StrategyFile, line: Line, train: TrainParameters,
+              efficiency: float, max_share: float = 1.0) -> StrategyFile:
+    """A switching strategy's file driven again for `train` (the weighed one): its
+    switching points on the same stages, with that train's envelopes at the file's share
+    (its braking curve too), so it stops on the mark. Where that misses the file's planned
+    time (or its own running time, if later), the plan recovers along one path, bisected
+    until the run meets the time: from recovery 0 to 1 every cruise speed and coasting
+    point moves that fraction of its way to flat out (1, 1); from 1 to 2 the flat-out
+    run's share rises from the file's to `max_share` (if higher). A train that cannot meet
+    the time even so drives flat out at that share and arrives late."""
+    x = switching_points(plan)
+    ds = float(plan.positions[1] - plan.positions[0])
+    track, share = Track.of(line, train, ds), float(plan.header.get("share", 1.0))
+    planned = max(float(plan.header["planned_time_s"]), running_time(plan))
+    switchings = {}
+
+    def run(recovery: float) -> Strategy:
+        level = share + max(recovery - 1.0, 0.0) * max(max_share - share, 0.0)
+        if level not in switchings:
+            switchings[level] = SwitchingStrategy(Problem(track, train, efficiency, level))
+        switching = switchings[level]
+        if len(x) != switching.dimension:
+            raise ValueError(f"{len(x)} switching points, the line has {switching.dimension}")
+        return switching.run(x + min(recovery, 1.0) * (1.0 - x))
+
+    best = run(0.0)
+    if best.time > planned:
+        low, high, best = 0.0, 2.0, run(2.0)
+        for _ in range(RECOVERY_STEPS if best.time <= planned else 0):
+            middle = 0.5 * (low + high)
+            candidate = run(middle)
+            if candidate.time > planned:
+                low = middle
+            else:
+                high, best = middle, candidate
+    return StrategyFile({**plan.header, "time_for_train_s": f"{best.time:.3f}"},
+                        best.positions, best.speeds, np.append(best.modes, 0),
+                        np.append(best.forces, 0.0))
