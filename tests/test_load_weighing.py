@@ -12,6 +12,7 @@ from ato_nodes.core.control.estimation import load_weighing
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.run.stages import ControllerStage, PlantStage
+from ato_nodes.core.train.line import load_line
 
 MAGLEV = "seed003-maglev-ato"  # weighs its load, on time; its 55 per mille grades bind
 
@@ -63,7 +64,8 @@ def test_a_heavy_trains_plan_is_slower_where_the_envelope_binds_and_a_light_ones
     light = plan(maglev(*off, "train.mass_reading=0.85"))
     assert np.all(heavy.feasible <= nominal.feasible + 1e-12)
     assert np.sum(heavy.feasible < nominal.feasible - 0.5) > 100  # metres of grades, 0.5 m/s
-    assert heavy.planned_run_time > nominal.planned_run_time + 1.0
+    top = float(nominal.caps.max())  # the fastest curves: both plan 402 s below them
+    assert heavy.run_time(top) > nominal.run_time(top) + 1.0
     # a light train is planned as the nominal one: the command limits are the nominal's
     assert np.array_equal(light.speeds, nominal.speeds)
     light_values = NodeValues("controller", maglev(*off, "train.mass_reading=0.85"))
@@ -87,12 +89,63 @@ def test_the_on_time_curve_plans_the_lines_time_and_arrives_within_two_seconds()
 
 
 def test_a_planned_time_the_fastest_curve_misses_is_one_line_and_the_curve_runs_at_the_limits():
-    curve = plan(maglev("train.load_weighing=false", "train.mass_reading=1.3"))
+    wider = "profile.ato.margin=1.3889"  # 5 km/h under the limits: 405 s at mass 1.3
+    curve = plan(maglev("train.load_weighing=false", "train.mass_reading=1.3", wider))
     assert curve.cruise == float(curve.caps.max())
     assert "402 s cannot be met" in curve.notice and "minimum-time" in curve.notice
     assert "\n" not in curve.notice
     papers = plan(load_scenario("seed004-metro"))  # the papers' curve: no notice, as before
     assert papers.notice is None and papers.cruise == float(papers.caps.max())
+
+
+@pytest.mark.parametrize("scenario", ["seed004-metro-ato", MAGLEV, "hsr-neutral-ato"])
+def test_the_shipped_ato_scenarios_plan_their_lines_time(scenario):
+    values = prepare(scenario, [])
+    curve = plan(values)
+    planned = load_line(values["line.file"]).planned_run_time
+    assert curve.notice is None and curve.planned_run_time == pytest.approx(planned, abs=2.0)
+
+
+def planned_force(curve, speeds, train, line):
+    """The specific force `speeds` on the curve's grid plan in each cell, N/kN
+    (+ traction), and whether the pantograph is in a neutral section there."""
+    x, v = curve.positions, speeds
+    rate = np.diff(v ** 2) / (2.0 * np.diff(x))
+    force = np.array([rate[i] / train.xi + train.resistance(v[i])
+                      + line.additional_resistance(x[i], train.length) for i in range(len(rate))])
+    neutral = np.array([line.in_neutral_section(p - train.pantograph_offset) for p in x[:-1]])
+    return force, neutral
+
+
+def test_the_capped_curve_falls_where_the_share_cannot_hold_the_cruise_speed():
+    values = prepare("hsr-neutral-ato", ["train.load_weighing=false", "train.mass_reading=1.3"])
+    context = RunContext(NodeValues("profile", values))
+    curve, train, line = context.plan, context.train, context.line
+    force, _ = planned_force(curve, curve.curve(curve.cruise), train, line)
+    share = np.array([curve.cells.share * train.force_limits(v)[1] for v in curve.speeds[:-1]])
+    assert curve.cruise < float(curve.caps.max())
+    assert np.max(force - share) < 0.5  # the 15 per mille grade at 224 km/h: it falls
+    capped = np.minimum(curve.feasible, curve.cruise)  # the cap alone held it there
+    force, _ = planned_force(curve, capped, train, line)
+    assert np.max(force - share) > 5.0
+
+
+def test_the_capped_curve_coasts_through_neutral_sections():
+    values = prepare("hsr-neutral-ato", [])
+    context = RunContext(NodeValues("profile", values))
+    curve, train, line = context.plan, context.train, context.line
+    assert curve.cruise < float(curve.caps.max()) - 5.0  # capped well below the limits
+    force, neutral = planned_force(curve, curve.speeds, train, line)
+    assert neutral.sum() > 1000  # both sections, 0.5 m cells
+    assert np.all(force[neutral] <= 1e-6)  # no traction planned inside a section
+    assert np.max(force[~neutral]) > 5.0  # where it is powered, it drives
+    for cruise in (curve.cruise - 20.0 / 3.6, float(curve.caps.max())):
+        force, _ = planned_force(curve, curve.curve(cruise), train, line)
+        assert np.all(force[neutral] <= 1e-6)
+    # the cap alone held the cruise speed through the up-grade section: traction
+    capped = np.minimum(curve.feasible, curve.cruise)
+    force, _ = planned_force(curve, capped, train, line)
+    assert np.max(force[neutral]) > 5.0
 
 
 @pytest.mark.parametrize("overrides, words", [

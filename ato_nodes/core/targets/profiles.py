@@ -13,11 +13,11 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.errors import ScenarioError
-from ..base.kernels import jitable
+from ..base.kernels import compiled, jitable
 from ..base.registry import Component, Plan
 from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
-from ..train.plant import TrainParameters
+from ..train.plant import TrainParameters, basic_resistance, force_limits
 
 SEED000_PARAMETERS = (
     param("profile.seed000.cycle", 1200.0, "T of eq. 25, s", PROFILE_NODES, 1.0, 1e6),
@@ -316,6 +316,19 @@ class StrategyProfile(Plan):
         return float(self.forces[self._stage(position)])
 
 
+class Cells(NamedTuple):
+    """What the ato curve's passes know of each grid cell, kept for the capped curves:
+    whether it is powered (the pantograph outside every neutral section), its line
+    resistance (N/kN), the cells where a neutral section starts; the train and the
+    envelope share planned with."""
+
+    powered: np.ndarray
+    line_resistance: np.ndarray
+    neutral_entries: np.ndarray
+    train: TrainParameters
+    share: float
+
+
 class AtoCurve(Plan):
     """Distance-indexed ATO target curve of one interstation run (seed 004).
 
@@ -338,7 +351,11 @@ class AtoCurve(Plan):
       unreachable; a speed the share cannot hold is not planned; in a neutral section
       the plan coasts). The
       passes then step cell by cell; the curve for a cruise speed c is the curve
-      without one, capped at c (both passes are monotone in their start).
+      without one, capped at c (both passes are monotone in their start), except
+      where the share cannot hold c (a neutral section, a grade too steep for the
+      weighed train at c): there the curve falls from c as the forward pass does, until
+      back on the cap; the rounded curve is held to the coasting in neutral sections
+      too (its centred mean would start the coasting inside the section).
     * `jerk` > 0: the acceleration is made continuous with at most this jerk, the
       curve in time averaged over T = max(acceleration, deceleration) / jerk:
       centred where it falls (the braking starts T/2 earlier, never later), over
@@ -377,6 +394,7 @@ class AtoCurve(Plan):
         self.start_speed = start_speed
         self.caps = np.maximum(self.limits - margin, start_speed)
         self.margin, self.jerk, self.departure = margin, jerk, departure
+        self.cells: Cells | None = None  # set by _feasible
         self.feasible = (self._feasible(train, envelope_share, train_length)
                          if envelope_share > 0.0 else None)
         self.cruise, self.notice = self._cruise(float(self.caps.max()), envelope_share)
@@ -433,9 +451,39 @@ class AtoCurve(Plan):
 
     def curve(self, cruise: float) -> np.ndarray:
         """The target at every grid point for a cruise speed, m/s."""
-        speeds = (np.minimum(self.feasible, cruise) if self.feasible is not None
-                  else self._fixed_rates(cruise))
-        return self._rounded(speeds) if self.jerk > 0.0 else speeds
+        if self.feasible is None:
+            speeds = self._fixed_rates(cruise)
+            return self._rounded(speeds) if self.jerk > 0.0 else speeds
+        speeds = self._capped(cruise)
+        if self.jerk <= 0.0:
+            return speeds
+        return self._forward(self._rounded(speeds), self.cells.neutral_entries)
+
+    def _capped(self, cruise: float) -> np.ndarray:
+        """The feasible curve capped at `cruise`, where the share can hold the cruise speed;
+        where it cannot (a neutral section, or a grade too steep for the share at that
+        speed) the curve falls from the cruise speed as the forward pass of _feasible
+        does, until it is back on the cap."""
+        cells, speeds = self.cells, np.minimum(self.feasible, cruise)
+        traction = cells.share * cells.train.force_limits(cruise)[1]
+        held = (np.where(cells.powered, traction, 0.0) - cells.train.resistance(cruise)
+                - cells.line_resistance)
+        falls = (speeds >= cruise) & (held < 0.0)
+        starts = np.flatnonzero(falls & ~np.concatenate(([False], falls[:-1])))
+        return self._forward(speeds, starts)
+
+    def _forward(self, speeds: np.ndarray, starts) -> np.ndarray:
+        """The forward pass of _feasible again from each cell of `starts`, kept under
+        `speeds`, until it meets them on a powered cell (in place): the cap at a cruise
+        speed (or the rounding's centred mean at a neutral section) would hold a speed
+        the share (or the section) does not give."""
+        cells, train = self.cells, self.cells.train
+        for first in starts:
+            forward_pass(speeds, int(first), self.positions, cells.powered,
+                         cells.line_resistance, train.envelope, train.davis_a, train.davis_b,
+                         train.davis_c, train.xi, cells.share, self.acceleration,
+                         self.power_speed, self.start_speed ** 2)
+        return speeds
 
     def _fixed_rates(self, cruise: float) -> np.ndarray:
         """In run-up distance d(v) the acceleration curve from any point grows by one
@@ -469,6 +517,9 @@ class AtoCurve(Plan):
             v2 = min(max(v2 + 2.0 * rate * (x[i + 1] - x[i]), self.start_speed ** 2),
                      caps[i + 1] ** 2)
             squared[i + 1] = v2
+        on = np.array(powered)
+        self.cells = Cells(on, np.array(line_resistance),
+                           np.flatnonzero(~on & np.concatenate(([True], on[:-1]))), train, share)
         stopping = self.stopping(x[-1] - x) ** 2 if self.stop_jerk > 0.0 else squared
         v2 = squared[-1] = 0.0
         for i in range(len(x) - 2, -1, -1):
@@ -528,6 +579,30 @@ class AtoCurve(Plan):
         """The limit that applies to the train with its head at `position`, m/s."""
         cell = np.searchsorted(self.positions, position, side="right") - 1
         return float(self.limits[min(max(cell, 0), len(self.limits) - 1)])
+
+
+def _forward_pass(speeds, first, x, powered, line_resistance, envelope, davis_a, davis_b,
+                  davis_c, xi, share, acceleration, power_speed, start) -> None:
+    """AtoCurve._forward from cell `first`: _feasible's forward pass (train.net_traction's
+    terms), in place; compiled when numba is installed (a long line's capped curve
+    falls over thousands of cells, for each of the bisection's cruise speeds)."""
+    v2 = speeds[first] ** 2
+    for i in range(first, len(x) - 1):
+        v = math.sqrt(v2)
+        traction = force_limits(v, envelope)[1] if powered[i] else 0.0
+        net = share * traction - basic_resistance(v, davis_a, davis_b, davis_c) \
+            - line_resistance[i]
+        planned = acceleration if v <= power_speed else acceleration * power_speed / v
+        v2 = max(v2 + 2.0 * min(planned, xi * net) * (x[i + 1] - x[i]), start)
+        if v2 < speeds[i + 1] ** 2:
+            speeds[i + 1] = math.sqrt(v2)
+        elif powered[i + 1]:
+            return
+        else:
+            v2 = speeds[i + 1] ** 2
+
+
+forward_pass = compiled(_forward_pass) or _forward_pass
 
 
 LATE_NOTICE = 0.05  # s an on-time curve may miss the planned time by without a notice
