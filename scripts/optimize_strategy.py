@@ -91,6 +91,11 @@ def main() -> None:
                                     seed=args.seed)
     except ValueError as exc:  # shorter than flat-out; or the DP's grid, ~1 % slower
         _cli.fail(f"{exc} on {line_path}")
+    write_outputs(args, line, line_path, problem, outcome)
+
+
+def write_outputs(args, line, line_path, problem, outcome) -> None:
+    """The strategy file (with its header), indices.json, the plots and the summary line."""
     result, history, values = outcome.result, outcome.history, outcome.values
     planned = values["planned"]
     values["traction_in_neutral_sections"] = result.traction_in(line.neutral_sections)
