@@ -17,6 +17,7 @@ from ..base.kernels import compiled, jitable
 from ..base.registry import Component, Plan
 from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
+from ..train.line import load_line
 from ..train.plant import TrainParameters, basic_resistance, force_limits
 
 SEED000_PARAMETERS = (
@@ -733,12 +734,23 @@ def _strategy(values, context) -> StrategyProfile:
     if values["profile.strategy.replan"] and context.train != TrainParameters.from_values(
             values):  # the weighed train, heavier than the one planned for
         try:
-            plan = strategy.for_train(plan, context.line, context.train,
-                                      values["plant.efficiency"],
-                                      values["profile.strategy.max_share"])
+            plan = _driven_again(path, values["line.file"], context.train,
+                                 values["plant.efficiency"],
+                                 values["profile.strategy.max_share"])
         except ValueError as exc:
             raise ScenarioError(f"strategy file {path}: {exc}") from None
     return StrategyProfile(plan, values["profile.strategy.start_speed"])
+
+
+@functools.lru_cache(maxsize=8)
+def _driven_again(path: str, line_file: str, train: TrainParameters, efficiency: float,
+                  max_share: float):
+    """strategy.for_train, once per process for each file, line and weighed train (0.1-2.5
+    s: a tuning's candidates and a study's runs of one train share it; never changed by
+    a caller)."""
+    from . import strategy
+    return strategy.for_train(strategy.read_strategy(path), load_line(line_file), train,
+                              efficiency, max_share)
 
 
 SEED000 = Component(
