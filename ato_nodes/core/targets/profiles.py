@@ -734,7 +734,8 @@ def _strategy(values, context) -> StrategyProfile:
     if values["profile.strategy.replan"] and context.train != TrainParameters.from_values(
             values):  # the weighed train, heavier than the one planned for
         try:
-            plan = _driven_again(path, values["line.file"], context.train,
+            plan = _driven_again(path, hashlib.sha256(Path(path).read_bytes()).hexdigest(),
+                                 values["line.file"], digest, context.train,
                                  values["plant.efficiency"],
                                  values["profile.strategy.max_share"])
         except ValueError as exc:
@@ -743,11 +744,11 @@ def _strategy(values, context) -> StrategyProfile:
 
 
 @functools.lru_cache(maxsize=8)
-def _driven_again(path: str, line_file: str, train: TrainParameters, efficiency: float,
-                  max_share: float):
-    """strategy.for_train, once per process for each file, line and weighed train (0.1-2.5
-    s: a tuning's candidates and a study's runs of one train share it; never changed by
-    a caller)."""
+def _driven_again(path: str, file_digest: str, line_file: str, line_digest: str,
+                  train: TrainParameters, efficiency: float, max_share: float):
+    """strategy.for_train, once per process for each file, line (the digests: their
+    contents) and weighed train (0.1-2.5 s: a tuning's candidates and a study's runs of
+    one train share it; never changed by a caller)."""
     from . import strategy
     return strategy.for_train(strategy.read_strategy(path), load_line(line_file), train,
                               efficiency, max_share)
