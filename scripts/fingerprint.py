@@ -74,14 +74,16 @@ def main() -> None:
                            if s in wanted and wanted[s] != digest]
                 differing += bool(changed)
                 compared = len([s for s in result[name] if s in wanted])
-                print(f"{name}: {compared} series compared, "
-                      f"{'differ: ' + ', '.join(changed) if changed else 'identical'}", flush=True)
+                verdict = ("not in the saved set" if not compared else
+                           "differ: " + ", ".join(changed) if changed else "identical")
+                print(f"{name}: {compared} series compared, {verdict}", flush=True)
             else:
                 print(f"{name}: {len(result[name])} series", flush=True)
     if args.out:
         args.out.write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
     if reference is not None:
-        print(f"{len(result) - differing} of {len(result)} scenarios identical")
+        saved = sum(name in reference for name in result)
+        print(f"{saved - differing} of the {saved} saved scenarios identical")
         sys.exit(1 if differing else 0)
 
 
