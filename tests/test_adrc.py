@@ -187,7 +187,8 @@ class TestLinearADRC:
     def test_tracks_a_first_order_plant_with_constant_disturbance(self):
         period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
         adrc = linear_adrc_of(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b,
-                                              feedforward=False, delay_aware=False), period,
+                                              feedforward=False, delay_aware=False,
+                                              plan_feedforward=False, plan_band=0.0), period,
                               CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()))
         v = 0.0
         for _ in range(400):

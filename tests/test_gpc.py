@@ -30,7 +30,7 @@ ARX = Arx(0.01, np.array((1.6, -0.62)), np.array((0.004, 0.001)), 2)
 
 
 def controller(arx=ARX, horizon=12, nu=3, constrained=True, rate=0.0, low=-1e6, high=1e6):
-    settings = GPCSettings(horizon, nu, 1.0, 1e-4, constrained, 0.0)
+    settings = GPCSettings(horizon, nu, 1.0, 1e-4, constrained, 0.0, 0.0, False)
     limiter = CommandLimiter(low, high, 0.3, rate)
     gpc = GPC(settings, FixedModel(arx), 0.3, limiter, train=None, envelope=False)
     gpc.start(10.0, 10.0)

@@ -367,8 +367,8 @@ class LinearADRCGains(NamedTuple):
     b0: float
     feedforward: bool
     delay_aware: bool
-    plan_feedforward: bool = False
-    plan_band: float = 0.0
+    plan_feedforward: bool
+    plan_band: float                # m/s
 
 
 class PlanForces(NamedTuple):

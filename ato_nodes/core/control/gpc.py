@@ -207,8 +207,8 @@ class GPCSettings:
     r: float
     constrained: bool
     bias_filter: float
-    berthing_speed: float = 0.0  # m/s, 0: the whole horizon (the paper's)
-    hold: bool = False           # no learning while the limiter holds the train
+    berthing_speed: float  # m/s, 0: the whole horizon (the paper's)
+    hold: bool             # no learning while the limiter holds the train
 
 
 def _free_and_forced(c: float, a: np.ndarray, b: np.ndarray, delay: int, speeds: np.ndarray,
