@@ -27,6 +27,7 @@ import numpy as np
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.control.estimation import (PARAMETERS, estimate_series, estimator_of,
                                                load_weighing)
+from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.train.line import load_line
 from ato_nodes.core.train.plant import TrainParameters
@@ -34,6 +35,7 @@ from ato_nodes.studies import Variant, prepare_variants
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ("seed004-metro-ato", "seed003-maglev-ato")
+WEIGHING_ERROR = SPEC_BY_NAME["train.load_weighing_error"].default
 CASES = {  # label -> (mass factor, resistance factor) of the real train
     "light (m 0.85)": (0.85, 1.0),
     "nominal": (1.0, 1.0),
@@ -45,8 +47,9 @@ CASES = {  # label -> (mass factor, resistance factor) of the real train
 
 def parse_args() -> argparse.Namespace:
     parser = _cli.argument_parser(__doc__)
-    parser.add_argument("--weighing-error", type=float, default=0.03,
-                        help="load weighing's relative error, 1 sigma (default 0.03)")
+    parser.add_argument("--weighing-error", type=float, default=WEIGHING_ERROR,
+                        help="load weighing's relative error, 1 sigma (default "
+                             f"train.load_weighing_error's {WEIGHING_ERROR:g})")
     parser.add_argument("--weighing-seed", type=int, default=4,
                         help="seed of the load weighing's error (default 4)")
     parser.add_argument("--figure", type=Path,
@@ -65,7 +68,7 @@ def estimated(values: dict, reading: float, error: float) -> dict[str, np.ndarra
     """The run's series and the estimator's over them, the errors against the real train."""
     series = simulate(values)
     estimator = {spec.name: spec.default for spec in PARAMETERS}
-    estimator["estimator.load_weighing.error"] = error
+    estimator["train.load_weighing_error"] = error
     line = load_line(values["line.file"]) if values["line.file"] else None
     settings, state = estimator_of(estimator, TrainParameters.from_values(values),
                                    values["run.period"], reading, line,

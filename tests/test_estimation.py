@@ -13,12 +13,14 @@ from ato_nodes.core.control.estimation import (
     PARAMETERS, estimate_series, estimated_force_limits, estimated_mass_factor,
     estimated_resistance, estimator_of, estimator_step, load_weighing)
 from ato_nodes.core.control.train_model import known_resistance, nominal_train
+from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.train.line import load_line
 from ato_nodes.core.train.plant import TrainParameters, force_limits
 
-ESTIMATOR = {spec.name: spec.default for spec in PARAMETERS}
-ERROR = ESTIMATOR["estimator.load_weighing.error"]
+ERROR = SPEC_BY_NAME["train.load_weighing_error"].default
+ESTIMATOR = {**{spec.name: spec.default for spec in PARAMETERS},
+             "train.load_weighing_error": ERROR}
 SETTLED = 1000.0  # m: past the metro's acceleration, where the heavy train saturates
 
 

@@ -100,11 +100,6 @@ from .train_model import NominalModel, NominalState, nominal_act, nominal_train
 PARAMETERS = (
     param("estimator.enabled", False, "estimate the real train's mass and running resistance "
           "on board (off: the nominal train is used)", "controller"),
-    param("estimator.load_weighing.error", 0.03, "relative error (1 sigma) of the load "
-          "weighing's mass reading at departure, the estimator's prior", "controller",
-          0.0, 0.5),
-    param("estimator.load_weighing.seed", 0, "seed of the load weighing's error (same seed, "
-          "same reading)", "controller", 0, 2**31 - 1),
     param("estimator.resistance_sigma", 0.2, "prior uncertainty (1 sigma) of the running "
           "resistance over the nominal", "controller", 0.001, 5.0),
     param("estimator.speed_noise", 0.01, "speed sensor noise and resolution together, "
@@ -201,10 +196,10 @@ def estimator_of(values, train: TrainParameters, period: float, mass_reading: fl
                  ) -> tuple[EstimatorSettings, EstimatorState]:
     """Settings and departure state (from `position` m at `speed` m/s) from the run's
     estimator.* `values`, the nominal `train` and the load weighing's `mass_reading`
-    (load_weighing)."""
+    (load_weighing), its error the run's train.load_weighing_error."""
     settings = estimator_settings(values, train, period, line)
     return settings, estimator_start(settings, mass_reading,
-                                     values["estimator.load_weighing.error"],
+                                     values["train.load_weighing_error"],
                                      values["estimator.resistance_sigma"], position, speed)
 
 
