@@ -173,6 +173,18 @@ def test_a_hung_recorder_goes_with_a_killed_launcher_and_its_bag_opens(tmp_path)
     assert 80 <= min(counts.values()) <= max(counts.values()) <= 100 + 20 + 2
 
 
+def domain_free(domain: int) -> bool:
+    """Whether the domain's lock port can be bound (SO_REUSEADDR: a TIME_WAIT connection on
+    the port, which lies in the ephemeral range, is no lock)."""
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind(("127.0.0.1", DOMAIN_LOCK_PORT + domain))
+        except OSError:
+            return False
+    return True
+
+
 def test_a_deaf_node_dies_with_a_killed_launcher_and_keeps_its_domain_till_then(tmp_path):
     bag = tmp_path / "orphan"
     process = start_stack("--duration", "600", "--real-time", "--out", str(bag), "--set",
@@ -187,10 +199,9 @@ def test_a_deaf_node_dies_with_a_killed_launcher_and_keeps_its_domain_till_then(
     while any(alive(pid) for pid in nodes.values()) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not [role for role, pid in nodes.items() if alive(pid)]
-    probe = socket.socket()  # SO_REUSEADDR: a TIME_WAIT connection on the port (it is in the
-    probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # ephemeral range) is no lock
-    probe.bind(("127.0.0.1", DOMAIN_LOCK_PORT + domain))  # the domain is free again
-    probe.close()
+    while not domain_free(domain) and time.monotonic() < deadline:
+        time.sleep(0.1)  # the last process holding the lock may exit after the nodes
+    assert domain_free(domain)
     assert (bag / "metadata.yaml").exists()  # the recorder closed its bag on SIGTERM
 
 

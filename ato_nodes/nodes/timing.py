@@ -57,7 +57,9 @@ class _NodeTiming:
         """The run events' handler `handle`, noting the totals at 'start' and 'finished'."""
         def handling(msg) -> None:
             word, _, argument = msg.data.partition(" ")
-            if word in ("start", "finished"):
+            # the first of each only: a 'start' noted again after 'finished' (seen once, a
+            # recorder's loop CPU negative in a 5 s run) would turn the loop inside out
+            if word in ("start", "finished") and word not in self.loop:
                 self.loop[word] = (time.process_time_ns(),
                                    int(argument.split()[0]) if word == "finished" else 0,
                                    {name: list(totals) for name, totals in self.parts.items()})
