@@ -1,0 +1,216 @@
+"""Timetables of journeys, ROS-free: per stop an arrival and a departure time on a line
+with several stations, checked against the line and against the fastest the train can
+run each section.
+
+A timetable file (msg_config/timetables/*.yaml) names its line and its train and lists
+its stops in the line's order; a station between two stops is passed without stopping:
+
+    line: lines/metro-line.yaml   # relative to this file, else to msg_config/
+    train: metro-b                # msg_config/trains/NAME.yaml
+    stops:
+      - {station: Westgate (synthetic), departure: 0}
+      - {station: Market (synthetic), arrival: 131, departure: 156}
+      - {station: Depot Road (synthetic), arrival: 1000}
+
+Times are seconds on the journey's clock (any origin): the first stop has a departure
+only, the last an arrival only, every other stop both. A section's running time is the
+arrival at its end less the departure at its start, standstill to standstill; a stop's
+dwell is its departure less its arrival and is at least the station's dwell in the line
+file (what the station needs for its passengers). A section's minimum running time is
+the nominal train's ato curve (core/targets/profiles.py) at its full envelope share,
+from standstill to standstill as the on-time curve counts it; a timetable faster than
+that is refused. Every problem is one ScenarioError line naming the file and the line.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import yaml
+
+from ..base import yamlfile
+from ..base.errors import ScenarioError
+from ..base.paths import resolve_file
+from ..train.line import Line, Section, Station, _entries, _error, _number, load_line
+from ..train.plant import TrainParameters
+from .profiles import ato_curve
+
+TOP_KEYS = {"line", "train", "stops"}
+STOP_KEYS = {"station", "arrival", "departure"}
+
+
+@dataclass(frozen=True)
+class Stop:
+    station: str
+    position: float          # m along the line
+    arrival: float | None    # s; None at the first stop
+    departure: float | None  # s; None at the last stop
+    source_line: int         # the line of the timetable file that gives it
+
+    @property
+    def dwell(self) -> float:
+        """s at the platform (0 at the journey's ends)."""
+        if self.arrival is None or self.departure is None:
+            return 0.0
+        return self.departure - self.arrival
+
+
+class JourneySection(NamedTuple):
+    """The run from one stop to the next."""
+
+    origin: str
+    destination: str
+    start: float         # m along the line
+    end: float           # m
+    running_time: float  # s, standstill to standstill, as the timetable gives it
+
+
+@dataclass(frozen=True)
+class Timetable:
+    path: str
+    line_file: str   # absolute
+    line: Line
+    train: str       # the train preset it is planned for
+    stops: tuple[Stop, ...]
+
+    @property
+    def sections(self) -> tuple[JourneySection, ...]:
+        return tuple(JourneySection(a.station, b.station, a.position, b.position,
+                                    b.arrival - a.departure)
+                     for a, b in zip(self.stops, self.stops[1:], strict=False))
+
+    @property
+    def running_time(self) -> float:
+        """The journey's running time: its sections' together, dwells excluded, s."""
+        return sum(section.running_time for section in self.sections)
+
+
+def load_timetable(path: str | Path) -> Timetable:
+    """A timetable file, checked against its line (not yet against a train: see
+    check_minimum_times)."""
+    text = yamlfile.read_text(path, "timetable file")
+    yamlfile.check_structure(text, str(path))
+    root = yaml.compose(text)
+    if not isinstance(root, yaml.MappingNode):
+        raise ScenarioError(f"{path}: a timetable file is a mapping (line, train, stops)")
+    fields = {}
+    for key_node, value_node in root.value:
+        if key_node.value not in TOP_KEYS:
+            raise _error(path, key_node, f"unknown key {key_node.value!r}")
+        fields[key_node.value] = value_node
+    missing = sorted(TOP_KEYS - set(fields))
+    if missing:
+        raise ScenarioError(f"{path}: missing {missing[0]!r}")
+    line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
+    line = load_line(line_file)
+    stops = _stops(path, fields["stops"], line)
+    return Timetable(str(path), line_file, line, _text(fields["train"]), stops)
+
+
+def _text(node: yaml.Node) -> str:
+    return str(yaml.safe_load(yaml.serialize(node)))
+
+
+def _stops(path, node: yaml.Node, line: Line) -> tuple[Stop, ...]:
+    """The stops, each a station of the line, in its order, with the times its place in
+    the journey needs, each later than the one before."""
+    entries = _entries(path, node, "stops")
+    if len(entries) < 2:
+        raise _error(path, node, "stops: a journey needs at least two stops")
+    stations = {station.name: station for station in line.stations}
+    stops: list[Stop] = []
+    for index, (item, entry) in enumerate(entries):
+        unknown = sorted(set(entry) - STOP_KEYS)
+        if unknown:
+            raise _error(path, item, f"stops: unknown key {unknown[0]!r}")
+        name = _text(entry["station"]) if "station" in entry else ""
+        if name not in stations:
+            raise _error(path, item, f"stops: {name!r} is not a station of the line "
+                         f"(its stations: {', '.join(stations)})")
+        times = {key: _time(path, item, entry, key, index, len(entries))
+                 for key in ("arrival", "departure")}
+        stop = Stop(name, stations[name].position, times["arrival"], times["departure"],
+                    item.start_mark.line + 1)
+        _check_order(path, item, stop, stops[-1] if stops else None, stations[name])
+        stops.append(stop)
+    return tuple(stops)
+
+
+def _time(path, item: yaml.Node, entry: dict, key: str, index: int, count: int
+          ) -> float | None:
+    """The stop's arrival or departure, s: required where the journey has one (no
+    arrival at the first stop, no departure at the last), refused where it has none."""
+    needed = index > 0 if key == "arrival" else index < count - 1
+    where = {0: "the first stop", count - 1: "the last stop"}.get(index, "a stop on the way")
+    if needed and key not in entry:
+        raise _error(path, item, f"stops: {where} needs its {key}")
+    if not needed and key in entry:
+        raise _error(path, entry[key], f"stops: {where} has no {key}")
+    return _number(path, entry[key], key) if needed else None
+
+
+def _check_order(path, item, stop: Stop, previous: Stop | None, station: Station) -> None:
+    if stop.arrival is not None and stop.departure is not None:
+        if stop.departure < stop.arrival:
+            raise _error(path, item, f"stops: times do not increase: departure "
+                         f"{stop.departure:g} s from {stop.station} is before its arrival "
+                         f"{stop.arrival:g} s")
+        if stop.dwell < station.dwell:
+            raise _error(path, item, f"stops: dwell {stop.dwell:g} s at {stop.station} is "
+                         f"shorter than the station's {station.dwell:g} s (the line file's)")
+    if previous is None:
+        return
+    if stop.position <= previous.position:
+        raise _error(path, item, f"stops: {stop.station} is not after {previous.station} "
+                     "along the line")
+    if not stop.arrival > previous.departure:
+        raise _error(path, item, f"stops: times do not increase: arrival {stop.arrival:g} s at "
+                     f"{stop.station} is not after the departure {previous.departure:g} s "
+                     f"from {previous.station}")
+
+
+def section_line(line: Line, start: float, end: float) -> Line:
+    """The line from a stop at `start` to one at `end` (m), in metres from `start`: the
+    stop mark at its end, every section of the line kept (the train's mass belt lies
+    behind the departure point at first), no planned time of its own."""
+    def shifted(sections: tuple[Section, ...]) -> tuple[Section, ...]:
+        return tuple(Section(s.start - start, s.end - start, s.value) for s in sections)
+
+    stops = tuple(Station(s.name, s.position - start, s.dwell) for s in line.stations
+                  if s.position in (start, end))
+    return dataclasses.replace(
+        line, name=f"{line.name}, {start:g}-{end:g} m", length=line.length - start,
+        gradients=shifted(line.gradients), curves=shifted(line.curves),
+        tunnels=shifted(line.tunnels), speed_limits=shifted(line.speed_limits),
+        neutral_sections=shifted(line.neutral_sections), stations=stops,
+        planned_run_time=None)
+
+
+def minimum_running_time(line: Line, values: dict) -> float:
+    """The fastest the run's nominal train (plant.*) runs `line` to its stop mark: the
+    ato curve (profile.ato.*) at the train's full envelope share, from standstill to
+    standstill (the on-time curve's count), s."""
+    fastest = {**values, "profile.envelope_share": 1.0, "profile.ato.on_time": True}
+    return ato_curve(fastest, line, TrainParameters.from_values(values)).planned_run_time
+
+
+def check_minimum_times(timetable: Timetable, values: dict) -> tuple[float, ...]:
+    """Each section's minimum running time for the run's train (`values`: plant.* and
+    profile.ato.*), s; ScenarioError (the file and the stop's line) for a section the
+    timetable gives less."""
+    minimums = []
+    for section, stop in zip(timetable.sections, timetable.stops[1:], strict=True):
+        fastest = minimum_running_time(
+            section_line(timetable.line, section.start, section.end), values)
+        if section.running_time < fastest:
+            raise ScenarioError(
+                f"{timetable.path} line {stop.source_line}: the running time "
+                f"{section.running_time:g} s from {section.origin} to {section.destination} "
+                f"is below its minimum {math.ceil(fastest * 10) / 10:g} s (train "
+                f"{values['plant.train'] or '(none)'}: its ato curve at the full envelope)")
+        minimums.append(fastest)
+    return tuple(minimums)
