@@ -1,0 +1,106 @@
+#!/usr/bin/env python3
+"""Plan a journey's running times for least traction energy: the timetable's total
+running-time supplement distributed over its sections so that every section has the same
+marginal energy (core/targets/journey.py), each section then driven energy-optimally in
+its time (seed 002's dynamic programme).
+
+    python scripts/plan_journey.py metro-line
+    python scripts/plan_journey.py hsr-journey --compare
+
+LINE names msg_config/lines/LINE.yaml; its timetable is msg_config/timetables/LINE.yaml
+(or --timetable FILE, which must be for that line). --train plans for another train
+preset than the timetable's (its minimum running times are checked again). Prints per
+section the minimum running time (the ato curve at the full envelope share), the
+timetable's time, the allocated time and the energy of the section driven in it, and the
+totals; --compare adds the uniform allocation (the supplement in proportion to the
+minimum times) driven the same way and the exact optimum over every run made (a fine
+grid of running-time splits). Bad input: one line, exit 2.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import _cli
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.paths import config_dir
+from ato_nodes.core.config.scenario import complete, train_preset
+from ato_nodes.core.targets import journey
+from ato_nodes.core.targets.timetable import check_minimum_times, load_timetable
+
+
+def parse_args():
+    parser = _cli.argument_parser(__doc__)
+    parser.add_argument("line", metavar="LINE", help="line name (msg_config/lines/LINE.yaml)")
+    parser.add_argument("--timetable", type=Path, help="timetable file (default: "
+                        "msg_config/timetables/LINE.yaml)")
+    parser.add_argument("--train", help="train preset (default: the timetable's)")
+    parser.add_argument("--compare", action="store_true", help="also the uniform allocation "
+                        "and the exact optimum (about twice the time)")
+    return parser.parse_args()
+
+
+def load(args):
+    """(timetable, run values, minimum running times), or one line and exit 2."""
+    line_file = (config_dir() / "lines" / f"{args.line}.yaml").resolve()
+    try:
+        if not line_file.is_file():
+            raise ScenarioError(f"unknown line {args.line!r} (no {line_file})")
+        timetable = load_timetable(args.timetable or
+                                   config_dir() / "timetables" / f"{args.line}.yaml")
+        if Path(timetable.line_file).resolve() != line_file:
+            raise ScenarioError(f"timetable {timetable.path} is for line "
+                                f"{timetable.line_file}, not {args.line}")
+        train = args.train or timetable.train
+        train_preset(train)
+        values = complete({"plant.train": train}, [])
+        return timetable, values, check_minimum_times(timetable, values)
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+
+
+def main() -> None:
+    args = parse_args()
+    timetable, values, minimums = load(args)
+    try:
+        plan = journey.plan_journey(timetable, values, minimums)
+    except ValueError as exc:
+        _cli.fail(str(exc))
+    comparison = journey.compare(plan, timetable.running_time) if args.compare else None
+    report(timetable, values["plant.train"], plan, comparison)
+
+
+def report(timetable, train: str, plan: journey.JourneyPlan, comparison) -> None:
+    print(f"{timetable.line.name}, train {train}: running time {timetable.running_time:g} s "
+          f"(minimum {sum(plan.minimums):.1f} s + {supplement(plan, timetable):.1f} %), "
+          f"marginal energy {plan.allocation.marginal:.0f} kW")
+    extra = " | uniform s | uniform kWh" if comparison else ""
+    print(f"| section | km | minimum s | timetable s | allocated s | driven s | kWh{extra} |")
+    print("|---|---|---|---|---|---|---|" + ("---|---|" if comparison else ""))
+    for i, (section, run) in enumerate(zip(timetable.sections, plan.driven, strict=True)):
+        row = (f"| {section.origin} - {section.destination} | "
+               f"{(section.end - section.start) / 1000:.2f} | {plan.minimums[i]:.1f} | "
+               f"{section.running_time:g} | {plan.allocation.times[i]:.1f} | "
+               f"{journey.point(run, plan.sections[i])[0]:.1f} | {run.energy_kwh:.2f}")
+        if comparison:
+            row += (f" | {comparison.uniform_times[i]:.1f} | "
+                    f"{comparison.uniform_runs[i].energy_kwh:.2f}")
+        print(row + " |")
+    print(f"allocation: {plan.energy_kwh:.2f} kWh")
+    if comparison:
+        uniform = sum(run.energy_kwh for run in comparison.uniform_runs)
+        best = comparison.best_energy_kwh
+        print(f"uniform: {uniform:.2f} kWh; optimum (best split): {best:.2f} kWh at "
+              f"{', '.join(f'{t:.1f}' for t in comparison.best_times)} s")
+        print(f"allocation {100 * (plan.energy_kwh / best - 1):+.2f} % against the optimum, "
+              f"{100 * (1 - plan.energy_kwh / uniform):.2f} % saved against uniform "
+              f"(uniform {100 * (uniform / best - 1):+.2f} % against the optimum)")
+
+
+def supplement(plan: journey.JourneyPlan, timetable) -> float:
+    return 100.0 * (timetable.running_time / sum(plan.minimums) - 1.0)
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)
