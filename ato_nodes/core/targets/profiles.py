@@ -475,16 +475,22 @@ class AtoCurve(Plan):
 
     def _forward(self, speeds: np.ndarray, starts) -> np.ndarray:
         """The forward pass of _feasible again from each cell of `starts`, kept under
-        `speeds`, until it meets them on a powered cell (in place): the cap at a cruise
-        speed (or the rounding's centred mean at a neutral section) would hold a speed
-        the share (or the section) does not give."""
-        cells, train = self.cells, self.cells.train
+        `speeds`, until it meets them on a powered cell: the cap at a cruise speed (or
+        the rounding's centred mean at a neutral section) would hold a speed the share
+        (or the section) does not give. (The speeds the passes leave alone come back
+        as they were: sqrt(x * x) is x in binary floating point.)"""
+        squared = speeds ** 2
         for first in starts:
-            forward_pass(speeds, int(first), self.positions, cells.powered,
-                         cells.line_resistance, train.envelope, train.davis_a, train.davis_b,
-                         train.davis_c, train.xi, cells.share, self.acceleration,
-                         self.power_speed, self.start_speed ** 2)
-        return speeds
+            self._forward_from(squared, int(first), to_end=False)
+        return np.sqrt(squared)
+
+    def _forward_from(self, squared: np.ndarray, first: int, to_end: bool) -> None:
+        """forward_pass on the grid with the cells' train and share."""
+        cells, train = self.cells, self.cells.train
+        forward_pass(squared, first, self.positions, cells.powered, cells.line_resistance,
+                     train.envelope, train.davis_a, train.davis_b, train.davis_c, train.xi,
+                     cells.share, self.acceleration, self.power_speed, self.start_speed ** 2,
+                     to_end)
 
     def _fixed_rates(self, cruise: float) -> np.ndarray:
         """In run-up distance d(v) the acceleration curve from any point grows by one
@@ -505,27 +511,20 @@ class AtoCurve(Plan):
         """The curve without a cruise speed, each cell's rate the planned one or what the
         share of the envelope's force gives against the resistance, whichever is lower
         (forward then backward pass)."""
-        x, caps = self.positions, self.caps
-        line_resistance = [self.line.additional_resistance(p, train_length) for p in x]
-        powered = [not self.line.in_neutral_section(p - train.pantograph_offset) for p in x]
-        xi, a, vp = train.xi, self.acceleration, self.power_speed
-        squared = np.empty(len(x))
-        v2 = squared[0] = self.start_speed ** 2
-        for i in range(len(x) - 1):
-            v = math.sqrt(v2)
-            planned = a if v <= vp else a * vp / v
-            rate = min(planned, xi * train.net_traction(v, share, line_resistance[i], powered[i]))
-            v2 = min(max(v2 + 2.0 * rate * (x[i + 1] - x[i]), self.start_speed ** 2),
-                     caps[i + 1] ** 2)
-            squared[i + 1] = v2
-        on = np.array(powered)
-        self.cells = Cells(on, np.array(line_resistance),
+        x = self.positions
+        line_resistance = np.array([self.line.additional_resistance(p, train_length) for p in x])
+        on = np.array([not self.line.in_neutral_section(p - train.pantograph_offset) for p in x])
+        self.cells = Cells(on, line_resistance,
                            np.flatnonzero(~on & np.concatenate(([True], on[:-1]))), train, share)
+        squared = self.caps ** 2
+        squared[0] = self.start_speed ** 2
+        self._forward_from(squared, 0, to_end=True)
         stopping = self.stopping(x[-1] - x) ** 2 if self.stop_jerk > 0.0 else squared
         v2 = squared[-1] = 0.0
         for i in range(len(x) - 2, -1, -1):
             v = math.sqrt(v2)
-            rate = min(self.deceleration, xi * train.net_braking(v, share, line_resistance[i]))
+            rate = min(self.deceleration,
+                       train.xi * train.net_braking(v, share, line_resistance[i]))
             v2 = min(v2 + 2.0 * max(rate, 0.0) * (x[i + 1] - x[i]), squared[i], stopping[i])
             squared[i] = v2
         return np.sqrt(squared)
@@ -582,12 +581,16 @@ class AtoCurve(Plan):
         return float(self.limits[min(max(cell, 0), len(self.limits) - 1)])
 
 
-def _forward_pass(speeds, first, x, powered, line_resistance, envelope, davis_a, davis_b,
-                  davis_c, xi, share, acceleration, power_speed, start) -> None:
-    """AtoCurve._forward from cell `first`: _feasible's forward pass (train.net_traction's
-    terms), in place; compiled when numba is installed (a long line's capped curve
-    falls over thousands of cells, for each of the bisection's cruise speeds)."""
-    v2 = speeds[first] ** 2
+def _forward_pass(squared, first, x, powered, line_resistance, envelope, davis_a, davis_b,
+                  davis_c, xi, share, acceleration, power_speed, start, to_end) -> None:
+    """The forward pass of AtoCurve._feasible and _forward from cell `first`, in place on
+    squared speeds: each next cell the lower of its own value and what the planned
+    acceleration, or the share of the traction envelope against the resistance
+    (train.net_traction's terms), gives, at least `start`; it ends where it meets the
+    cells' values on a powered cell, unless `to_end`. Compiled when numba is installed
+    (the feasible curve steps through every cell; a long line's capped curve falls
+    over thousands of cells, for each of the bisection's cruise speeds)."""
+    v2 = squared[first]
     for i in range(first, len(x) - 1):
         v = math.sqrt(v2)
         traction = force_limits(v, envelope)[1] if powered[i] else 0.0
@@ -595,12 +598,12 @@ def _forward_pass(speeds, first, x, powered, line_resistance, envelope, davis_a,
             - line_resistance[i]
         planned = acceleration if v <= power_speed else acceleration * power_speed / v
         v2 = max(v2 + 2.0 * min(planned, xi * net) * (x[i + 1] - x[i]), start)
-        if v2 < speeds[i + 1] ** 2:
-            speeds[i + 1] = math.sqrt(v2)
-        elif powered[i + 1]:
+        if v2 < squared[i + 1]:
+            squared[i + 1] = v2
+        elif powered[i + 1] and not to_end:
             return
         else:
-            v2 = speeds[i + 1] ** 2
+            v2 = squared[i + 1]
 
 
 forward_pass = compiled(_forward_pass) or _forward_pass
