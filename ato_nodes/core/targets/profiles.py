@@ -6,9 +6,9 @@ import csv
 import functools
 import hashlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from ..base.kernels import compiled, jitable
 from ..base.registry import Component, Plan
 from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
-from ..train.line import load_line
+from ..train.line import Line
 from ..train.plant import TrainParameters, basic_resistance, force_limits
 
 SEED000_PARAMETERS = (
@@ -723,8 +723,8 @@ def _strategy(values, context) -> StrategyProfile:
         plan = strategy.read_strategy(path)
     except ValueError as exc:
         raise ScenarioError(str(exc)) from None
-    digest = hashlib.sha256(Path(values["line.file"]).read_bytes()).hexdigest()
-    if plan.header.get("line_sha256") != digest:
+    line_digest = hashlib.sha256(Path(values["line.file"]).read_bytes()).hexdigest()
+    if plan.header.get("line_sha256") != line_digest:
         raise ScenarioError(f"strategy file {path} was planned for another line "
                             f"({plan.header.get('line', '?')}), not {values['line.file']}")
     if plan.header.get("train") != values["plant.train"]:
@@ -737,8 +737,7 @@ def _strategy(values, context) -> StrategyProfile:
     if values["profile.strategy.replan"] and context.train != TrainParameters.from_values(
             values):  # the weighed train, heavier than the one planned for
         try:
-            plan = _driven_again(path, hashlib.sha256(Path(path).read_bytes()).hexdigest(),
-                                 values["line.file"], digest, context.train,
+            plan = _driven_again(StrategyByContents.of(plan), context.line, context.train,
                                  values["plant.efficiency"],
                                  values["profile.strategy.max_share"])
         except ValueError as exc:
@@ -746,15 +745,30 @@ def _strategy(values, context) -> StrategyProfile:
     return StrategyProfile(plan, values["profile.strategy.start_speed"])
 
 
+@dataclass(frozen=True)
+class StrategyByContents:
+    """A strategy file as read, compared and hashed by the sha256 of its contents (a key of
+    _driven_again's cache: a file rewritten in place is driven again)."""
+
+    plan: Any = field(compare=False)  # strategy.StrategyFile
+    digest: str
+
+    @classmethod
+    def of(cls, plan) -> StrategyByContents:
+        digest = hashlib.sha256(repr(sorted(plan.header.items())).encode())
+        for column in (plan.positions, plan.speeds, plan.modes, plan.forces):
+            digest.update(column.tobytes())
+        return cls(plan, digest.hexdigest())
+
+
 @functools.lru_cache(maxsize=8)
-def _driven_again(path: str, file_digest: str, line_file: str, line_digest: str,
-                  train: TrainParameters, efficiency: float, max_share: float):
-    """strategy.for_train, once per process for each file, line (the digests: their
-    contents) and weighed train (0.1-2.5 s: a tuning's candidates and a study's runs of
-    one train share it; never changed by a caller)."""
+def _driven_again(planned: StrategyByContents, line: Line, train: TrainParameters,
+                  efficiency: float, max_share: float):
+    """strategy.for_train, once per process for each strategy, line (a Line compares by
+    its contents too) and weighed train (0.1-2.5 s: a tuning's candidates and a study's
+    runs of one train share it; never changed by a caller)."""
     from . import strategy
-    return strategy.for_train(strategy.read_strategy(path), load_line(line_file), train,
-                              efficiency, max_share)
+    return strategy.for_train(planned.plan, line, train, efficiency, max_share)
 
 
 SEED000 = Component(
