@@ -63,11 +63,11 @@ def load(args):
 def main() -> None:
     args = parse_args()
     timetable, values, minimums = load(args)
-    try:
+    try:  # a time the programme's flat-out run cannot make
         plan = journey.plan_journey(timetable, values, minimums)
+        comparison = journey.compare(plan, timetable.running_time) if args.compare else None
     except ValueError as exc:
         _cli.fail(str(exc))
-    comparison = journey.compare(plan, timetable.running_time) if args.compare else None
     report(timetable, values["plant.train"], plan, comparison)
 
 
