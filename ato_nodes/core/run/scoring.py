@@ -60,8 +60,7 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
     the steps every one of them holds. Which indices apply follows from what the
     run has: the observer's accuracy for a controller with a third-order observer,
     the overshoot for a step target, stopping and punctuality for a line with a stop."""
-    length = min(len(values) for values in series.values())
-    series = {name: values[:length] for name, values in series.items()}
+    series = common_steps(series)
     command = series.get("command")
     if command is not None and parameters:
         command = notch_level(command, parameters)
@@ -74,6 +73,20 @@ def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
     if {"position", "acceleration", "force"} <= set(series):
         indices.update(operation(series, parameters or {}))
     return indices
+
+
+def common_steps(series: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The series cut to the steps every one of them holds (an interrupted run)."""
+    length = min(len(values) for values in series.values())
+    return {name: values[:length] for name, values in series.items()}
+
+
+def energy_terms(parameters: dict) -> dict[str, float]:
+    """operation_indices' mass (the real train's: the nominal times its load factor),
+    gravity and efficiency, from the run's parameters."""
+    mass = parameters.get("plant.mass", math.nan) * parameters.get("plant.mass_factor", 1.0)
+    return {"mass": mass, "gravity": parameters.get("plant.gravity", 9.8),
+            "efficiency": parameters.get("plant.efficiency", 0.9)}
 
 
 LIMITED = 1e5  # N/kN: a controller limit below this is a real one (defaults are 1e6)
@@ -130,10 +143,7 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
     if "speed_limit" in series and not np.any(np.isfinite(series["speed_limit"])):
         series = {name: values for name, values in series.items() if name != "speed_limit"}
     indices = operation_indices(
-        series,  # the real train's mass: the nominal times its load factor
-        mass=parameters.get("plant.mass", math.nan) * parameters.get("plant.mass_factor", 1.0),
-        gravity=parameters.get("plant.gravity", 9.8),
-        efficiency=parameters.get("plant.efficiency", 0.9),
+        series, **energy_terms(parameters),
         stop_position=line.stop_position if to_station else None,
         planned_run_time=line.planned_run_time if to_station else None)
     if parameters.get("profile.approach_step", 0.0) > 0.0:

@@ -68,6 +68,15 @@ def _arrival_time(t: np.ndarray, speed: np.ndarray) -> float:
     return float(t[moving[-1] + 1])
 
 
+def traction_energy_kwh(t: np.ndarray, speed: np.ndarray, force: np.ndarray, mass: float,
+                        gravity: float = 9.8, efficiency: float = 0.9) -> float:
+    """Energy drawn from the supply for traction over the samples, kWh (force in N/kN,
+    mass in t: the module docstring's traction_energy_kwh)."""
+    force_kn = np.asarray(force, dtype=float) * mass * gravity / 1000.0
+    drawn = np.maximum(force_kn, 0.0) * np.maximum(np.asarray(speed, dtype=float), 0.0)
+    return _integral(np.asarray(t, dtype=float), drawn) / efficiency / KJ_PER_KWH
+
+
 def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float = 9.8,
                       efficiency: float = 0.9, stop_position: float | None = None,
                       planned_run_time: float | None = None,
@@ -78,7 +87,7 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
         for name in ("t", "position", "speed", "acceleration", "force"))
     force_kn = force * mass * gravity / 1000.0
     v = np.maximum(speed, 0.0)
-    traction = _integral(t, np.maximum(force_kn, 0.0) * v) / efficiency / KJ_PER_KWH
+    traction = traction_energy_kwh(t, speed, force, mass, gravity, efficiency)
     regenerated = _integral(t, np.maximum(-force_kn, 0.0) * v) * efficiency / KJ_PER_KWH
     dt = np.diff(t)
     da = np.diff(acceleration)

@@ -1,0 +1,262 @@
+"""Per-station indices of a journey run (ROS-free): where and when the train stopped at
+each stop of its timetable (core/targets/timetable.py), against the timetable, and what
+each section between two stops took.
+
+The stop at a station is the train's final standstill (speed <= STANDSTILL, the
+scorer's) within `window` (STOP_WINDOW) of the station's mark, among the standstills
+after the stop before and before the train is beyond the window: the scorer's rule for a
+run's one stop (core/scoring/operation.py: arrival at the first sample of the final
+standstill, stopping error at its last position), applied station by station. The final
+standstill, not the first: a train that halts short and creeps to the mark opens its
+doors at the mark, and its arrival counts the creep. The window is wide (a stop metres
+off is a stop with a large error, not a missed one) and under half the shortest section
+(each standstill belongs to one station at most); a standstill outside every window (a
+signal check) is part of its section.
+
+Per station: the stop error (m, + past the mark), the arrival (first standstill sample)
+and departure (first sample moving again), their lateness against the timetable (s, +
+late; the run's t = 0 is the timetable's first departure, where the journey profile
+starts its clock) and the dwell. A station the train went beyond without a standstill in
+its window is PASSED (a failure); one the run ended before is NOT_REACHED (not judged).
+Per section, between the departure and the next arrival (standstill to standstill, as
+the timetable counts): running time, traction energy (the scorer's
+traction_energy_kwh) and the largest |target - speed| (m/s). Stations are judged against
+StationRequirements: the stop within STOP_TOLERANCE of the mark, the arrival within
+ARRIVAL_TOLERANCE of the timetable; the origin has no arrival and its position is the
+run's start, so nothing is required of it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple, Protocol
+
+import numpy as np
+
+from ..base.errors import ScenarioError
+from .operation import STANDSTILL, traction_energy_kwh
+
+
+# What is read of a timetable (core/targets/timetable.py's Stop, JourneySection and
+# Timetable): scoring sits below the targets and does not import them.
+class Stop(Protocol):
+    station: str
+    position: float          # m
+    arrival: float | None    # s, timetable clock
+    departure: float | None  # s
+
+
+class JourneySection(Protocol):
+    origin: str
+    destination: str
+    start: float         # m
+    end: float           # m
+    running_time: float  # s
+
+
+class Timetable(Protocol):
+    stops: tuple[Stop, ...]
+    sections: tuple[JourneySection, ...]
+
+STOP_WINDOW = 50.0        # m either side of a station's mark
+STOP_TOLERANCE = 0.1      # m: the project's stopping accuracy (docs/tracking.md section 1)
+ARRIVAL_TOLERANCE = 5.0   # s either side of the timetable's arrival
+
+STOPPED, PASSED, NOT_REACHED = "stopped", "passed without stopping", "not reached"
+PASS, FAIL, NOT_JUDGED = "pass", "fail", "not judged"  # as the report's verdicts
+REQUIRED_SERIES = ("t", "position", "speed", "target", "force")
+
+
+class StationRequirements(NamedTuple):
+    stop_error: float = STOP_TOLERANCE           # m: |stop error| at most
+    arrival_lateness: float = ARRIVAL_TOLERANCE  # s: |arrival lateness| at most
+
+
+REQUIRED = StationRequirements()
+
+
+class StationIndices(NamedTuple):
+    station: str
+    mark: float                # m along the line
+    outcome: str               # STOPPED, PASSED or NOT_REACHED
+    stop_error: float          # m, + past the mark (NaN: no stop)
+    arrival: float             # s, run clock (NaN: the origin, no stop)
+    departure: float           # s (NaN: the last stop, still standing at the run's end)
+    arrival_lateness: float    # s, + late
+    departure_lateness: float  # s, + late
+    dwell: float               # s, departure - arrival
+    verdict: str               # PASS, FAIL, NOT_JUDGED; "" at the origin (nothing required)
+    reason: str                # what is broken, or why it is not judged
+
+
+class SectionIndices(NamedTuple):
+    """A section's figures, NaN unless the train stopped at both its ends and left the
+    first."""
+
+    origin: str
+    destination: str
+    running_time: float          # s, departure to arrival
+    running_time_error: float    # s, + slower than the timetable
+    traction_energy_kwh: float
+    max_abs_error: float         # m/s, target - speed
+
+
+@dataclass(frozen=True)
+class JourneyIndices:
+    stations: tuple[StationIndices, ...]
+    sections: tuple[SectionIndices, ...]
+    traction_energy_kwh: float  # the whole run's
+
+    @property
+    def worst_stop(self) -> StationIndices | None:
+        """The stop (the origin aside) farthest from its mark, None without one."""
+        stops = [s for s in self.stations[1:] if s.outcome == STOPPED]
+        return max(stops, key=lambda s: abs(s.stop_error), default=None)
+
+    @property
+    def worst_lateness(self) -> StationIndices | None:
+        """The arrival farthest from the timetable, early or late; None without one."""
+        stops = [s for s in self.stations[1:] if s.outcome == STOPPED]
+        return max(stops, key=lambda s: abs(s.arrival_lateness), default=None)
+
+    @property
+    def final_arrival_lateness(self) -> float:
+        """s, + late; NaN when the train did not stop at the last station."""
+        return self.stations[-1].arrival_lateness
+
+    @property
+    def verdict(self) -> str:
+        """FAIL if a station fails, else NOT_JUDGED if one is not judged, else PASS."""
+        verdicts = {station.verdict for station in self.stations}
+        return FAIL if FAIL in verdicts else NOT_JUDGED if NOT_JUDGED in verdicts else PASS
+
+
+class _Stop(NamedTuple):
+    """Where a station's stop lies in the samples."""
+
+    outcome: str
+    first: int   # first sample of the standstill (-1 without a stop)
+    last: int    # its last sample
+    resume: int  # the sample the next station's stop is looked for from
+
+
+def journey_indices(series: dict[str, np.ndarray], timetable: Timetable, mass: float,
+                    gravity: float = 9.8, efficiency: float = 0.9,
+                    window: float = STOP_WINDOW,
+                    requirements: StationRequirements = REQUIRED
+                    ) -> JourneyIndices:
+    """Per-station and per-section indices of a run of `timetable` (series of equal
+    length: REQUIRED_SERIES; mass in t, as operation_indices takes it)."""
+    _check(series, timetable, window)
+    t, position, speed, target, force = (np.asarray(series[name], dtype=float)
+                                         for name in REQUIRED_SERIES)
+    standstills = _standstills(speed)
+    found, start = [], 0
+    for stop in timetable.stops:
+        found.append(_find_stop(position, standstills, stop.position, window, start))
+        start = found[-1].resume
+    clock = timetable.stops[0].departure
+    stations = tuple(_station(stop, where, t, position, clock, window, requirements)
+                     for stop, where in zip(timetable.stops, found, strict=True))
+    sections = tuple(
+        _section(planned, begin, end, (t, speed, target, force), (mass, gravity, efficiency))
+        for planned, begin, end in zip(timetable.sections, found, found[1:], strict=False))
+    return JourneyIndices(stations, sections,
+                          traction_energy_kwh(t, speed, force, mass, gravity, efficiency))
+
+
+def _check(series: dict[str, np.ndarray], timetable: Timetable, window: float) -> None:
+    missing = [name for name in REQUIRED_SERIES if name not in series]
+    if missing:
+        raise ScenarioError(f"journey indices need the series {', '.join(missing)} "
+                            f"(the run has {', '.join(sorted(series)) or 'none'})")
+    lengths = {len(series[name]) for name in REQUIRED_SERIES}
+    if len(lengths) > 1 or 0 in lengths:
+        raise ScenarioError(f"journey indices need series of one nonzero length, not "
+                            f"{sorted(lengths)} samples")
+    shortest = min(timetable.sections, key=lambda s: s.end - s.start)
+    if not 0.0 < window < (shortest.end - shortest.start) / 2:
+        raise ScenarioError(f"the stop window {window:g} m must be positive and under half "
+                            f"the shortest section ({shortest.origin} - "
+                            f"{shortest.destination}, {shortest.end - shortest.start:g} m)")
+
+
+def _standstills(speed: np.ndarray) -> np.ndarray:
+    """(first, last) sample of each run of standing samples, in order."""
+    standing = np.concatenate(([0], (speed <= STANDSTILL).astype(int), [0]))
+    return np.flatnonzero(np.diff(standing)).reshape(-1, 2) - [0, 1]
+
+
+def _find_stop(position: np.ndarray, standstills: np.ndarray, mark: float, window: float,
+               start: int) -> _Stop:
+    """The stop at the station marked `mark` (m), looked for from sample `start`: the
+    last standstill within the window before the train is beyond it."""
+    beyond = np.flatnonzero(position[start:] > mark + window)
+    beyond_at = start + int(beyond[0]) if beyond.size else len(position)
+    within = [(first, last) for first, last in standstills
+              if start <= first < beyond_at and abs(position[last] - mark) <= window]
+    if within:
+        first, last = within[-1]
+        return _Stop(STOPPED, int(first), int(last), int(last) + 1)
+    if beyond.size:
+        return _Stop(PASSED, -1, -1, beyond_at)
+    return _Stop(NOT_REACHED, -1, -1, len(position))
+
+
+def _station(stop: Stop, where: _Stop, t: np.ndarray, position: np.ndarray, clock: float,
+             window: float, requirements: StationRequirements) -> StationIndices:
+    """A station's indices and verdict from where its stop lies (`clock`: the
+    timetable's time at the run's t = 0)."""
+    nan = math.nan
+    stopped = where.outcome == STOPPED
+    left = stopped and where.last + 1 < len(t) and stop.departure is not None
+    arrival = float(t[where.first]) if stopped and stop.arrival is not None else nan
+    departure = float(t[where.last + 1]) if left else nan
+    indices = StationIndices(
+        stop.station, stop.position, where.outcome,
+        float(position[where.last]) - stop.position if stopped else nan, arrival, departure,
+        arrival - (stop.arrival - clock) if stop.arrival is not None else nan,
+        departure - (stop.departure - clock) if stop.departure is not None else nan,
+        departure - arrival, "", "")
+    if stop.arrival is None:
+        return indices
+    verdict, reason = _verdict(indices, requirements, t, position, window)
+    return indices._replace(verdict=verdict, reason=reason)
+
+
+def _verdict(station: StationIndices, requirements: StationRequirements, t: np.ndarray,
+             position: np.ndarray, window: float) -> tuple[str, str]:
+    """(PASS, FAIL or NOT_JUDGED, what is broken or why it is not judged)."""
+    if station.outcome == NOT_REACHED:
+        short = station.mark - float(position[-1])
+        return NOT_JUDGED, (f"the run ended at t = {float(t[-1]):.1f} s, {abs(short):.1f} m "
+                            f"{'short of' if short > 0 else 'past'} the mark, before a stop")
+    if station.outcome == PASSED:
+        return FAIL, f"no standstill within {window:g} m of the mark"
+    broken = []
+    if not abs(station.stop_error) <= requirements.stop_error:
+        broken.append(f"stop error {station.stop_error:+.3f} m (within "
+                      f"{requirements.stop_error:g} m required)")
+    if not abs(station.arrival_lateness) <= requirements.arrival_lateness:
+        broken.append(f"arrival {station.arrival_lateness:+.1f} s against the timetable "
+                      f"(within {requirements.arrival_lateness:g} s required)")
+    return (FAIL, "; ".join(broken)) if broken else (PASS, "")
+
+
+def _section(planned: JourneySection, begin: _Stop, end: _Stop, series: tuple[np.ndarray, ...],
+             energy_terms: tuple[float, float, float]) -> SectionIndices:
+    """A section's indices between the departure at `begin` and the arrival at `end`
+    (`series`: t, speed, target, force)."""
+    t, speed, target, force = series
+    measured = begin.outcome == STOPPED and end.outcome == STOPPED and begin.last + 1 < len(t)
+    if not measured:
+        return SectionIndices(planned.origin, planned.destination, *[math.nan] * 4)
+    # From the departure's last standing sample: the trapezoids cover the whole section.
+    span = slice(begin.last, end.first + 1)
+    running_time = float(t[end.first] - t[begin.last + 1])
+    return SectionIndices(
+        planned.origin, planned.destination, running_time,
+        running_time - planned.running_time,
+        traction_energy_kwh(t[span], speed[span], force[span], *energy_terms),
+        float(np.max(np.abs(target[span] - speed[span]))))
