@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import difflib
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
@@ -271,11 +271,21 @@ def check_launcher_free(values: dict[str, Any]) -> None:
                                 f"--out instead")
 
 
+class Derivation(NamedTuple):
+    """How validate() derives a parameter: when the boolean parameter `switch` is true,
+    as `meaning` says (the error of a value given anyway quotes it)."""
+
+    switch: str
+    meaning: str
+
+
 # Derived from the run's values by validate(), once, for every runner: the nodes that
 # declare them cannot derive them (a profile or controller node does not see the real
 # train's plant.mass_factor), so every launcher passes them (launch.Stack with all the
 # values, launch/stack.launch.py on top of the scenario file).
-DERIVED_PARAMETERS = ("train.mass_reading",)
+DERIVED_PARAMETERS = {
+    "train.mass_reading": Derivation("train.load_weighing", "the load weighing's reading"),
+}
 
 
 def weighed(values: dict[str, Any]) -> dict[str, Any]:
@@ -291,10 +301,11 @@ def weighed(values: dict[str, Any]) -> dict[str, Any]:
 
 def check_not_derived(given, values: dict[str, Any], where: str = "") -> None:
     """Refuse a derived parameter given while the run derives it (one line)."""
-    if values["train.load_weighing"] and "train.mass_reading" in given:
-        prefix = f"{where}: " if where else ""
-        raise ScenarioError(f"{prefix}train.mass_reading is the load weighing's reading when "
-                            f"train.load_weighing is true: give one of them")
+    for name, derivation in DERIVED_PARAMETERS.items():
+        if values[derivation.switch] and name in given:
+            prefix = f"{where}: " if where else ""
+            raise ScenarioError(f"{prefix}{name} is {derivation.meaning} when "
+                                f"{derivation.switch} is true: give one of them")
 
 
 def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
