@@ -168,8 +168,10 @@ class Registry:
         return {spec.name: f"{spec.name} belongs to {self.role} kind {component.kind}; this "
                            f"run uses {chosen.kind} ({chosen.own_parameters})"
                 for component in self.components.values() if component is not chosen
-                for spec in component.parameters}
+                for spec in component.parameters if spec not in chosen.parameters}
 
     def parameters(self) -> tuple[ParamSpec, ...]:
-        return (self.kind_parameter,
-                *(spec for component in self.components.values() for spec in component.parameters))
+        # once each: a kind may take another's too (a journey drives ato curves)
+        own = {spec.name: spec for component in self.components.values()
+               for spec in component.parameters}
+        return (self.kind_parameter, *own.values())

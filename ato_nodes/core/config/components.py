@@ -6,7 +6,7 @@ from __future__ import annotations
 from ..base.registry import Registry
 from ..base.spec import PROFILE_NODES
 from ..control import adrc, gpc, pid
-from ..targets import profiles
+from ..targets import profiles, served
 
 CONTROLLERS = Registry("controller", "han_adrc", ("controller",), (
     adrc.HAN_ADRC, adrc.NLADRC, adrc.DISCRETE_ADRC, adrc.LINEAR_ADRC,
@@ -15,4 +15,5 @@ CONTROLLERS = Registry("controller", "han_adrc", ("controller",), (
 
 PROFILES = Registry("profile", "seed000", PROFILE_NODES, (
     profiles.SEED000, profiles.STEP, profiles.TABLE, profiles.ATO, profiles.STRATEGY,
+    served.JOURNEY,
 ))

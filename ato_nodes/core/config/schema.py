@@ -151,7 +151,8 @@ SPEC_BY_NAME = {spec.name: spec for spec in SPECS}
 if len(SPEC_BY_NAME) != len(SPECS):
     raise ValueError("a parameter name is defined twice in the schema")
 # resolved to absolute paths
-FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "gpc.model")
+FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "gpc.model",
+                   "profile.journey.timetable")
 
 
 def defaults() -> dict[str, Any]:

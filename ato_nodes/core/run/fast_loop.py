@@ -46,6 +46,8 @@ from ..config.schema import NodeValues
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
 from ..targets.profiles import PlanTable, plan_table, table_limit, table_speed
+from ..targets.served import NO_JOURNEY, JourneyState, JourneyTable, journey_limit, journey_speed, \
+    observed
 from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
 from ..train.plant import (
     TrainConstants,
@@ -77,8 +79,8 @@ def compiled_kinds() -> list[str]:
 def covers(profile, plant, controller, changes) -> bool:
     """Whether the compiled loop runs this run (stages built by simulate())."""
     plan = profile.context.plan
-    if plan.position_indexed:
-        drawable = plan.table() is not None
+    if plan.position_indexed:  # a table, or a journey's tables
+        drawable = plan.table() is not None or hasattr(plan, "journey")
     else:  # its horizons are computed once, without the stepped approach
         drawable = profile.approach_step <= 0.0 and not plan.limits_speed
     return AVAILABLE and not changes and drawable
@@ -119,6 +121,7 @@ class LoopInputs(NamedTuple):
     max_speed: float           # m/s, past it the run has diverged
     line: LineTables           # arrays (empty: the open track)
     plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
+    journey: JourneyTable      # a journey's (no sections: not a journey)
     preview: int               # the horizon entry the controller tracks
     approach_step: float       # m/s, seed 003's stepped approach (0: off)
     settings: Any              # the controller kind's settings NamedTuple
@@ -148,6 +151,7 @@ class ProfileState(NamedTuple):
 
     last_position: float       # m
     stair: float               # m/s, the stepped approach's stair (NaN: none)
+    journey: JourneyState      # a journey's section and arrival (served.observed)
 
 
 class FitnessState(NamedTuple):
@@ -182,17 +186,21 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     compiled loop lasting about CHUNK_SECONDS; `check(step)` is called before each
     (simulate() raises there once past its deadline)."""
     total = profile.context.steps
+    journey = getattr(profile.context.plan, "journey", NO_JOURNEY)
     plan = profile.context.plan.table() if profile.context.plan.position_indexed else None
-    if plan is None:  # a copy: the loop's one argument type is a writable array
+    if plan is None and journey is NO_JOURNEY:  # time-indexed; a copy: the loop's one
+        # argument type is a writable array
         targets = horizons(profile).copy()
         plan = plan_table((), ())
     else:  # filled in as the run goes, LOOKAHEAD steps ahead
         targets = np.empty((total, profile.preview + 1))
+        plan = plan_table((), ()) if plan is None else plan
     running_index, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
     rows = np.empty((total, len(COLUMNS)))
     extras = np.empty((total, len(controller.output_names)))
     with _controller_seam(controller) as (settings, controller_state):
-        inputs = _inputs(profile, plant, controller, plan, settings, running_index, limit)
+        inputs = _inputs(profile, plant, controller, plan, journey, settings, running_index,
+                         limit)
         loop = _first_state(profile, plant, controller, controller_state, running_index)
         chunk = FIRST_CHUNK
         while loop.step < total and not loop.ended:
@@ -217,8 +225,8 @@ def _controller_seam(stage):
         yield slot, slot
 
 
-def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index,
-            limit: float) -> LoopInputs:
+def _inputs(profile, plant, controller, plan: PlanTable, journey: JourneyTable, settings,
+            running_index, limit: float) -> LoopInputs:
     train = plant.train
     total = profile.context.steps
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
@@ -228,6 +236,7 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
         period=float(train.period), substeps=int(train.substeps), train=train.constants,
         pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
         max_speed=float(plant.max_speed), line=line_arrays(train.line), plan=plan,
+        journey=journey,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
@@ -242,7 +251,9 @@ def _first_state(profile, plant, controller, controller_state, running_index) ->
             speed=float(state.speed), force=float(state.force), lag=float(train.lag_state),
             acting=float(train.acting), powered=bool(train.powered),
             delayed=np.array(train.delayed, dtype=float), oldest=0),
-        profile=ProfileState(last_position=float(profile.last_position), stair=math.nan),
+        profile=ProfileState(last_position=float(profile.last_position), stair=math.nan,
+                             journey=JourneyState(*getattr(profile.context.plan, "state",
+                                                           (0, math.nan)))),
         controller=controller_state, last=float(controller.limiter.last),
         fitness=FitnessState(float(running_index.value), float(running_index.last_t),
                              float(running_index.last_w)),
@@ -276,17 +287,26 @@ if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
 
 
 @jitable
-def _plan_horizon(inputs: LoopInputs, step: int, position: float, horizon) -> None:
+def _plan_horizon(inputs: LoopInputs, journey: JourneyState, step: int, position: float,
+                  horizon) -> None:
     """RunContext.horizon of a position-indexed plan, into `horizon`: the plan's
     targets of steps step .. step + N along the planned trajectory from `position`
     (Heun's method, one step per period)."""
-    plan, h = inputs.plan, inputs.period
-    horizon[0] = table_speed(plan, position)
+    h = inputs.period
+    horizon[0] = _target(inputs, journey, step * h, position)
     for i in range(1, len(horizon)):
-        v = horizon[i - 1]
-        ahead = table_speed(plan, position + h * v)
+        t, v = (step + i) * h, horizon[i - 1]
+        ahead = _target(inputs, journey, t, position + h * v)
         position += 0.5 * h * (v + ahead)
-        horizon[i] = table_speed(plan, position)
+        horizon[i] = _target(inputs, journey, t, position)
+
+
+@jitable(inline=True)
+def _target(inputs: LoopInputs, journey: JourneyState, t: float, position: float) -> float:
+    """A position-indexed plan's target: a journey's in its state, else the table's."""
+    if len(inputs.journey.departures):
+        return journey_speed(inputs.journey, journey, t, position)
+    return table_speed(inputs.plan, position)
 
 
 @jitable
@@ -302,6 +322,8 @@ def _approach(step_size: float, stair: float, target: float, speed: float):
 @jitable(inline=True)
 def _speed_limit(inputs: LoopInputs, position: float) -> float:
     """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
+    if len(inputs.journey.departures):
+        return journey_limit(inputs.journey, position)
     if inputs.plan.limits_speed:
         return table_limit(inputs.plan, position)
     if inputs.line.limits_end > inputs.line.tunnels_end:
@@ -319,7 +341,8 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
     ended = False
     while k < stop and not ended:
         measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
-        if inputs.plan.grid.shape[1]:  # position-indexed: the horizons for this position
+        if inputs.plan.grid.shape[1] or len(inputs.journey.departures):  # position-indexed:
+            # the horizons for this position
             profile = _publish_horizons(inputs, profile, k, plant.position, targets)
         horizon = targets[k]
         reference = horizon[inputs.preview]
@@ -351,15 +374,17 @@ def _publish_horizons(inputs: LoopInputs, profile: ProfileState, k: int, positio
     at step 0, of step k + 2 from the extrapolated position after, into `targets`."""
     travel = position - profile.last_position if k else 0.0
     speed = travel / inputs.period
-    stair = profile.stair
+    stair, journey = profile.stair, profile.journey
+    if len(inputs.journey.departures):
+        journey = observed(inputs.journey, journey, k * inputs.period, position, speed)
     first = 0 if k == 0 else k + LOOKAHEAD
     for step in range(first, k + LOOKAHEAD + 1):
         if step < len(targets):
-            _plan_horizon(inputs, step, position + LOOKAHEAD * travel if k else position,
-                          targets[step])
+            _plan_horizon(inputs, journey, step,
+                          position + LOOKAHEAD * travel if k else position, targets[step])
             targets[step, 0], stair = _approach(inputs.approach_step, stair,
                                                 targets[step, 0], speed)
-    return ProfileState(position, stair)
+    return ProfileState(position, stair, journey)
 
 
 @jitable(inline=True)

@@ -77,6 +77,9 @@ class ProfileStage:
             wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * travel)]
         speed = travel / self.period
         self.last_position = position
+        observe = getattr(self.context.plan, "observe", None)
+        if observe is not None:  # a journey: its section and when the train stood at its end
+            observe(k * self.period, position, speed)
         horizons = []
         for step, predicted in wanted:
             if step < self.total_steps:
