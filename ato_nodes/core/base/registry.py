@@ -99,7 +99,10 @@ class Component:
     the state over (stages.ControllerStage.retune). Without it none are.
     steps, for controllers whose step is a plain function of NamedTuples: their
     core/control/stepped.ControllerSteps, which the compiled loop runs too
-    (core/run/fast_loop.py); without it a run of the kind takes the Python loop.
+    (core/run/fast_loop.py); without it the compiled loop calls the kind's own Python
+    step. warm_up, for controllers without steps: the (parameter, value) overrides of a
+    cheap run of the kind (no file to read, short horizons), with which loop.warm()
+    compiles the signature of the loop that every such kind shares.
     """
 
     kind: str
@@ -111,6 +114,7 @@ class Component:
     search_space: tuple[tuple[str, float, float], ...] = ()  # what tune.py tunes by default
     state_paths: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
     steps: Any = None  # ControllerSteps: what the Python and the compiled loop run
+    warm_up: tuple[tuple[str, Any], ...] = ()  # overrides of a cheap run (controllers)
 
     @property
     def live_parameters(self) -> tuple[str, ...]:

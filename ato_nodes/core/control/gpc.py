@@ -408,4 +408,6 @@ GPC_CONTROLLER = Component(
      Output("model_error", "m/s", "one-step prediction error y(k) - y(k|k-1)"),
      Output("bias", "m/s", "filtered one-step residual fed back into the prediction"),
      Output("samples_added", "1", "samples the online correction has added so far")),
-    search_space=(("gpc.q", 0.1, 100.0), ("gpc.r", 1e-5, 1e-1), ("gpc.bias_filter", 0.0, 20.0)))
+    search_space=(("gpc.q", 0.1, 100.0), ("gpc.r", 1e-5, 1e-1), ("gpc.bias_filter", 0.0, 20.0)),
+    # the mechanistic model needs no model file
+    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 1), ("controller.preview", 1)))

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config.components import CONTROLLERS
 from ..config.scenario import apply_overrides, load_scenario
 from ..control import lssvm
 from ..config.schema import SPEC_BY_NAME, NodeValues, steps
@@ -81,17 +82,21 @@ def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndar
 def warm(values: dict | None = None) -> None:
     """Compile the loop of core/run/fast_loop.py now, or load it from its cache beside that
     file, by a two-step run of `values` (default: the shipped seed000) with each
-    controller kind that has compiled steps, and one of the kinds without them (the
-    GPC's mechanistic model: no model file to read); and the LSSVM's solves. Every run
-    of a kind calls the loop with the same argument types, so this one compilation per
-    kind serves them all, in every process of this checkout."""
+    controller kind that has compiled steps, and one of seed000 with the first kind
+    without them that names a cheap run (its registry entry's warm_up: those kinds share
+    one signature); and the LSSVM's solves. Every run of a kind calls the loop with the
+    same argument types, so this one compilation per kind serves them all, in every
+    process of this checkout."""
     values = load_scenario("seed000") if values is None else values
     shortest = SPEC_BY_NAME["run.duration"].low
     duration = max(2 * values["run.period"], shortest)
     for kind in fast_loop.compiled_kinds():
         simulate(apply_overrides(values, {"run.duration": duration, "controller.kind": kind}))
-    seed000 = load_scenario("seed000")
-    simulate(apply_overrides(seed000, {
-        "run.duration": 2 * seed000["run.period"], "controller.kind": "gpc",
-        "gpc.prediction": "mechanistic", "gpc.horizon": 1, "controller.preview": 1}))
+    cheap = next((component for component in CONTROLLERS.components.values()
+                  if not component.steps and component.warm_up), None)
+    if cheap is not None:
+        seed000 = load_scenario("seed000")
+        simulate(apply_overrides(seed000, {
+            "run.duration": 2 * seed000["run.period"], "controller.kind": cheap.kind,
+            **dict(cheap.warm_up)}))
     lssvm.warm()
