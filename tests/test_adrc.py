@@ -4,6 +4,7 @@ import math
 
 import pytest
 
+from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.control.adrc import (HanADRCGains, LinearADRCGains, eso_update, fal,
                                          fal_gain, fhan, han_adrc, linear_adrc_of, nlsef,
                                          td_update)
@@ -189,7 +190,8 @@ class TestLinearADRC:
         adrc = linear_adrc_of(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b,
                                               feedforward=False, delay_aware=False,
                                               plan_feedforward=False, plan_band=0.0), period,
-                              CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()))
+                              CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()),
+                              on_board_estimator(defaults(), period))
         v = 0.0
         for _ in range(400):
             out = adrc.step(10.0, v, [10.0])

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from ato_nodes.core.base import kernels
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.control import estimation
 from ato_nodes.core.control.estimation import (
@@ -155,8 +156,8 @@ def test_the_estimated_model_is_the_nominal_one_at_the_prior_of_a_nominal_train(
     model, _ = nominal_train(train, values["run.period"], 0.0, line)
     heavy = state._replace(inverse_mass=1.0 / 1.3)
     for speed, position in ((5.0, 400.0), (20.0, 1500.0)):
-        assert estimated_resistance(settings, state, speed, position) == pytest.approx(
-            known_resistance(model, speed, position), rel=1e-12)
+        assert estimated_resistance(settings, state, speed, position) == known_resistance(
+            model, speed, position, 1.0)
         assert estimated_force_limits(settings, state, speed) == force_limits(
             speed, train.envelope)
         assert estimated_force_limits(settings, heavy, speed)[1] == pytest.approx(
@@ -176,3 +177,27 @@ def test_the_compiled_estimator_gives_the_python_bits():
     for name in python:
         assert np.array_equal(python[name], fast[name]), name
     assert np.array_equal(python_state.covariance, fast_state.covariance)
+
+
+def test_off_a_controller_reports_the_departure_estimates_throughout():
+    values, series = metro_run("plant.mass_factor=1.2", "plant.resistance_factor=1.2")
+    assert not values["estimator.enabled"]
+    assert np.all(series["mass_factor"] == values["train.mass_reading"])
+    assert np.all(series["resistance_scale"] == 1.0)
+
+
+def test_on_the_linear_adrc_learns_the_resistance_and_its_observer_explains_less():
+    """A 20 % heavier running resistance: with the estimate in its model, the linear
+    ADRC's observer is left less unexplained acceleration (z2) to estimate."""
+    runs = [metro_run("plant.resistance_factor=1.2", f"estimator.enabled={on}")[1]
+            for on in ("false", "true")]
+    moving = (runs[0]["speed"] > 5.0) & (runs[0]["t"] > 60.0)
+    unexplained = [np.mean(np.abs(series["z2"][moving])) for series in runs]
+    assert runs[1]["resistance_scale"][-1] == pytest.approx(1.2, rel=0.02)
+    assert unexplained[1] < 0.75 * unexplained[0]
+
+
+def test_a_controller_kind_without_the_estimator_refuses_it_in_one_line():
+    with pytest.raises(ScenarioError, match="does not use the on-board estimator") as caught:
+        prepare("seed000", ["estimator.enabled=true"])
+    assert "\n" not in str(caught.value)

@@ -11,6 +11,7 @@ from ato_nodes.core.run import fast_loop, loop, python_steps
 from ato_nodes.core.base import kernels
 from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.config.schema import steps
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
@@ -26,6 +27,10 @@ VARIANTS = [
                  "adrc.mu2=20"]),
     ("seed000", ["controller.kind=nladrc", "controller.holding_brake=5",
                  "plant.initial_speed=10"]),
+    # the on-board estimator in the linear ADRC's and the PID's state
+    ("seed004-metro-ato", ["estimator.enabled=true", "plant.mass_factor=1.3",
+                           "plant.resistance_factor=1.2"]),
+    ("seed001-crh380al-pid", ["estimator.enabled=true", "plant.resistance_factor=0.8"]),
 ]
 
 
@@ -84,7 +89,7 @@ def test_a_run_in_one_step_chunks_gives_the_bits_of_a_run_in_one_call(monkeypatc
                                                                        overrides):
     values = apply_overrides(load_scenario(scenario), ["run.duration=300", *overrides])
     whole, chunked = (chunked_run(monkeypatch, values, first) for first in (10**9, 1))
-    assert len(whole["t"]) == 6000
+    assert len(whole["t"]) == steps(values)
     for name in whole:
         assert np.array_equal(whole[name], chunked[name]), name
 
@@ -114,7 +119,9 @@ def test_the_compiled_loop_covers_every_shipped_scenario():
 
 @pytest.mark.parametrize("overrides", [["gpc.prediction=mechanistic"],
                                        ["gpc.prediction=multimodel"],
-                                       ["gpc.constrained=false", "gpc.correction=false"]])
+                                       ["gpc.constrained=false", "gpc.correction=false"],
+                                       ["estimator.enabled=true", "plant.mass_factor=1.2",
+                                        "plant.resistance_factor=1.3"]])
 def test_a_kind_without_compiled_steps_gives_the_python_loops_bits(monkeypatch, overrides):
     """The GPC's own Python step called from the compiled loop, for each of its models."""
     values = apply_overrides(load_scenario("seed001-crh380al"), ["run.duration=120",

@@ -6,11 +6,13 @@ import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.control import gpc as gpc_module
+from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.control.gpc import GPC, Arx, GPCSettings
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.config.schema import defaults
 
 
 class FixedModel:
@@ -32,7 +34,8 @@ ARX = Arx(0.01, np.array((1.6, -0.62)), np.array((0.004, 0.001)), 2)
 def controller(arx=ARX, horizon=12, nu=3, constrained=True, rate=0.0, low=-1e6, high=1e6):
     settings = GPCSettings(horizon, nu, 1.0, 1e-4, constrained, 0.0, 0.0, False)
     limiter = CommandLimiter(low, high, 0.3, rate)
-    gpc = GPC(settings, FixedModel(arx), 0.3, limiter, train=None, envelope=False)
+    gpc = GPC(settings, FixedModel(arx), 0.3, limiter, train=None, envelope=False,
+              estimator=on_board_estimator(defaults(), 0.3))
     gpc.start(10.0, 10.0)
     gpc.speeds = np.array([10.0, 10.1, 10.3, 10.4, 10.6, 10.7, 10.9])
     gpc.commands = np.array([5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0])

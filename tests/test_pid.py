@@ -6,7 +6,8 @@ from dataclasses import replace
 import pytest
 
 from ato_nodes.core.control.limiter import CommandLimiter
-from ato_nodes.core.control.pid import PID_STEPS, PIDGains, PIDSettings
+from ato_nodes.core.control.estimation import on_board_estimator
+from ato_nodes.core.control.pid import PID_STEPS, PIDGains, PIDSettings, PIDState
 from ato_nodes.core.control.stepped import SteppedController
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters
 from ato_nodes.core.config.schema import defaults
@@ -20,7 +21,9 @@ def gains(**changes) -> PIDGains:
 
 
 def PID(gains: PIDGains, period: float, limiter: CommandLimiter, train: TrainParameters):
-    return SteppedController(PID_STEPS, PIDSettings(gains, period, train.constants()), limiter)
+    on_board, estimated = on_board_estimator(defaults(), period)
+    return SteppedController(PID_STEPS, PIDSettings(gains, period, train.constants(), on_board),
+                             limiter, PIDState(0.0, 0.0, estimated))
 
 
 def train() -> TrainParameters:

@@ -103,6 +103,9 @@ class Component:
     step. warm_up, for controllers without steps: the (parameter, value) overrides of a
     cheap run of the kind (no file to read, short horizons), with which loop.warm()
     compiles the signature of the loop that every such kind shares.
+    estimates, for controllers: the kind uses the on-board estimator of the train
+    (core/control/estimation.py) when estimator.enabled; a run that enables it for a kind
+    that does not is refused.
     """
 
     kind: str
@@ -115,6 +118,7 @@ class Component:
     state_paths: tuple[str, ...] = ()  # carried over when live parameters change (controllers)
     steps: Any = None  # ControllerSteps: what the Python and the compiled loop run
     warm_up: tuple[tuple[str, Any], ...] = ()  # overrides of a cheap run (controllers)
+    estimates: bool = False  # controllers: uses the on-board estimator (estimator.enabled)
 
     @property
     def live_parameters(self) -> tuple[str, ...]:

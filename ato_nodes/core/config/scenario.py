@@ -323,6 +323,10 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
     except ScenarioError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
     line = load_line(values["line.file"]) if values["line.file"] else None
+    if values["estimator.enabled"] and not CONTROLLERS.chosen(values).estimates:
+        raise ScenarioError(f"{where}: estimator.enabled: controller.kind "
+                            f"{values['controller.kind']} does not use the on-board estimator "
+                            f"(those that do: {', '.join(estimating_kinds())})")
     try:
         _ = RunContext(NodeValues("profile", values), line).plan
         controller_values = NodeValues("controller", values)
@@ -332,6 +336,11 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
     except ScenarioError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
     return values
+
+
+def estimating_kinds() -> tuple[str, ...]:
+    return tuple(kind for kind, component in CONTROLLERS.components.items()
+                 if component.estimates)
 
 
 def ros_parameter_file(values: dict[str, Any], names=None) -> dict[str, Any]:

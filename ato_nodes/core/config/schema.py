@@ -14,6 +14,7 @@ from typing import Any
 
 from ..base.errors import ScenarioError
 from ..base.spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, TextForm, param
+from ..control.estimation import PARAMETERS as ESTIMATOR_PARAMETERS
 from ..control.limiter import LIMITER_PARAMETERS
 from ..scoring.indices import RunningIndex
 from .components import CONTROLLERS, PROFILES
@@ -100,7 +101,8 @@ BASE: tuple[ParamSpec, ...] = (
           "then plant.mass_factor read with a relative error (false = the ATO knows the mass "
           "train.mass_reading gives, the papers' setting)", "plant"),
     param("train.load_weighing_error", 0.03, "the load weighing's relative error, 1 sigma (a "
-          "seeded normal draw)", "plant", 0.0, 0.5),
+          "seeded normal draw; the on-board estimator's mass prior)", ("plant", "controller"),
+          0.0, 0.5),
     param("train.load_weighing_seed", 0, "seed of the load weighing's error draw", "plant",
           0, 2**31 - 1),
     param("train.mass_reading", 1.0, "the mass the ATO knows, over the nominal plant.mass: the "
@@ -127,6 +129,7 @@ BASE: tuple[ParamSpec, ...] = (
           "targets) and the controller tracks r_k+N (0 = r_k, the papers' setting)",
           ("profile", "controller"), 0, MAX_PREVIEW),
     *LIMITER_PARAMETERS,
+    *ESTIMATOR_PARAMETERS,
     param("supervisor.ready_timeout", 30.0, "wall seconds to wait for every edge to match",
           "supervisor", 0.1, 3600.0),
     param("supervisor.report", "", "path of the JSON run report the supervisor writes",

@@ -46,6 +46,8 @@ from ..base.registry import Component, Output
 from ..base.spec import param, settings
 from ..train.line import Line
 from ..train.plant import TrainParameters
+from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator, estimates,
+                         on_board_estimator, on_board_step)
 from .limiter import CommandLimiter, LimiterSettings, limit_command
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 from .train_model import (NominalModel, NominalState, known_resistance, nominal_advance,
@@ -421,6 +423,7 @@ class LinearADRCSettings(NamedTuple):
     l2: float
     model: NominalModel    # the nominal train, read with feedforward or delay_aware
     plan: PlanForces       # the plan's forces, read with plan_feedforward
+    estimator: OnBoardEstimator  # its resistance scale read with feedforward
 
 
 class LinearADRCState(NamedTuple):
@@ -429,13 +432,14 @@ class LinearADRCState(NamedTuple):
     observer_input: float  # F - w over the last period, N/kN
     u_applied: float       # the last command let through
     model: NominalState
+    estimator: EstimatorState
 
 
 @jitable
 def linear_adrc_start(settings: LinearADRCSettings, state: LinearADRCState, target: float,
                       measured: float) -> LinearADRCState:
     return LinearADRCState(measured, state.z2, state.observer_input, state.u_applied,
-                           state.model)
+                           state.model, state.estimator)
 
 
 @jitable
@@ -452,9 +456,12 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     and w_r at r's planned position (core/control/train_model.py); with `delay_aware`, F
     is the force the nominal actuator applies and v the speed predicted N steps ahead
     (the commands inside the dead time and lag act first), so the law's error is
-    the one its command can still change. The ESO is integrated by backward Euler in
-    closed form, stable for any step. Outputs z1, z2."""
+    the one its command can still change. The known resistance's basic part is scaled
+    by the on-board estimate (estimation.py; 1 with the estimator off). The ESO is
+    integrated by backward Euler in closed form, stable for any step. Outputs z1, z2
+    and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
+    scale = state.estimator.resistance_scale
     e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
         1.0 + h * settings.l1 + h * h * settings.l2)
     z2 = state.z2 - h * settings.l2 * e
@@ -463,7 +470,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     speed = z1
     if g.delay_aware and ahead:
         speed = nominal_predict(model, state.model, z1, z2, g.b0, ahead, state.u_applied,
-                                g.feedforward)
+                                g.feedforward, scale)
     law = (g.omega_c * (target - speed) - z2) / g.b0
     resistance = 0.0  # known to the observer over the coming period
     if g.feedforward:
@@ -476,29 +483,35 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
             law = on_plan_side(law + force, force, speed, target, g.plan_band)
         else:
             planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
-            law += planned / g.b0 + known_resistance(model, target, there)
-        resistance = known_resistance(model, measured, state.model.position)
+            law += planned / g.b0 + known_resistance(model, target, there, scale)
+        resistance = known_resistance(model, measured, state.model.position, scale)
     u = limit_command(law, target, measured, last, limits)
     force, nominal = u, state.model
     if g.feedforward or g.delay_aware:
         force, nominal = nominal_advance(model, state.model, u, measured)
     observer_input = (force if g.delay_aware else u) - resistance
-    return u, (z1, z2), LinearADRCState(z1, z2, observer_input, u, nominal)
+    estimator = on_board_step(settings.estimator, state.estimator, u, measured)
+    mass, mass_sigma, resistance_scale, resistance_sigma = estimates(estimator)
+    return u, (z1, z2, mass, mass_sigma, resistance_scale, resistance_sigma), LinearADRCState(
+        z1, z2, observer_input, u, nominal, estimator)
 
 
 LINEAR_ADRC_STEPS = ControllerSteps(linear_adrc_start, linear_adrc_step, LinearADRCState)
 
 
 def linear_adrc_of(gains: LinearADRCGains, period: float, limiter: CommandLimiter,
-                   train: TrainParameters, position: float = 0.0, line: Line | None = None,
+                   train: TrainParameters, estimator: tuple[OnBoardEstimator, EstimatorState],
+                   position: float = 0.0, line: Line | None = None,
                    plan: PlanForces | None = None) -> SteppedController:
-    """The linear ADRC with the nominal model of `train` on `line` from `position` (and
-    the plan's forces, with plan_feedforward)."""
+    """The linear ADRC with the nominal model of `train` on `line` from `position`, the
+    on-board `estimator` (on_board_estimator's settings and state) and the plan's
+    forces, with plan_feedforward."""
     model, nominal = nominal_train(train, period, position, line)
+    on_board, estimated = estimator
     return SteppedController(LINEAR_ADRC_STEPS, LinearADRCSettings(
         gains, period, 2.0 * gains.omega_o, gains.omega_o ** 2, model,
-        plan if plan is not None else plan_forces()), limiter,
-        LinearADRCState(0.0, 0.0, 0.0, 0.0, nominal))
+        plan if plan is not None else plan_forces(), on_board), limiter,
+        LinearADRCState(0.0, 0.0, 0.0, 0.0, nominal, estimated))
 
 
 def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
@@ -511,6 +524,7 @@ def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
                                 f"{values['profile.kind']}")
         plan = plan_forces(context.plan)
     return linear_adrc_of(gains, context.period, limiter, context.train,
+                          on_board_estimator(values, context.period, context.line),
                           values["plant.initial_position"], context.line, plan)
 
 
@@ -548,7 +562,7 @@ LINEAR_ADRC = Component(
     "linear_adrc", "first-order linear ADRC", LINEAR_ADRC_PARAMETERS,
     linear_adrc,
     (Output("z1", "m/s", "ESO speed estimate"),
-     Output("z2", "m/s^2", "ESO total-disturbance estimate")),
+     Output("z2", "m/s^2", "ESO total-disturbance estimate"), *ESTIMATE_OUTPUTS),
     search_space=(("ladrc.omega_o", 2.0, 40.0), ("ladrc.omega_c", 0.3, 6.0),
                   ("ladrc.b0", 0.006, 0.013)),
-    state_paths=STATE_PATHS, steps=LINEAR_ADRC_STEPS)
+    state_paths=STATE_PATHS, steps=LINEAR_ADRC_STEPS, estimates=True)

@@ -59,27 +59,24 @@ unsure by the dead reckoning's error).
 Units: speeds m/s, forces and resistances N/kN (specific, as the whole core), positions
 m, theta and r dimensionless; the covariance is over (v m/s, theta, r).
 
-Interface for the controllers and the target planner (wiring is not done here)
---------------------------------------------------------------------------------
-* Build once: settings = estimator_settings(values, train, period, line) (values the
-  run's estimator.* values, train the nominal TrainParameters, as the run context has
-  them); reading = load_weighing(real_mass_factor, error, seed) (the plant side's load
-  cell: the one place the real mass is read); state = estimator_start(settings, reading,
-  error, resistance_sigma, position, speed), or both at once by estimator_of(values,
-  train, period, reading, line, position, speed).
-* Each period, after the command u is sent (where the linear ADRC calls
-  nominal_advance): state = estimator_step(settings, state, u, measured_speed).
-* Read: estimated_mass_factor(state) and estimated_resistance_scale(state) -> (value,
-  sigma); estimated_resistance(settings, state, speed, position) (N/kN, basic * r + line:
-  for known_resistance in the ADRC/PID feedforward and GPC's mechanistic model);
-  estimated_force_limits(settings, state, speed) ((low, high) N/kN: the envelope the
-  GPC's constraints and the target planner's envelope share should use).
+How the controllers use it
+-------------------------
+* on_board_estimator(values, period, line) builds it once per run (OnBoardEstimator in
+  the controller's settings, the EstimatorState in its state): the nominal train, the
+  load weighing's train.mass_reading (scenario.weighed: the plant side's load cell, the
+  one place the real mass is read) as the mass prior, its error
+  train.load_weighing_error.
+* Each period, after the command u is sent: state = on_board_step(estimator, state, u,
+  measured_speed) (estimator_step when estimator.enabled, else the state kept).
+* The resistance scale enters train_model.known_resistance as its basic_scale (the
+  linear ADRC's feedforward, observer input and prediction; the PID's feedforward; the
+  GPC's prediction); estimated_force_limits(settings, state, speed) is the envelope of
+  the GPC's constraints. A scale of 1 multiplies exactly, so a controller with the
+  estimator off gives the bits it gave before it had one.
+* estimates(state) are the controllers' recorded outputs ESTIMATE_OUTPUTS.
 * estimate_series(settings, state, commands, measured_speeds) runs it over recorded
-  series (tests, studies); compiled_estimate_rows is the same loop compiled.
-Integration needs: registering PARAMETERS in the schema (node "controller"; the profile
-node too if the planner uses it live), the load weighing wired from the plant's
-plant.mass_factor at departure (a new reading at every departure: the load changes at
-stops), and the state carried in the controller's state NamedTuple.
+  series (studies: scripts/estimator_accuracy.py); compiled_estimate_rows is the same
+  loop compiled.
 """
 
 from __future__ import annotations
@@ -92,14 +89,18 @@ import numpy as np
 
 from ..base.kernels import compiled, jitable
 from ..base.spec import param
+from ..base.registry import Output
 from ..train.line import Line, belt_resistance, in_neutral_section
 from ..train.plant import Envelope, TrainParameters, basic_resistance, force_limits
 from .limiter import clamp
-from .train_model import NominalModel, NominalState, nominal_act, nominal_train
+from .train_model import (NominalModel, NominalState, known_resistance, nominal_act,
+                          nominal_train)
 
 PARAMETERS = (
     param("estimator.enabled", False, "estimate the real train's mass and running resistance "
-          "on board (off: the nominal train is used)", "controller"),
+          "on board, for the controllers that use it (linear_adrc, pid, gpc: the resistance in "
+          "their models and feedforward, the estimated envelope in the GPC's constraints); off: "
+          "the load weighing's mass and the nominal resistance", "controller"),
     param("estimator.resistance_sigma", 0.2, "prior uncertainty (1 sigma) of the running "
           "resistance over the nominal", "controller", 0.001, 5.0),
     param("estimator.speed_noise", 0.01, "speed sensor noise and resolution together, "
@@ -246,12 +247,7 @@ def estimated_resistance(settings: EstimatorSettings, state: EstimatorState, spe
                          position: float) -> float:
     """Basic (scaled by the estimate) plus line resistance at `speed` (m/s) with the head
     at `position` (m), N/kN: what train_model.known_resistance gives for the nominal."""
-    train = settings.actuator.train
-    resistance = state.resistance_scale * basic_resistance(speed, train.davis_a, train.davis_b,
-                                                           train.davis_c)
-    if settings.actuator.on_line:
-        resistance += belt_resistance(settings.actuator.line, position, train.length)
-    return resistance
+    return known_resistance(settings.actuator, speed, position, state.resistance_scale)
 
 
 @jitable
@@ -416,7 +412,54 @@ def _near_neutral_edge(settings: EstimatorSettings, position: float, speed: floa
             or in_neutral_section(model.line, end + margin) != inside)
 
 
-ESTIMATE_COLUMNS = ("mass_factor", "mass_sigma", "resistance_scale", "resistance_sigma")
+class OnBoardEstimator(NamedTuple):
+    """The estimator as a controller carries it in its settings (its state in the
+    controller's state): off, the departure state stays, the load weighing's mass and
+    the nominal resistance, and the controller runs as without one, to the bit."""
+
+    settings: EstimatorSettings
+    enabled: bool
+
+
+ESTIMATE_OUTPUTS = (
+    Output("mass_factor", "1", "the real mass over the nominal as estimated on board (the "
+           "load weighing's until the train runs at its envelope)"),
+    Output("mass_sigma", "1", "its uncertainty, 1 sigma"),
+    Output("resistance_scale", "1", "the real basic running resistance over the nominal, as "
+           "estimated on board"),
+    Output("resistance_sigma", "1", "its uncertainty, 1 sigma"),
+)
+ESTIMATE_COLUMNS = tuple(output.name for output in ESTIMATE_OUTPUTS)
+
+
+def on_board_estimator(values, period: float, line: Line | None = None
+                       ) -> tuple[OnBoardEstimator, EstimatorState]:
+    """A controller's estimator (estimator.enabled) from the run's values: the nominal
+    train (plant.*), the load weighing's train.mass_reading as its mass prior, departing
+    from plant.initial_position (m)."""
+    train = TrainParameters.from_values(values)
+    settings, state = estimator_of(values, train, period, values["train.mass_reading"], line,
+                                   values["plant.initial_position"], 0.0)
+    return OnBoardEstimator(settings, values["estimator.enabled"]), state
+
+
+@jitable
+def on_board_step(estimator: OnBoardEstimator, state: EstimatorState, command: float,
+                  measured_speed: float) -> EstimatorState:
+    """estimator_step when the estimator is on; else the state as it is."""
+    if estimator.enabled:
+        return estimator_step(estimator.settings, state, command, measured_speed)
+    return state
+
+
+@jitable
+def estimates(state: EstimatorState) -> tuple[float, float, float, float]:
+    """ESTIMATE_OUTPUTS' values."""
+    mass, mass_sigma = estimated_mass_factor(state)
+    scale, scale_sigma = estimated_resistance_scale(state)
+    return mass, mass_sigma, scale, scale_sigma
+
+
 
 
 @jitable
@@ -426,8 +469,7 @@ def estimate_rows(settings: EstimatorSettings, state: EstimatorState, commands: 
     rows[k] the estimates after step k, ESTIMATE_COLUMNS; returns the last state."""
     for k in range(len(commands)):
         state = estimator_step(settings, state, commands[k], measured_speeds[k])
-        rows[k, 0], rows[k, 1] = estimated_mass_factor(state)
-        rows[k, 2], rows[k, 3] = estimated_resistance_scale(state)
+        rows[k, 0], rows[k, 1], rows[k, 2], rows[k, 3] = estimates(state)
     return state
 
 

@@ -25,6 +25,12 @@ Every step k (y(k) the measured speed, m/s; u the command, N/kN):
 The models see the effective command: the command clipped to the nominal train's
 envelope at the measured speed (core/control/identification.py: why).
 
+With the on-board estimator (estimator.enabled, core/control/estimation.py), the
+constraints take the estimated envelope (the nominal over the estimated mass), and
+the ARX constant the acceleration the estimated resistance adds to the nominal's,
+d = -xi (r - 1) w0(y(k)): a constant acceleration d ramps y by h d a step when
+c grows by h d sum_j j a_j (the models' a sum to ~1), whatever the model.
+
 Online correction (LSSVM, `gpc.correction`): after y(k) arrives, a sample whose
 one-step prediction error exceeds `gpc.correction_threshold` (the paper's 2 km/h)
 joins the model (core/control/lssvm.py: factor update, bounded window); deterministic, so a
@@ -33,6 +39,7 @@ node and simulate() stay bit-identical.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -45,6 +52,8 @@ from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param
 from ..base.units import KMH
 from ..train.plant import force_limits
+from .estimation import (ESTIMATE_OUTPUTS, OnBoardEstimator, estimated_force_limits, estimates,
+                         on_board_estimator, on_board_step)
 from .limiter import CommandLimiter, holds
 from .lssvm import load_model
 
@@ -254,13 +263,17 @@ def _push(history: np.ndarray, value: float) -> None:
 
 class GPC(Controller):
     def __init__(self, settings: GPCSettings, model, period: float, limiter: CommandLimiter,
-                 train, envelope: bool):
+                 train, envelope: bool, estimator: tuple):
+        """`estimator`: on_board_estimator's settings and departure state."""
         if settings.horizon <= model.delay:
             raise ScenarioError(f"gpc.horizon = {settings.horizon} does not reach past the "
                                 f"model's input delay of {model.delay} steps")
         self.s, self.model, self.limiter = settings, model, limiter
+        self.train, self.period = train, period
         # the nominal train's traction and brake envelope (None: no envelope)
         self.envelope = train.envelope if envelope else None
+        self.estimator: OnBoardEstimator = estimator[0]
+        self.estimated = estimator[1]
         self.nu = min(settings.control_horizon, settings.horizon)
         self.bias_gain = period / (settings.bias_filter + period) if settings.bias_filter else 0.0
         self.speeds = np.zeros(0)
@@ -287,11 +300,20 @@ class GPC(Controller):
                                self.commands, self.s.horizon, self.nu)
 
     def force_range(self, speed: float) -> tuple[float, float]:
-        """(brake, traction) the nominal train can apply at this speed, N/kN (unbounded
-        without an envelope)."""
+        """(brake, traction) the train can apply at this speed, N/kN: the nominal's, or
+        as estimated on board (unbounded without an envelope)."""
         if self.envelope is None:
             return -math.inf, math.inf
+        if self.estimator.enabled:
+            return estimated_force_limits(self.estimator.settings, self.estimated, speed)
         return force_limits(speed, self.envelope)
+
+    def estimated_resistance_change(self, arx: Arx) -> float:
+        """What the ARX constant gains from the estimated resistance (module docstring)."""
+        train, speed = self.train, self.speeds[-1]
+        acceleration = -train.xi * (self.estimated.resistance_scale - 1.0) * train.resistance(
+            speed)
+        return self.period * acceleration * float(np.arange(1, len(arx.a) + 1) @ arx.a)
 
     def step(self, target: float, measured: float, horizon) -> ControllerOutput:
         s = self.s
@@ -300,6 +322,9 @@ class GPC(Controller):
         _push(self.speeds, measured)
         error = self._learn(target, measured)
         model_arx = self.model.linearise(self.speeds, self.commands)
+        if self.estimator.enabled:  # the model's own prediction and error include it
+            model_arx = dataclasses.replace(
+                model_arx, c=model_arx.c + self.estimated_resistance_change(model_arx))
         free, matrix = self._responses(model_arx, self.bias)
         reference = np.asarray(horizon[1:s.horizon + 1], dtype=float)
         if s.berthing_speed > 0.0:
@@ -317,7 +342,9 @@ class GPC(Controller):
         _push(self.commands, brake if u < brake else traction if u > traction else u)
         self.expected = model_arx.predict(self.speeds, self.commands)
         predicted = free[0] + matrix[0, 0] * (u - previous)
-        return ControllerOutput(u, (predicted, error, self.bias, float(self.added)))
+        self.estimated = on_board_step(self.estimator, self.estimated, u, measured)
+        return ControllerOutput(u, (predicted, error, self.bias, float(self.added),
+                                    *estimates(self.estimated)))
 
     def _learn(self, target: float, measured: float) -> float:
         """The model's own one-step error (without the fed-back bias), fed back and to
@@ -380,7 +407,8 @@ def _build(values, context, limiter: CommandLimiter) -> GPC:
             model = MultiModel(model.lssvm.layout, model.arx_centres, model.arx_width,
                                model.arx_coefficients)
     return GPC(settings, model, context.period, limiter, context.train,
-               values["plant.envelope"])
+               values["plant.envelope"],
+               on_board_estimator(values, context.period, context.line))
 
 
 def model_for_run(values, context):
@@ -407,7 +435,9 @@ GPC_CONTROLLER = Component(
     (Output("predicted_speed", "m/s", "the model's prediction of y(k+1) under u(k)"),
      Output("model_error", "m/s", "one-step prediction error y(k) - y(k|k-1)"),
      Output("bias", "m/s", "filtered one-step residual fed back into the prediction"),
-     Output("samples_added", "1", "samples the online correction has added so far")),
+     Output("samples_added", "1", "samples the online correction has added so far"),
+     *ESTIMATE_OUTPUTS),
     search_space=(("gpc.q", 0.1, 100.0), ("gpc.r", 1e-5, 1e-1), ("gpc.bias_filter", 0.0, 20.0)),
     # the mechanistic model needs no model file
-    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 1), ("controller.preview", 1)))
+    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 1), ("controller.preview", 1)),
+    estimates=True)

@@ -5,7 +5,8 @@
 * feedforward, weighted by `feedforward` (0 off, 1 full): the command the nominal
   train (the run context's model) needs to follow the plan, a_r / xi + w0(r), with
   a_r the planned acceleration at the tracked target from the preview horizon,
-  (r_k+N - r_k+N-1) / h (0 without preview);
+  (r_k+N - r_k+N-1) / h (0 without preview), w0 scaled by the on-board estimate of
+  the resistance (core/control/estimation.py; 1 with the estimator off);
 * derivative on the measurement, not on the error (a target step gives no kick),
   through a first-order filter of time constant `tf` (backward Euler);
 * integral with back-calculation anti-windup: while the limiter cuts the command,
@@ -21,6 +22,8 @@ from ..base.kernels import jitable
 from ..base.registry import Component, Output
 from ..base.spec import param, settings
 from ..train.plant import TrainConstants, basic_resistance
+from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator, estimates,
+                         on_board_estimator, on_board_step)
 from .limiter import LimiterSettings, limit_command
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 
@@ -49,28 +52,31 @@ class PIDSettings(NamedTuple):
     gains: PIDGains
     period: float  # s
     train: TrainConstants  # the nominal train (the feedforward's model)
+    estimator: OnBoardEstimator
 
 
 class PIDState(NamedTuple):
-    integral: float = 0.0  # N/kN
-    filtered: float = 0.0  # m/s, the measurement through the derivative's filter
+    integral: float  # N/kN
+    filtered: float  # m/s, the measurement through the derivative's filter
+    estimator: EstimatorState
 
 
 @jitable
 def pid_start(settings: PIDSettings, state: PIDState, target: float, measured: float
               ) -> PIDState:
-    return PIDState(state.integral, measured)
+    return PIDState(state.integral, measured, state.estimator)
 
 
 @jitable
 def pid_step(settings: PIDSettings, state: PIDState, target: float, measured: float, horizon,
              last: float, limits: LimiterSettings):
     """One step (ControllerSteps.step); outputs feedforward, proportional, integral (after
-    the step), derivative."""
+    the step), derivative and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, train = settings.gains, settings.period, settings.train
     planned_acceleration = (horizon[-1] - horizon[-2]) / h if len(horizon) > 1 else 0.0
-    feedforward = g.feedforward * (planned_acceleration / train.xi + basic_resistance(
-        target, train.davis_a, train.davis_b, train.davis_c))
+    feedforward = g.feedforward * (
+        planned_acceleration / train.xi + state.estimator.resistance_scale * basic_resistance(
+            target, train.davis_a, train.davis_b, train.davis_c))
     previous = state.filtered
     filtered = previous + h / (g.tf + h) * (measured - previous)
     derivative = -g.kd * (filtered - previous) / h
@@ -79,20 +85,29 @@ def pid_step(settings: PIDSettings, state: PIDState, target: float, measured: fl
     raw = feedforward + proportional + state.integral + derivative
     u = limit_command(raw, target, measured, last, limits)
     integral = state.integral + h * (g.ki * error + g.kt * (u - raw))
-    return u, (feedforward, proportional, integral, derivative), PIDState(integral, filtered)
+    estimator = on_board_step(settings.estimator, state.estimator, u, measured)
+    mass, mass_sigma, resistance_scale, resistance_sigma = estimates(estimator)
+    return u, (feedforward, proportional, integral, derivative, mass, mass_sigma,
+               resistance_scale, resistance_sigma), PIDState(integral, filtered, estimator)
 
 
 PID_STEPS = ControllerSteps(pid_start, pid_step, PIDState)
 
 
+def _pid(values, context, limiter) -> SteppedController:
+    on_board, estimated = on_board_estimator(values, context.period, context.line)
+    return SteppedController(PID_STEPS, PIDSettings(
+        settings(PIDGains, "pid", values), context.period, context.train.constants(),
+        on_board), limiter, PIDState(0.0, 0.0, estimated))
+
+
 PID_CONTROLLER = Component(
-    "pid", "PID with nominal-model feedforward and anti-windup", PARAMETERS,
-    lambda values, context, limiter: SteppedController(PID_STEPS, PIDSettings(
-        settings(PIDGains, "pid", values), context.period, context.train.constants()), limiter),
+    "pid", "PID with nominal-model feedforward and anti-windup", PARAMETERS, _pid,
     (Output("feedforward", "N/kN", "nominal-model feedforward"),
      Output("proportional", "N/kN", "proportional term"),
      Output("integral", "N/kN", "integrator state (after this step)"),
-     Output("derivative", "N/kN", "derivative term on the filtered measurement")),
+     Output("derivative", "N/kN", "derivative term on the filtered measurement"),
+     *ESTIMATE_OUTPUTS),
     search_space=(("pid.kp", 1.0, 1000.0), ("pid.ki", 0.0, 500.0), ("pid.kd", 0.0, 500.0),
                   ("pid.tf", 0.01, 2.0), ("pid.kt", 0.0, 20.0), ("pid.feedforward", 0.0, 1.5)),
-    state_paths=STATE_PATHS, steps=PID_STEPS)
+    state_paths=STATE_PATHS, steps=PID_STEPS, estimates=True)

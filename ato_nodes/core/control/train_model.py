@@ -100,10 +100,13 @@ def nominal_advance(model: NominalModel, state: NominalState, command: float, sp
 
 
 @jitable
-def known_resistance(model: NominalModel, speed: float, position: float) -> float:
-    """Basic plus line resistance the model knows at `speed` and `position`, N/kN."""
+def known_resistance(model: NominalModel, speed: float, position: float,
+                     basic_scale: float) -> float:
+    """Basic resistance times `basic_scale` (the real over the nominal, as estimated on
+    board; 1: the nominal's) plus line resistance at `speed` and `position`, N/kN."""
     train = model.train
-    resistance = basic_resistance(speed, train.davis_a, train.davis_b, train.davis_c)
+    resistance = basic_scale * basic_resistance(speed, train.davis_a, train.davis_b,
+                                                train.davis_c)
     if model.on_line:
         resistance += belt_resistance(model.line, position, train.length)
     return resistance
@@ -112,18 +115,19 @@ def known_resistance(model: NominalModel, speed: float, position: float) -> floa
 @jitable
 def nominal_predict(model: NominalModel, state: NominalState, speed: float,
                     unexplained: float, gain: float, steps: int, held: float,
-                    resisted: bool) -> float:
+                    resisted: bool, basic_scale: float) -> float:
     """The speed `steps` periods from now, from `speed` now: the commands inside the
     dead time act in turn, then `held`; acceleration gain (force - known resistance) +
     `unexplained` (m/s^2, an observer's estimate of the rest; without `resisted` it
-    holds the resistance too, and the model's is left out)."""
+    holds the resistance too, and the model's is left out; `basic_scale` as for
+    known_resistance)."""
     h, lag_state, position = model.period, state.lag_state, state.position
     pending = state.pending
     for i in range(steps):
         command = pending[(state.oldest + i) % len(pending)] if i < len(pending) else held
         lag_state, mean = nominal_act(model, lag_state, command, speed, position)
         if resisted:
-            mean -= known_resistance(model, speed, position)
+            mean -= known_resistance(model, speed, position, basic_scale)
         acceleration = gain * mean + unexplained
         position += h * speed
         speed += h * acceleration
