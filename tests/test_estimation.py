@@ -201,3 +201,16 @@ def test_a_controller_kind_without_the_estimator_refuses_it_in_one_line():
     with pytest.raises(ScenarioError, match="does not use the on-board estimator") as caught:
         prepare("seed000", ["estimator.enabled=true"])
     assert "\n" not in str(caught.value)
+
+
+def test_the_recorded_estimates_are_the_estimators_over_the_recorded_run():
+    """What the controller carries in its loop is what estimate_series gives offline
+    over the commands and measured speeds it recorded (scripts/estimator_accuracy.py)."""
+    values, series = metro_run("plant.mass_factor=1.3", "plant.resistance_factor=1.2",
+                               "estimator.enabled=true")
+    on_board, state = estimation.on_board_estimator(values, values["run.period"],
+                                                    load_line(values["line.file"]))
+    offline, _ = estimate_series(on_board.settings, state, series["command"],
+                                 series["measured_speed"])
+    for name, values_offline in offline.items():
+        assert np.array_equal(values_offline, series[name]), name
