@@ -594,7 +594,8 @@ class Markup(str):
 
 
 def markdown_report(reports: list[RunReport], rows: list[VerdictRow],
-                    figures: list[Figure]) -> str:
+                    figures: list[Figure], sections: list[str] = ()) -> str:
+    """`sections`: Markdown lines after the verdict and notes (the journeys')."""
     labels = [r.label for r in reports]
     lines = ["# ATO run report", ""]
     for report in reports:
@@ -616,7 +617,7 @@ def markdown_report(reports: list[RunReport], rows: list[VerdictRow],
         lines += _markdown_rows(["index", "requirement"] + labels, [
             [row.heading, row.requirement] + [Markup(" ".join(filter(None, (
                 md_text(text), MARK[status])))) for text, status in row.cells] for row in rows])
-    lines += [""] + [f"- {md_text(note)}" for note in report_notes(reports)]
+    lines += [""] + [f"- {md_text(note)}" for note in report_notes(reports)] + list(sections)
     for figure in figures:
         title = md_text(figure.title)
         lines += ["", f"## {title}", "", f"![{title}]({figure.path.name})"]

@@ -394,7 +394,9 @@ def page_sections(reports: list[RunReport], rows: list[VerdictRow]) -> list[str]
 
 
 def write_html(reports: list[RunReport], rows: list[VerdictRow], tunings: list[Tuning],
-               path: Path) -> Path:
+               path: Path, sections: list[str] = (), more_figures: list[tuple] = ()) -> Path:
+    """`sections` (HTML) follow the verdict, `more_figures` ((title, figure): the
+    journeys') the distance figure."""
     figures = []  # (title, figure, scripts once drawn)
     if reports:
         figures.append(("Against time (zoom any subplot: all follow; report.html#t=START:END "
@@ -402,11 +404,12 @@ def write_html(reports: list[RunReport], rows: list[VerdictRow], tunings: list[T
         distance = distance_figure(reports)
         if distance is not None:
             figures.append(("Against distance, over the line", distance, []))
+        figures += [(title, figure, []) for title, figure in more_figures]
     if tunings:
         figures.append(("Tuning convergence", convergence_figure(tunings), []))
     parts = ["<!doctype html><html><head><meta charset='utf-8'><title>ATO run report</title>",
              f"<style>{STYLE}</style></head><body><h1>ATO run report</h1>"]
-    parts += page_sections(reports, rows)
+    parts += page_sections(reports, rows) + list(sections)
     for number, (title, figure, scripts) in enumerate(figures):
         parts.append(f"<h2>{html.escape(title)}</h2>")
         parts.append(figure.to_html(full_html=False, include_plotlyjs=number == 0,

@@ -30,7 +30,8 @@ def encode_line(text: str) -> str:
 
 # Other files a run reads, kept in the bag as <name>.sha256 and <name>.base64, so a
 # bag re-runs without them (the line is kept as LINE_BASE64, which the scorer reads).
-KEPT_FILES = ("profile.table.file", "profile.strategy.file", "gpc.model")
+KEPT_FILES = ("profile.table.file", "profile.strategy.file", "gpc.model",
+              "profile.journey.timetable")
 
 
 def kept_files(values: dict) -> dict[str, str]:
