@@ -1,6 +1,6 @@
 """The journey a run drove and its per-station indices, from the run's parameters and
 series alone (a bag's or an in-process run's): the report (ato_nodes.report_journey)
-and scripts/robustness.py read a journey through here.
+and scripts/robustness.py (score_with_journey) read a journey through here.
 
 A journey run (profile.kind journey) names its timetable in profile.journey.timetable;
 its bag keeps the file's copy (core/run/scoring.KEPT_FILES) beside the line's, so a bag
@@ -11,6 +11,7 @@ not on whatever files that machine has under those names.
 from __future__ import annotations
 
 import base64
+import math
 import tempfile
 from pathlib import Path
 
@@ -18,8 +19,10 @@ import numpy as np
 import yaml
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.run.scoring import LINE_BASE64, common_steps, energy_terms, kept_file
-from ato_nodes.core.scoring.journey import JourneyIndices, journey_indices
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.scoring import (LINE_BASE64, common_steps, energy_terms, kept_file,
+                                        score_series)
+from ato_nodes.core.scoring.journey import STOPPED, JourneyIndices, journey_indices
 from ato_nodes.core.targets.timetable import Timetable, load_timetable
 
 TIMETABLE = "profile.journey.timetable"
@@ -72,3 +75,29 @@ def run_journey(series: dict[str, np.ndarray], parameters: dict, timetable: Time
     an interrupted run's stations ahead are not reached). ScenarioError (one line)
     when the run lacks a series they need."""
     return journey_indices(common_steps(series), timetable, **energy_terms(parameters))
+
+
+# The worst station of a journey run, as studies count it (inf: a station missed or not
+# reached, which no bound admits).
+WORST_STOP, WORST_ARRIVAL = "journey_worst_stop_m", "journey_worst_arrival_s"
+
+
+def worst_stations(indices: JourneyIndices) -> dict[str, float]:
+    """The largest |stop error| (m) and |arrival lateness| (s) over the stations after
+    the origin; inf if one of them has no stop."""
+    stations = indices.stations[1:]
+    if any(station.outcome != STOPPED for station in stations):
+        return {WORST_STOP: math.inf, WORST_ARRIVAL: math.inf}
+    return {WORST_STOP: max(abs(station.stop_error) for station in stations),
+            WORST_ARRIVAL: max(abs(station.arrival_lateness) for station in stations)}
+
+
+def score_with_journey(values: dict) -> dict:
+    """score_series of the run of `values` in-process, with worst_stations for a
+    journey run (a study's worker: the series stay in its process)."""
+    series = simulate(values)
+    indices = score_series(series, values)
+    timetable = run_timetable(values)
+    if timetable is not None:
+        indices.update(worst_stations(run_journey(series, values, timetable)))
+    return indices

@@ -19,7 +19,8 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.targets.timetable import load_timetable
 from ato_nodes.core.train.line import Section
-from ato_nodes.journeys import TIMETABLE, run_timetable
+from ato_nodes.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journey,
+                                run_timetable, worst_stations)
 from ato_nodes.report import write_report
 from ato_nodes.report_journey import journey_figure, journey_reports, station_rows
 from ato_nodes.analysis import judge
@@ -142,3 +143,17 @@ def test_a_run_lacking_a_series_is_noted_and_other_runs_have_no_journey(journey,
                                tmp_path / "report")
     assert "## Journey" not in markdown.read_text()
 
+
+
+def test_a_study_counts_a_journey_by_its_worst_station(journey):
+    series, values = journey.series, journey.parameters
+    timetable = run_timetable(values)
+    cut = worst_stations(run_journey(series, values, timetable))
+    assert cut == {WORST_STOP: np.inf, WORST_ARRIVAL: np.inf}  # Central not reached
+    reached = dataclasses.replace(timetable, stops=timetable.stops[:3])
+    worst = worst_stations(run_journey(series, values, reached))
+    stops = [(stop, standstill_near(series, stop.position)) for stop in reached.stops[1:]]
+    assert worst[WORST_STOP] == pytest.approx(max(
+        abs(series["position"][last] - stop.position) for stop, (_, last) in stops))
+    assert worst[WORST_ARRIVAL] == pytest.approx(max(
+        abs(series["t"][first] - stop.arrival) for stop, (first, _) in stops))
