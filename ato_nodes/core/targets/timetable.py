@@ -35,7 +35,8 @@ import yaml
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import resolve_file
-from ..train.line import Line, Section, Station, _entries, _error, _number, load_line
+from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
+                          node_error, node_number)
 from ..train.plant import TrainParameters
 from .profiles import ato_curve
 
@@ -95,13 +96,8 @@ def load_timetable(path: str | Path) -> Timetable:
     text = yamlfile.read_text(path, "timetable file")
     yamlfile.check_structure(text, str(path))
     root = yaml.compose(text)
-    if not isinstance(root, yaml.MappingNode):
-        raise ScenarioError(f"{path}: a timetable file is a mapping (line, train, stops)")
-    fields = {}
-    for key_node, value_node in root.value:
-        if key_node.value not in TOP_KEYS:
-            raise _error(path, key_node, f"unknown key {key_node.value!r}")
-        fields[key_node.value] = value_node
+    fields = mapping_fields(path, root, TOP_KEYS,
+                            "a timetable file is a mapping (line, train, stops)")
     missing = sorted(TOP_KEYS - set(fields))
     if missing:
         raise ScenarioError(f"{path}: missing {missing[0]!r}")
@@ -118,18 +114,18 @@ def _text(node: yaml.Node) -> str:
 def _stops(path, node: yaml.Node, line: Line) -> tuple[Stop, ...]:
     """The stops, each a station of the line, in its order, with the times its place in
     the journey needs, each later than the one before."""
-    entries = _entries(path, node, "stops")
+    entries = node_entries(path, node, "stops")
     if len(entries) < 2:
-        raise _error(path, node, "stops: a journey needs at least two stops")
+        raise node_error(path, node, "stops: a journey needs at least two stops")
     stations = {station.name: station for station in line.stations}
     stops: list[Stop] = []
     for index, (item, entry) in enumerate(entries):
         unknown = sorted(set(entry) - STOP_KEYS)
         if unknown:
-            raise _error(path, item, f"stops: unknown key {unknown[0]!r}")
+            raise node_error(path, item, f"stops: unknown key {unknown[0]!r}")
         name = _text(entry["station"]) if "station" in entry else ""
         if name not in stations:
-            raise _error(path, item, f"stops: {name!r} is not a station of the line "
+            raise node_error(path, item, f"stops: {name!r} is not a station of the line "
                          f"(its stations: {', '.join(stations)})")
         times = {key: _time(path, item, entry, key, index, len(entries))
                  for key in ("arrival", "departure")}
@@ -147,28 +143,28 @@ def _time(path, item: yaml.Node, entry: dict, key: str, index: int, count: int
     needed = index > 0 if key == "arrival" else index < count - 1
     where = {0: "the first stop", count - 1: "the last stop"}.get(index, "a stop on the way")
     if needed and key not in entry:
-        raise _error(path, item, f"stops: {where} needs its {key}")
+        raise node_error(path, item, f"stops: {where} needs its {key}")
     if not needed and key in entry:
-        raise _error(path, entry[key], f"stops: {where} has no {key}")
-    return _number(path, entry[key], key) if needed else None
+        raise node_error(path, entry[key], f"stops: {where} has no {key}")
+    return node_number(path, entry[key], key) if needed else None
 
 
 def _check_order(path, item, stop: Stop, previous: Stop | None, station: Station) -> None:
     if stop.arrival is not None and stop.departure is not None:
         if stop.departure < stop.arrival:
-            raise _error(path, item, f"stops: times do not increase: departure "
+            raise node_error(path, item, f"stops: times do not increase: departure "
                          f"{stop.departure:g} s from {stop.station} is before its arrival "
                          f"{stop.arrival:g} s")
         if stop.dwell < station.dwell:
-            raise _error(path, item, f"stops: dwell {stop.dwell:g} s at {stop.station} is "
+            raise node_error(path, item, f"stops: dwell {stop.dwell:g} s at {stop.station} is "
                          f"shorter than the station's {station.dwell:g} s (the line file's)")
     if previous is None:
         return
     if stop.position <= previous.position:
-        raise _error(path, item, f"stops: {stop.station} is not after {previous.station} "
+        raise node_error(path, item, f"stops: {stop.station} is not after {previous.station} "
                      "along the line")
     if not stop.arrival > previous.departure:
-        raise _error(path, item, f"stops: times do not increase: arrival {stop.arrival:g} s at "
+        raise node_error(path, item, f"stops: times do not increase: arrival {stop.arrival:g} s at "
                      f"{stop.station} is not after the departure {previous.departure:g} s "
                      f"from {previous.station}")
 

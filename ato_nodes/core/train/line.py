@@ -207,19 +207,14 @@ def parse_line(text: str, path: str | Path = "<line>") -> Line:
         mark = getattr(exc, "problem_mark", None)
         at = f" line {mark.line + 1}" if mark else ""
         raise ScenarioError(f"{path}{at}: malformed YAML") from None
-    if not isinstance(root, yaml.MappingNode):
-        raise ScenarioError(f"{path}: a line file is a mapping (name, length, gradients, ...)")
-    fields = {}
-    for key_node, value_node in root.value:
-        if key_node.value not in TOP_KEYS:
-            raise _error(path, key_node, f"unknown key {key_node.value!r}")
-        fields[key_node.value] = value_node
+    fields = mapping_fields(path, root, TOP_KEYS, "a line file is a mapping (name, length, "
+                                                  "gradients, ...)")
     for required in ("name", "length", "speed_limits"):
         if required not in fields:
             raise ScenarioError(f"{path}: missing {required!r}")
-    length = _number(path, fields["length"], "length", positive=True)
+    length = node_number(path, fields["length"], "length", positive=True)
     if length > MAX_LENGTH:
-        raise _error(path, fields["length"], f"length {length:g} m is beyond {MAX_LENGTH:g} m "
+        raise node_error(path, fields["length"], f"length {length:g} m is beyond {MAX_LENGTH:g} m "
                      "(the longest line a run may have)")
     sections = {name: _sections(path, name, fields.get(name), length) for name in SECTION_KEYS}
     _check_limits_cover(path, fields["speed_limits"], sections["speed_limits"], length)
@@ -228,16 +223,30 @@ def parse_line(text: str, path: str | Path = "<line>") -> Line:
     return Line(
         name=str(yaml.safe_load(yaml.serialize(fields["name"]))), length=length,
         stations=stations,
-        planned_run_time=_number(path, run_time, "planned_run_time", positive=True)
+        planned_run_time=node_number(path, run_time, "planned_run_time", positive=True)
         if run_time is not None else None,
         **sections)
 
 
-def _error(path: Path, node: yaml.Node, message: str) -> ScenarioError:
+def mapping_fields(path: Path, root: yaml.Node, known: frozenset[str] | set[str],
+                   shape: str) -> dict[str, yaml.Node]:
+    """The top-level fields of a file's `root` by key, each a known one; else one line
+    (`shape` says what the file is)."""
+    if not isinstance(root, yaml.MappingNode):
+        raise ScenarioError(f"{path}: {shape}")
+    fields = {}
+    for key_node, value_node in root.value:
+        if key_node.value not in known:
+            raise node_error(path, key_node, f"unknown key {key_node.value!r}")
+        fields[key_node.value] = value_node
+    return fields
+
+
+def node_error(path: Path, node: yaml.Node, message: str) -> ScenarioError:
     return ScenarioError(f"{path} line {node.start_mark.line + 1}: {message}")
 
 
-def _number(path: Path, node: yaml.Node, name: str, positive: bool = False) -> float:
+def node_number(path: Path, node: yaml.Node, name: str, positive: bool = False) -> float:
     value = yaml.safe_load(yaml.serialize(node))
     if isinstance(value, str):  # YAML 1.1 reads 1e9 (no dot) as text
         try:
@@ -245,21 +254,21 @@ def _number(path: Path, node: yaml.Node, name: str, positive: bool = False) -> f
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _error(path, node, f"{name} must be a finite number, not {value!r}")
+        raise node_error(path, node, f"{name} must be a finite number, not {value!r}")
     if positive and not value > 0:
-        raise _error(path, node, f"{name} must be positive, not {value}")
+        raise node_error(path, node, f"{name} must be positive, not {value}")
     return float(value)
 
 
-def _entries(path: Path, node: yaml.Node | None, kind: str):
+def node_entries(path: Path, node: yaml.Node | None, kind: str):
     if node is None:
         return []
     if not isinstance(node, yaml.SequenceNode):
-        raise _error(path, node, f"{kind} must be a list")
+        raise node_error(path, node, f"{kind} must be a list")
     entries = []
     for item in node.value:
         if not isinstance(item, yaml.MappingNode):
-            raise _error(path, item, f"each entry of {kind} is a mapping")
+            raise node_error(path, item, f"each entry of {kind} is a mapping")
         entries.append((item, {k.value: v for k, v in item.value}))
     return entries
 
@@ -267,27 +276,27 @@ def _entries(path: Path, node: yaml.Node | None, kind: str):
 def _sections(path: Path, kind: str, node: yaml.Node | None, length: float) -> tuple:
     value_key, allowed = SECTION_KEYS[kind]
     sections, previous_end = [], None
-    for item, entry in _entries(path, node, kind):
+    for item, entry in node_entries(path, node, kind):
         unknown = sorted(set(entry) - allowed)
         if unknown:
-            raise _error(path, item, f"{kind}: unknown key {unknown[0]!r}")
+            raise node_error(path, item, f"{kind}: unknown key {unknown[0]!r}")
         missing = sorted(allowed - set(entry))
         if missing:
-            raise _error(path, item, f"{kind}: missing {missing[0]!r}")
-        start = _number(path, entry["start"], "start")
-        end = _number(path, entry["end"], "end")
+            raise node_error(path, item, f"{kind}: missing {missing[0]!r}")
+        start = node_number(path, entry["start"], "start")
+        end = node_number(path, entry["end"], "end")
         if end <= start:
-            raise _error(path, item, f"{kind}: section from {start:g} to {end:g} m has no "
+            raise node_error(path, item, f"{kind}: section from {start:g} to {end:g} m has no "
                          "positive length")
         if start < 0 or end > length:
-            raise _error(path, item, f"{kind}: section {start:g}-{end:g} m is off the line "
+            raise node_error(path, item, f"{kind}: section {start:g}-{end:g} m is off the line "
                          f"(0-{length:g} m)")
         if previous_end is not None and start < previous_end:
-            raise _error(path, item, f"{kind}: section starting at {start:g} m overlaps or "
+            raise node_error(path, item, f"{kind}: section starting at {start:g} m overlaps or "
                          f"precedes the one ending at {previous_end:g} m")
         value = 0.0
         if value_key is not None:
-            value = _number(path, entry[value_key], value_key,
+            value = node_number(path, entry[value_key], value_key,
                             positive=value_key in ("radius", "limit"))
         sections.append(Section(start, end, value))
         previous_end = end
@@ -299,29 +308,29 @@ def _check_limits_cover(path, node, limits, length) -> None:
     position = 0.0
     for section in limits:
         if section.start > position:
-            raise _error(path, node, f"speed_limits: no limit between {position:g} and "
+            raise node_error(path, node, f"speed_limits: no limit between {position:g} and "
                          f"{section.start:g} m")
         position = section.end
     if position < length:
-        raise _error(path, node, f"speed_limits: no limit from {position:g} m to the end")
+        raise node_error(path, node, f"speed_limits: no limit from {position:g} m to the end")
 
 
 def _stations(path: Path, node: yaml.Node | None, length: float) -> tuple[Station, ...]:
     stations = []
-    for item, entry in _entries(path, node, "stations"):
+    for item, entry in node_entries(path, node, "stations"):
         unknown = sorted(set(entry) - {"name", "position", "dwell"})
         if unknown:
-            raise _error(path, item, f"stations: unknown key {unknown[0]!r}")
+            raise node_error(path, item, f"stations: unknown key {unknown[0]!r}")
         if "position" not in entry:
-            raise _error(path, item, "stations: missing 'position'")
-        position = _number(path, entry["position"], "position")
+            raise node_error(path, item, "stations: missing 'position'")
+        position = node_number(path, entry["position"], "position")
         if not 0 <= position <= length:
-            raise _error(path, item, f"stations: {position:g} m is off the line")
-        dwell = _number(path, entry["dwell"], "dwell") if "dwell" in entry else 0.0
+            raise node_error(path, item, f"stations: {position:g} m is off the line")
+        dwell = node_number(path, entry["dwell"], "dwell") if "dwell" in entry else 0.0
         if dwell < 0:
-            raise _error(path, entry["dwell"], f"stations: dwell {dwell:g} s is negative")
+            raise node_error(path, entry["dwell"], f"stations: dwell {dwell:g} s is negative")
         name = str(yaml.safe_load(yaml.serialize(entry["name"]))) if "name" in entry else ""
         if stations and position <= stations[-1].position:
-            raise _error(path, item, "stations must be in increasing position order")
+            raise node_error(path, item, "stations must be in increasing position order")
         stations.append(Station(name, position, dwell))
     return tuple(stations)
