@@ -456,10 +456,9 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     and w_r at r's planned position (core/control/train_model.py); with `delay_aware`, F
     is the force the nominal actuator applies and v the speed predicted N steps ahead
     (the commands inside the dead time and lag act first), so the law's error is
-    the one its command can still change. The known resistance's basic part is scaled
-    by the on-board estimate (estimation.py; 1 with the estimator off). The ESO is
-    integrated by backward Euler in closed form, stable for any step. Outputs z1, z2
-    and the estimates (ESTIMATE_OUTPUTS)."""
+    the one its command can still change; the known basic resistance is scaled by the
+    on-board estimate (1 off). The ESO is integrated by backward Euler in closed form,
+    stable for any step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
     scale = state.estimator.resistance_scale
     e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
