@@ -458,11 +458,15 @@ def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
                 if values.get(LINE_BASE64) else None}
         kept.update({name: kept_file(values, name) for name in KEPT_FILES})
         for name, content in kept.items():
-            if content is not None:
-                copy = Path(folder) / Path(values[name]).name
+            if content is not None:  # a folder each: a line and its timetable share a name
+                copy = Path(folder) / name / Path(values[name]).name
+                copy.parent.mkdir()
                 copy.write_bytes(content)
                 values[name] = str(copy)
-        series = simulate(values, changes=run.parameter_changes)
+        try:
+            series = simulate(values, changes=run.parameter_changes)
+        except ScenarioError as exc:
+            raise BagError(f"{run.path}: cannot simulate the run again: {exc}") from None
     steps = len(run.series["t"])
     differ = [name for name, recorded in run.series.items()
               if name != "t" and name in series and not (

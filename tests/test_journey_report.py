@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.bagio import Run
+from ato_nodes.bagio import Run, resimulate
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
@@ -157,3 +157,12 @@ def test_a_study_counts_a_journey_by_its_worst_station(journey):
         abs(series["position"][last] - stop.position) for stop, (_, last) in stops))
     assert worst[WORST_ARRIVAL] == pytest.approx(max(
         abs(series["t"][first] - stop.arrival) for stop, (first, _) in stops))
+
+
+def test_a_journey_bag_runs_again_from_its_kept_line_and_timetable_of_one_name(journey,
+                                                                               tmp_path):
+    """The line and the timetable are both metro-line.yaml: each copy keeps its own."""
+    values = moved(journey, tmp_path).parameters
+    values["line.file"] = str(tmp_path / "elsewhere" / "metro-line.yaml")
+    series, differ = resimulate(Run(journey.path, journey.series, values, {}))
+    assert differ == [] and len(series["t"]) == len(journey.series["t"])

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -195,9 +194,9 @@ def _journey(values, context) -> JourneyPlan:
     if context.line is None:
         raise ScenarioError("profile.kind is journey but line.file is empty")
     timetable = load_timetable(path)
-    if Path(timetable.line_file).resolve() != Path(values["line.file"]).resolve():
+    if timetable.line != context.line:  # by contents: a bag's copies have other paths
         raise ScenarioError(f"timetable {path} is of line {timetable.line_file}, the run's "
-                            f"line.file is {values['line.file']}")
+                            f"line.file is {values['line.file']} (their contents differ)")
     if timetable.train != values["plant.train"]:
         raise ScenarioError(f"timetable {path} is planned for train {timetable.train!r}, the "
                             f"run uses {values['plant.train'] or '(none)'!r}")
