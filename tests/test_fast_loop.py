@@ -144,8 +144,8 @@ def test_every_covered_shipped_scenario_gives_the_python_loops_bits(monkeypatch,
 
 def test_every_run_of_a_kind_calls_one_compiled_signature():
     """So one compilation per controller kind (setup.sh's, or a tuning's before its
-    workers start) serves every compiled run of the checkout: lines or open track,
-    time- or position-indexed targets, dead time or none."""
+    workers start) serves every compiled run of the checkout but journeys: lines or open
+    track, time- or position-indexed targets, dead time or none."""
     loop.warm()
     for scenario, overrides in VARIANTS:
         values = apply_overrides(load_scenario(scenario), ["run.duration=1", *overrides])
@@ -153,7 +153,11 @@ def test_every_run_of_a_kind_calls_one_compiled_signature():
         simulate(values, prune=(RunningIndex("max_abs_error"), 1.0))
     for scenario in COVERED:
         simulate(apply_overrides(load_scenario(scenario), ["run.duration=1"]))
-    assert len(fast_loop._steps.signatures) == len(set(fast_loop.STEPS_BY_STATE))
+    journey_kinds = {values["controller.kind"] for values in map(load_scenario, COVERED)
+                     if values["profile.journey.timetable"]}
+    assert journey_kinds  # and each has a signature of its own: the loop reads its tables
+    assert len(fast_loop._steps.signatures) == len(set(fast_loop.STEPS_BY_STATE)) + len(
+        journey_kinds)
 
 
 def test_warming_takes_any_run_a_tuning_may_start_from():

@@ -19,7 +19,9 @@ scenario the loop covers.
 The controller kind is chosen by the type of its state: controller_start() and
 controller_step() below resolve, while compiling, to the kind's own functions, so
 one loop serves every kind, compiled once per kind (and once for all the kinds
-without compiled steps) and cached on disk (numba keys its cache by the argument
+without compiled steps; once more per kind for journeys, whose tables are an argument of
+their own, None in other runs, so that their loops compile without a journey's code) and
+cached on disk (numba keys its cache by the argument
 types; loop.warm() compiles them all).
 
 A run is computed in chunks of steps, each one call of the compiled loop lasting
@@ -46,8 +48,7 @@ from ..config.schema import NodeValues
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
 from ..targets.profiles import PlanTable, plan_table, table_limit, table_speed
-from ..targets.served import NO_JOURNEY, JourneyState, JourneyTable, journey_limit, journey_speed, \
-    observed
+from ..targets.served import JourneyState, JourneyTable, journey_limit, journey_speed, observed
 from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
 from ..train.plant import (
     TrainConstants,
@@ -121,7 +122,6 @@ class LoopInputs(NamedTuple):
     max_speed: float           # m/s, past it the run has diverged
     line: LineTables           # arrays (empty: the open track)
     plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
-    journey: JourneyTable      # a journey's (no sections: not a journey)
     preview: int               # the horizon entry the controller tracks
     approach_step: float       # m/s, seed 003's stepped approach (0: off)
     settings: Any              # the controller kind's settings NamedTuple
@@ -186,9 +186,10 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     compiled loop lasting about CHUNK_SECONDS; `check(step)` is called before each
     (simulate() raises there once past its deadline)."""
     total = profile.context.steps
-    journey = getattr(profile.context.plan, "journey", NO_JOURNEY)
+    # a journey's tables, else None: the loops of other runs compile without its code
+    journey = getattr(profile.context.plan, "journey", None)
     plan = profile.context.plan.table() if profile.context.plan.position_indexed else None
-    if plan is None and journey is NO_JOURNEY:  # time-indexed; a copy: the loop's one
+    if plan is None and journey is None:  # time-indexed; a copy: the loop's one
         # argument type is a writable array
         targets = horizons(profile).copy()
         plan = plan_table((), ())
@@ -199,14 +200,14 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     rows = np.empty((total, len(COLUMNS)))
     extras = np.empty((total, len(controller.output_names)))
     with _controller_seam(controller) as (settings, controller_state):
-        inputs = _inputs(profile, plant, controller, plan, journey, settings, running_index,
-                         limit)
+        inputs = _inputs(profile, plant, controller, plan, settings, running_index, limit)
         loop = _first_state(profile, plant, controller, controller_state, running_index)
         chunk = FIRST_CHUNK
         while loop.step < total and not loop.ended:
             check(loop.step)
             started = time.perf_counter()
-            loop = _steps(inputs, loop, min(total, loop.step + chunk), targets, rows, extras)
+            loop = _steps(inputs, journey, loop, min(total, loop.step + chunk), targets, rows,
+                          extras)
             elapsed = time.perf_counter() - started
             chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
     running_index.value, running_index.last_t, running_index.last_w = loop.fitness
@@ -225,8 +226,8 @@ def _controller_seam(stage):
         yield slot, slot
 
 
-def _inputs(profile, plant, controller, plan: PlanTable, journey: JourneyTable, settings,
-            running_index, limit: float) -> LoopInputs:
+def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index,
+            limit: float) -> LoopInputs:
     train = plant.train
     total = profile.context.steps
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
@@ -236,7 +237,6 @@ def _inputs(profile, plant, controller, plan: PlanTable, journey: JourneyTable, 
         period=float(train.period), substeps=int(train.substeps), train=train.constants,
         pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
         max_speed=float(plant.max_speed), line=line_arrays(train.line), plan=plan,
-        journey=journey,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
@@ -287,25 +287,26 @@ if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
 
 
 @jitable
-def _plan_horizon(inputs: LoopInputs, journey: JourneyState, step: int, position: float,
-                  horizon) -> None:
+def _plan_horizon(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyState,
+                  step: int, position: float, horizon) -> None:
     """RunContext.horizon of a position-indexed plan, into `horizon`: the plan's
     targets of steps step .. step + N along the planned trajectory from `position`
     (Heun's method, one step per period)."""
     h = inputs.period
-    horizon[0] = _target(inputs, journey, step * h, position)
+    horizon[0] = _target(inputs, journey, state, step * h, position)
     for i in range(1, len(horizon)):
         t, v = (step + i) * h, horizon[i - 1]
-        ahead = _target(inputs, journey, t, position + h * v)
+        ahead = _target(inputs, journey, state, t, position + h * v)
         position += 0.5 * h * (v + ahead)
-        horizon[i] = _target(inputs, journey, t, position)
+        horizon[i] = _target(inputs, journey, state, t, position)
 
 
-@jitable(inline=True)
-def _target(inputs: LoopInputs, journey: JourneyState, t: float, position: float) -> float:
+@jitable
+def _target(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyState, t: float,
+            position: float) -> float:
     """A position-indexed plan's target: a journey's in its state, else the table's."""
-    if len(inputs.journey.departures):
-        return journey_speed(inputs.journey, journey, t, position)
+    if journey is not None:  # pruned while compiling a run that is not a journey
+        return journey_speed(journey, state, t, position)
     return table_speed(inputs.plan, position)
 
 
@@ -319,11 +320,11 @@ def _approach(step_size: float, stair: float, target: float, speed: float):
     return min(stair, target), stair
 
 
-@jitable(inline=True)
-def _speed_limit(inputs: LoopInputs, position: float) -> float:
+@jitable
+def _speed_limit(inputs: LoopInputs, journey: JourneyTable | None, position: float) -> float:
     """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
-    if len(inputs.journey.departures):
-        return journey_limit(inputs.journey, position)
+    if journey is not None:
+        return journey_limit(journey, position)
     if inputs.plan.limits_speed:
         return table_limit(inputs.plan, position)
     if inputs.line.limits_end > inputs.line.tunnels_end:
@@ -331,8 +332,8 @@ def _speed_limit(inputs: LoopInputs, position: float) -> float:
     return math.inf
 
 
-def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows, extras
-                  ) -> LoopState:
+def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopState,
+                  stop: int, targets, rows, extras) -> LoopState:
     """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
     (or the step the run ends at); the state after. `targets` holds every step's
     horizon: given (time-indexed plans) or filled in LOOKAHEAD steps ahead."""
@@ -341,9 +342,9 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
     ended = False
     while k < stop and not ended:
         measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
-        if inputs.plan.grid.shape[1] or len(inputs.journey.departures):  # position-indexed:
-            # the horizons for this position
-            profile = _publish_horizons(inputs, profile, k, plant.position, targets)
+        if inputs.plan.grid.shape[1] or journey is not None:  # position-indexed: the
+            # horizons for this position
+            profile = _publish_horizons(inputs, journey, profile, k, plant.position, targets)
         horizon = targets[k]
         reference = horizon[inputs.preview]
         if k == 0:
@@ -351,7 +352,7 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
         u, outputs, controller = controller_step(inputs.settings, controller, reference,
                                                  measured, horizon, last, inputs.limits)
         last = u
-        _record(inputs, rows[k], k, plant, horizon[0], measured, u)
+        _record(inputs, journey, rows[k], k, plant, horizon[0], measured, u)
         for i in range(len(outputs)):
             extras[k, i] = outputs[i]
         speed = plant.speed
@@ -368,28 +369,28 @@ def _steps_source(inputs: LoopInputs, loop: LoopState, stop: int, targets, rows,
 
 
 @jitable
-def _publish_horizons(inputs: LoopInputs, profile: ProfileState, k: int, position: float,
-                      targets) -> ProfileState:
+def _publish_horizons(inputs: LoopInputs, journey: JourneyTable | None, profile: ProfileState,
+                      k: int, position: float, targets) -> ProfileState:
     """ProfileStage.on_position for a position-indexed plan: the horizons of steps 0 .. 2
     at step 0, of step k + 2 from the extrapolated position after, into `targets`."""
     travel = position - profile.last_position if k else 0.0
     speed = travel / inputs.period
-    stair, journey = profile.stair, profile.journey
-    if len(inputs.journey.departures):
-        journey = observed(inputs.journey, journey, k * inputs.period, position, speed)
+    stair, state = profile.stair, profile.journey
+    if journey is not None:
+        state = observed(journey, state, k * inputs.period, position, speed)
     first = 0 if k == 0 else k + LOOKAHEAD
     for step in range(first, k + LOOKAHEAD + 1):
         if step < len(targets):
-            _plan_horizon(inputs, journey, step,
+            _plan_horizon(inputs, journey, state, step,
                           position + LOOKAHEAD * travel if k else position, targets[step])
             targets[step, 0], stair = _approach(inputs.approach_step, stair,
                                                 targets[step, 0], speed)
-    return ProfileState(position, stair, journey)
+    return ProfileState(position, stair, state)
 
 
 @jitable(inline=True)
-def _record(inputs: LoopInputs, row, k: int, plant: PlantState, target: float,
-            measured: float, command: float) -> None:
+def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: PlantState,
+            target: float, measured: float, command: float) -> None:
     """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command)."""
     train, column, x, v = inputs.train, inputs.columns, plant.position, plant.speed
     line_resistance = belt_resistance(inputs.line, x, train.length)
@@ -402,7 +403,7 @@ def _record(inputs: LoopInputs, row, k: int, plant: PlantState, target: float,
     row[column.force] = plant.force
     row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b, train.davis_c)
     row[column.line_resistance] = line_resistance
-    row[column.speed_limit], row[column.command] = _speed_limit(inputs, x), command
+    row[column.speed_limit], row[column.command] = _speed_limit(inputs, journey, x), command
 
 
 @jitable(inline=True)

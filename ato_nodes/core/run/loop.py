@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..config.components import CONTROLLERS
-from ..config.scenario import apply_overrides, load_scenario
+from ..config.scenario import apply_overrides, load_scenario, scenario_names
 from ..control import lssvm
 from ..config.schema import SPEC_BY_NAME, NodeValues, steps
 from ..scoring.indices import RunningIndex
@@ -84,9 +84,11 @@ def warm(values: dict | None = None) -> None:
     file, by a two-step run of `values` (default: the shipped seed000) with each
     controller kind that has compiled steps, and one of seed000 with the first kind
     without them that names a cheap run (its registry entry's warm_up: those kinds share
-    one signature); and the LSSVM's solves. Every run of a kind calls the loop with the
-    same argument types, so this one compilation per kind serves them all, in every
-    process of this checkout."""
+    one signature), by default also the shipped journeys' kinds (a journey's loop reads
+    its tables: a signature of its own per kind); and the LSSVM's solves. Every other run of
+    a kind calls the loop with the same argument types, so these compilations serve them
+    all, in every process of this checkout."""
+    warm_journeys = values is None  # setup's: a tuning warms its own run's kind
     values = load_scenario("seed000") if values is None else values
     shortest = SPEC_BY_NAME["run.duration"].low
     duration = max(2 * values["run.period"], shortest)
@@ -99,4 +101,17 @@ def warm(values: dict | None = None) -> None:
         simulate(apply_overrides(seed000, {
             "run.duration": 2 * seed000["run.period"], "controller.kind": cheap.kind,
             **dict(cheap.warm_up)}))
+    if warm_journeys:
+        _warm_journeys()
     lssvm.warm()
+
+
+def _warm_journeys() -> None:
+    """A two-step run of the shortest shipped journey of each controller kind (a journey's
+    loop has a signature of its own per kind; building a longer journey's plan is slower)."""
+    journeys = [load_scenario(name) for name in scenario_names()]
+    warmed = set()
+    for journey in sorted(journeys, key=lambda values: values["run.duration"]):
+        if journey["profile.journey.timetable"] and journey["controller.kind"] not in warmed:
+            warmed.add(journey["controller.kind"])
+            simulate(apply_overrides(journey, {"run.duration": 2 * journey["run.period"]}))

@@ -75,10 +75,6 @@ class JourneyTable(NamedTuple):
     berth: float            # m (profile.journey.berth)
 
 
-NO_JOURNEY = JourneyTable(np.empty((3, 0)), np.zeros(1, dtype=np.int64), np.zeros(1),
-                          np.empty(0), np.empty(0), 0.0)  # a run of another plan
-
-
 class JourneyState(NamedTuple):
     """What the profile carries from step to step on a journey."""
 
