@@ -144,8 +144,9 @@ def test_every_covered_shipped_scenario_gives_the_python_loops_bits(monkeypatch,
 
 def test_every_run_of_a_kind_calls_one_compiled_signature():
     """So one compilation per controller kind (setup.sh's, or a tuning's before its
-    workers start) serves every compiled run of the checkout but journeys: lines or open
-    track, time- or position-indexed targets, dead time or none."""
+    workers start) serves every compiled run of the checkout but journeys and runs with
+    the on-board estimator on: lines or open track, time- or position-indexed targets,
+    dead time or none."""
     loop.warm()
     for scenario, overrides in VARIANTS:
         values = apply_overrides(load_scenario(scenario), ["run.duration=1", *overrides])
@@ -156,13 +157,29 @@ def test_every_run_of_a_kind_calls_one_compiled_signature():
     journey_kinds = {values["controller.kind"] for values in map(load_scenario, COVERED)
                      if values["profile.journey.timetable"]}
     assert journey_kinds  # and each has a signature of its own: the loop reads its tables
+    estimating_kinds = {load_scenario(scenario)["controller.kind"] for scenario, overrides
+                        in VARIANTS if "estimator.enabled=true" in overrides}
+    assert estimating_kinds  # each a signature of its own: off, the estimator's settings
+    # and state are None and the kind's loop compiles without its code
     assert len(fast_loop._steps.signatures) == len(set(fast_loop.STEPS_BY_STATE)) + len(
-        journey_kinds)
+        journey_kinds) + len(estimating_kinds)
 
 
 def test_warming_takes_any_run_a_tuning_may_start_from():
     for overrides in (["run.period=0.0001"], ["run.period=10"], ["controller.kind=pid"]):
         loop.warm(apply_overrides(load_scenario("seed000"), overrides))
+
+
+def test_warming_a_run_with_the_estimator_compiles_the_signature_it_calls():
+    """The estimator on is a signature of its own: warm() compiles it for the kinds that
+    use it (and leaves it off for the others, which refuse it)."""
+    values = apply_overrides(load_scenario("seed004-metro-ato"),
+                             ["run.duration=1", "estimator.enabled=true"])
+    loop.warm(values)
+    warmed = len(fast_loop._steps.signatures)
+    simulate(values)
+    simulate(apply_overrides(values, ["controller.kind=pid"]))
+    assert len(fast_loop._steps.signatures) == warmed
 
 
 def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):

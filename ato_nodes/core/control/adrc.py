@@ -46,8 +46,8 @@ from ..base.registry import Component, Output
 from ..base.spec import param, settings
 from ..train.line import Line
 from ..train.plant import TrainParameters
-from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator, estimates,
-                         on_board_estimator, on_board_step)
+from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
+                         on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
 from .limiter import CommandLimiter, LimiterSettings, limit_command
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 from .train_model import (NominalModel, NominalState, known_resistance, nominal_advance,
@@ -423,7 +423,8 @@ class LinearADRCSettings(NamedTuple):
     l2: float
     model: NominalModel    # the nominal train, read with feedforward or delay_aware
     plan: PlanForces       # the plan's forces, read with plan_feedforward
-    estimator: OnBoardEstimator  # its resistance scale read with feedforward
+    estimator: OnBoardEstimator  # its resistance scale read with feedforward (settings
+                                 # None: off)
 
 
 class LinearADRCState(NamedTuple):
@@ -432,7 +433,7 @@ class LinearADRCState(NamedTuple):
     observer_input: float  # F - w over the last period, N/kN
     u_applied: float       # the last command let through
     model: NominalState
-    estimator: EstimatorState
+    estimator: EstimatorState | None  # None: off
 
 
 @jitable
@@ -460,7 +461,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     on-board estimate (1 off). The ESO is integrated by backward Euler in closed form,
     stable for any step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
-    scale = state.estimator.resistance_scale
+    scale = on_board_scale(state.estimator)
     e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
         1.0 + h * settings.l1 + h * h * settings.l2)
     z2 = state.z2 - h * settings.l2 * e
@@ -490,8 +491,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
         force, nominal = nominal_advance(model, state.model, u, measured)
     observer_input = (force if g.delay_aware else u) - resistance
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)
-    mass, mass_sigma, resistance_scale, resistance_sigma = estimates(estimator)
-    return u, (z1, z2, mass, mass_sigma, resistance_scale, resistance_sigma), LinearADRCState(
+    return u, (z1, z2) + on_board_estimates(settings.estimator, estimator), LinearADRCState(
         z1, z2, observer_input, u, nominal, estimator)
 
 
@@ -499,18 +499,26 @@ LINEAR_ADRC_STEPS = ControllerSteps(linear_adrc_start, linear_adrc_step, LinearA
 
 
 def linear_adrc_of(gains: LinearADRCGains, period: float, limiter: CommandLimiter,
-                   train: TrainParameters, estimator: tuple[OnBoardEstimator, EstimatorState],
+                   train: TrainParameters,
+                   estimator: tuple[OnBoardEstimator, EstimatorState | None],
                    position: float = 0.0, line: Line | None = None,
                    plan: PlanForces | None = None) -> SteppedController:
     """The linear ADRC with the nominal model of `train` on `line` from `position`, the
     on-board `estimator` (on_board_estimator's settings and state) and the plan's
     forces, with plan_feedforward."""
-    model, nominal = nominal_train(train, period, position, line)
-    on_board, estimated = estimator
+    return _linear_adrc(gains, limiter, nominal_train(train, period, position, line),
+                        estimator, plan)
+
+
+def _linear_adrc(gains: LinearADRCGains, limiter: CommandLimiter,
+                 nominal: tuple[NominalModel, NominalState],
+                 estimator: tuple[OnBoardEstimator, EstimatorState | None],
+                 plan: PlanForces | None) -> SteppedController:
+    (model, start), (on_board, estimated) = nominal, estimator
     return SteppedController(LINEAR_ADRC_STEPS, LinearADRCSettings(
-        gains, period, 2.0 * gains.omega_o, gains.omega_o ** 2, model,
+        gains, model.period, 2.0 * gains.omega_o, gains.omega_o ** 2, model,
         plan if plan is not None else plan_forces(), on_board), limiter,
-        LinearADRCState(0.0, 0.0, 0.0, 0.0, nominal, estimated))
+        LinearADRCState(0.0, 0.0, 0.0, 0.0, start, estimated))
 
 
 def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
@@ -522,9 +530,10 @@ def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
                                 f"with forces (profile.kind strategy), not "
                                 f"{values['profile.kind']}")
         plan = plan_forces(context.plan)
-    return linear_adrc_of(gains, context.period, limiter, context.train,
-                          on_board_estimator(values, context.period, context.line),
-                          values["plant.initial_position"], context.line, plan)
+    nominal = nominal_train(context.train, context.period, values["plant.initial_position"],
+                            context.line)  # the estimator's model shares its line tables
+    return _linear_adrc(gains, limiter, nominal, on_board_estimator(
+        values, context.period, context.line, nominal[0]), plan)
 
 
 HAN_ADRC = Component(

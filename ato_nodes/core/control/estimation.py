@@ -61,19 +61,24 @@ m, theta and r dimensionless; the covariance is over (v m/s, theta, r).
 
 How the controllers use it
 -------------------------
-* on_board_estimator(values, period, line) builds it once per run (OnBoardEstimator in
-  the controller's settings, the EstimatorState in its state): the nominal train, the
-  load weighing's train.mass_reading (scenario.weighed: the plant side's load cell, the
-  one place the real mass is read) as the mass prior, its error
-  train.load_weighing_error.
+* on_board_estimator(values, period, line, model) builds it once per run (OnBoardEstimator
+  in the controller's settings, the EstimatorState in its state): the nominal train
+  (`model`: the controller's nominal model, whose line tables it shares), the load
+  weighing's train.mass_reading (scenario.weighed: the plant side's load cell, the one
+  place the real mass is read) as the mass prior, its error train.load_weighing_error.
+  Off (estimator.enabled false), its settings and its state are None: compiled code
+  prunes the estimator's branches while compiling (numba drops a branch on an argument
+  that is None), so a run without it compiles without its code and carries none of its
+  arrays from step to step.
 * Each period, after the command u is sent: state = on_board_step(estimator, state, u,
-  measured_speed) (estimator_step when estimator.enabled, else the state kept).
-* The resistance scale enters train_model.known_resistance as its basic_scale (the
-  linear ADRC's feedforward, observer input and prediction; the PID's feedforward; the
-  GPC's prediction); estimated_force_limits(settings, state, speed) is the envelope of
-  the GPC's constraints. A scale of 1 multiplies exactly, so a controller with the
-  estimator off gives the bits it gave before it had one.
-* estimates(state) are the controllers' recorded outputs ESTIMATE_OUTPUTS.
+  measured_speed) (estimator_step when on, else None kept).
+* The resistance scale (on_board_scale: 1 off) enters train_model.known_resistance as its
+  basic_scale (the linear ADRC's feedforward, observer input and prediction; the PID's
+  feedforward; the GPC's prediction); estimated_force_limits(settings, state, speed) is
+  the envelope of the GPC's constraints. A scale of 1 multiplies exactly, so a controller
+  with the estimator off gives the bits it gave before it had one.
+* on_board_estimates(estimator, state) are the controllers' recorded outputs
+  ESTIMATE_OUTPUTS: estimates(state), off the departure's throughout.
 * estimate_series(settings, state, commands, measured_speeds) runs it over recorded
   series (studies: scripts/estimator_accuracy.py); compiled_estimate_rows is the same
   loop compiled.
@@ -93,8 +98,8 @@ from ..base.registry import Output
 from ..train.line import Line, belt_resistance, in_neutral_section
 from ..train.plant import Envelope, TrainParameters, basic_resistance, force_limits
 from .limiter import clamp
-from .train_model import (NominalModel, NominalState, known_resistance, nominal_act,
-                          nominal_train)
+from .train_model import (NominalModel, NominalState, dead_time_steps, known_resistance,
+                          nominal_act, nominal_train)
 
 PARAMETERS = (
     param("estimator.enabled", False, "estimate the real train's mass and running resistance "
@@ -163,42 +168,51 @@ def load_weighing(mass_factor: float, relative_error: float, seed: int) -> float
 
 
 def estimator_settings(values, train: TrainParameters, period: float,
-                       line: Line | None = None) -> EstimatorSettings:
-    """From the run's estimator.* `values` and the nominal `train` (what the ATO knows)."""
+                       line: Line | None = None, model: NominalModel | None = None
+                       ) -> EstimatorSettings:
+    """From the run's estimator.* `values` and the nominal `train` (what the ATO knows) on
+    `line`; `model`: the controller's nominal model of them, whose line tables the
+    estimator's own model shares (else built)."""
     unlimited = dataclasses.replace(train, **{name: math.inf for name in (
         "max_traction_force", "max_traction_power", "max_brake_force", "max_brake_power")})
-    actuator, start = nominal_train(unlimited, period, 0.0, line)
+    if model is None:
+        model = nominal_train(unlimited, period, 0.0, line)[0]
     return EstimatorSettings(
-        actuator, train.envelope, train.limited, values["estimator.speed_noise"] ** 2,
+        model._replace(train=unlimited.constants()), train.envelope, train.limited,
+        values["estimator.speed_noise"] ** 2,
         (values["estimator.acceleration_noise"] * period) ** 2,
         values["estimator.mass_drift"] ** 2 * period,
         values["estimator.resistance_drift"] ** 2 * period,
-        values["estimator.min_speed"], values["estimator.neutral_margin"], len(start.pending))
+        values["estimator.min_speed"], values["estimator.neutral_margin"],
+        dead_time_steps(train, period))
 
 
-def estimator_start(settings: EstimatorSettings, mass_reading: float, relative_error: float,
-                    resistance_sigma: float, position: float = 0.0, speed: float = 0.0
-                    ) -> EstimatorState:
+def estimator_start(settings: EstimatorSettings | None, mass_reading: float,
+                    relative_error: float, resistance_sigma: float, position: float = 0.0,
+                    speed: float = 0.0) -> EstimatorState:
     """The state at departure from `position` (m) at `speed` (m/s): the mass prior from
     the load weighing (`mass_reading`, its `relative_error` 1 sigma), the resistance prior
-    the nominal one with `resistance_sigma`."""
+    the nominal one with `resistance_sigma`; without `settings`, the priors alone (what
+    estimates() reads: no speed variance, no dead time)."""
     inverse_mass = 1.0 / mass_reading
     covariance = np.zeros((3, 3))
-    covariance[SPEED, SPEED] = settings.speed_variance
+    covariance[SPEED, SPEED] = settings.speed_variance if settings is not None else 0.0
     covariance[INVERSE_MASS, INVERSE_MASS] = (relative_error * inverse_mass) ** 2
     covariance[RESISTANCE, RESISTANCE] = resistance_sigma ** 2
-    ring = np.zeros(settings.dead_time_steps)
+    ring = np.zeros(settings.dead_time_steps if settings is not None else 0)
     return EstimatorState(speed, inverse_mass, 1.0, covariance,
                           NominalState(0.0, position, ring, 0), 0.0, 0.0, 0.0, 0.0, False, 0)
 
 
 def estimator_of(values, train: TrainParameters, period: float, mass_reading: float,
-                 line: Line | None = None, position: float = 0.0, speed: float = 0.0
+                 line: Line | None = None, position: float = 0.0, speed: float = 0.0,
+                 model: NominalModel | None = None
                  ) -> tuple[EstimatorSettings, EstimatorState]:
     """Settings and departure state (from `position` m at `speed` m/s) from the run's
-    estimator.* `values`, the nominal `train` and the load weighing's `mass_reading`
-    (load_weighing), its error the run's train.load_weighing_error."""
-    settings = estimator_settings(values, train, period, line)
+    estimator.* `values`, the nominal `train` (`model`, as for estimator_settings) and the
+    load weighing's `mass_reading` (load_weighing), its error the run's
+    train.load_weighing_error."""
+    settings = estimator_settings(values, train, period, line, model)
     return settings, estimator_start(settings, mass_reading,
                                      values["train.load_weighing_error"],
                                      values["estimator.resistance_sigma"], position, speed)
@@ -413,12 +427,12 @@ def _near_neutral_edge(settings: EstimatorSettings, position: float, speed: floa
 
 
 class OnBoardEstimator(NamedTuple):
-    """The estimator as a controller carries it in its settings (its state in the
-    controller's state): off, the departure state stays, the load weighing's mass and
-    the nominal resistance, and the controller runs as without one, to the bit."""
+    """The estimator as a controller carries it in its settings (its state, None when off,
+    in the controller's state): off, the controller runs as without one, to the bit, and
+    reports the departure's estimates throughout."""
 
-    settings: EstimatorSettings
-    enabled: bool
+    settings: EstimatorSettings | None  # None: off
+    departure: tuple[float, float, float, float]  # estimates() at departure
 
 
 ESTIMATE_OUTPUTS = (
@@ -432,24 +446,50 @@ ESTIMATE_OUTPUTS = (
 ESTIMATE_COLUMNS = tuple(output.name for output in ESTIMATE_OUTPUTS)
 
 
-def on_board_estimator(values, period: float, line: Line | None = None
-                       ) -> tuple[OnBoardEstimator, EstimatorState]:
-    """A controller's estimator (estimator.enabled) from the run's values: the nominal
-    train (plant.*), the load weighing's train.mass_reading as its mass prior, departing
-    from plant.initial_position (m)."""
-    train = TrainParameters.from_values(values)
-    settings, state = estimator_of(values, train, period, values["train.mass_reading"], line,
-                                   values["plant.initial_position"], 0.0)
-    return OnBoardEstimator(settings, values["estimator.enabled"]), state
+def on_board_estimator(values, period: float, line: Line | None = None,
+                       model: NominalModel | None = None
+                       ) -> tuple[OnBoardEstimator, EstimatorState | None]:
+    """A controller's estimator from the run's values: the nominal train (plant.*) on
+    `line` (`model`: the controller's nominal model of them, its line tables shared), the
+    load weighing's train.mass_reading as its mass prior, departing from
+    plant.initial_position (m); off (estimator.enabled false), its settings and state None
+    and the departure's estimates (the priors alone: no model built)."""
+    if not values["estimator.enabled"]:
+        prior = estimator_start(None, values["train.mass_reading"],
+                                values["train.load_weighing_error"],
+                                values["estimator.resistance_sigma"])
+        return OnBoardEstimator(None, estimates(prior)), None
+    settings, state = estimator_of(values, TrainParameters.from_values(values), period,
+                                   values["train.mass_reading"], line,
+                                   values["plant.initial_position"], 0.0, model)
+    return OnBoardEstimator(settings, estimates(state)), state
 
 
 @jitable
-def on_board_step(estimator: OnBoardEstimator, state: EstimatorState, command: float,
-                  measured_speed: float) -> EstimatorState:
-    """estimator_step when the estimator is on; else the state as it is."""
-    if estimator.enabled:
-        return estimator_step(estimator.settings, state, command, measured_speed)
-    return state
+def on_board_step(estimator: OnBoardEstimator, state: EstimatorState | None, command: float,
+                  measured_speed: float) -> EstimatorState | None:
+    """estimator_step when the estimator is on; else None, as it was (compiled code prunes
+    the step while compiling a run without the estimator)."""
+    if state is None:
+        return state
+    return estimator_step(estimator.settings, state, command, measured_speed)
+
+
+@jitable
+def on_board_scale(state: EstimatorState | None) -> float:
+    """The resistance scale as estimated on board; 1 with the estimator off."""
+    if state is None:
+        return 1.0
+    return state.resistance_scale
+
+
+@jitable
+def on_board_estimates(estimator: OnBoardEstimator, state: EstimatorState | None
+                       ) -> tuple[float, float, float, float]:
+    """ESTIMATE_OUTPUTS' values: estimates(state), the departure's with the estimator off."""
+    if state is None:
+        return estimator.departure
+    return estimates(state)
 
 
 @jitable
@@ -458,8 +498,6 @@ def estimates(state: EstimatorState) -> tuple[float, float, float, float]:
     mass, mass_sigma = estimated_mass_factor(state)
     scale, scale_sigma = estimated_resistance_scale(state)
     return mass, mass_sigma, scale, scale_sigma
-
-
 
 
 @jitable

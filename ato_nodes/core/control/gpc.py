@@ -52,8 +52,8 @@ from ..base.registry import Component, Controller, ControllerOutput, Output
 from ..base.spec import param
 from ..base.units import KMH
 from ..train.plant import force_limits
-from .estimation import (ESTIMATE_OUTPUTS, OnBoardEstimator, estimated_force_limits, estimates,
-                         on_board_estimator, on_board_step)
+from .estimation import (ESTIMATE_OUTPUTS, OnBoardEstimator, estimated_force_limits,
+                         on_board_estimates, on_board_estimator, on_board_step)
 from .limiter import CommandLimiter, holds
 from .lssvm import load_model
 
@@ -273,7 +273,7 @@ class GPC(Controller):
         # the nominal train's traction and brake envelope (None: no envelope)
         self.envelope = train.envelope if envelope else None
         self.estimator: OnBoardEstimator = estimator[0]
-        self.estimated = estimator[1]
+        self.estimated = estimator[1]  # None: off
         self.nu = min(settings.control_horizon, settings.horizon)
         self.bias_gain = period / (settings.bias_filter + period) if settings.bias_filter else 0.0
         self.speeds = np.zeros(0)
@@ -304,7 +304,7 @@ class GPC(Controller):
         as estimated on board (unbounded without an envelope)."""
         if self.envelope is None:
             return -math.inf, math.inf
-        if self.estimator.enabled:
+        if self.estimated is not None:
             return estimated_force_limits(self.estimator.settings, self.estimated, speed)
         return force_limits(speed, self.envelope)
 
@@ -322,7 +322,7 @@ class GPC(Controller):
         _push(self.speeds, measured)
         error = self._learn(target, measured)
         model_arx = self.model.linearise(self.speeds, self.commands)
-        if self.estimator.enabled:  # the model's own prediction and error include it
+        if self.estimated is not None:  # the model's own prediction and error include it
             model_arx = dataclasses.replace(
                 model_arx, c=model_arx.c + self.estimated_resistance_change(model_arx))
         free, matrix = self._responses(model_arx, self.bias)
@@ -344,7 +344,7 @@ class GPC(Controller):
         predicted = free[0] + matrix[0, 0] * (u - previous)
         self.estimated = on_board_step(self.estimator, self.estimated, u, measured)
         return ControllerOutput(u, (predicted, error, self.bias, float(self.added),
-                                    *estimates(self.estimated)))
+                                    *on_board_estimates(self.estimator, self.estimated)))
 
     def _learn(self, target: float, measured: float) -> float:
         """The model's own one-step error (without the fed-back bias), fed back and to

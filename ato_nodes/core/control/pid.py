@@ -22,8 +22,8 @@ from ..base.kernels import jitable
 from ..base.registry import Component, Output
 from ..base.spec import param, settings
 from ..train.plant import TrainConstants, basic_resistance
-from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator, estimates,
-                         on_board_estimator, on_board_step)
+from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
+                         on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
 from .limiter import LimiterSettings, limit_command
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 
@@ -52,13 +52,13 @@ class PIDSettings(NamedTuple):
     gains: PIDGains
     period: float  # s
     train: TrainConstants  # the nominal train (the feedforward's model)
-    estimator: OnBoardEstimator
+    estimator: OnBoardEstimator  # settings None: off
 
 
 class PIDState(NamedTuple):
     integral: float  # N/kN
     filtered: float  # m/s, the measurement through the derivative's filter
-    estimator: EstimatorState
+    estimator: EstimatorState | None  # None: off
 
 
 @jitable
@@ -75,7 +75,7 @@ def pid_step(settings: PIDSettings, state: PIDState, target: float, measured: fl
     g, h, train = settings.gains, settings.period, settings.train
     planned_acceleration = (horizon[-1] - horizon[-2]) / h if len(horizon) > 1 else 0.0
     feedforward = g.feedforward * (
-        planned_acceleration / train.xi + state.estimator.resistance_scale * basic_resistance(
+        planned_acceleration / train.xi + on_board_scale(state.estimator) * basic_resistance(
             target, train.davis_a, train.davis_b, train.davis_c))
     previous = state.filtered
     filtered = previous + h / (g.tf + h) * (measured - previous)
@@ -86,9 +86,8 @@ def pid_step(settings: PIDSettings, state: PIDState, target: float, measured: fl
     u = limit_command(raw, target, measured, last, limits)
     integral = state.integral + h * (g.ki * error + g.kt * (u - raw))
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)
-    mass, mass_sigma, resistance_scale, resistance_sigma = estimates(estimator)
-    return u, (feedforward, proportional, integral, derivative, mass, mass_sigma,
-               resistance_scale, resistance_sigma), PIDState(integral, filtered, estimator)
+    return u, (feedforward, proportional, integral, derivative) + on_board_estimates(
+        settings.estimator, estimator), PIDState(integral, filtered, estimator)
 
 
 PID_STEPS = ControllerSteps(pid_start, pid_step, PIDState)

@@ -62,7 +62,12 @@ def nominal_train(train: TrainParameters, period: float, position: float = 0.0,
     model = NominalModel(train.constants(), train.pantograph_offset, period, decay, spread,
                          line_arrays(line), line is not None,
                          line is not None and bool(line.neutral_sections))
-    return model, NominalState(0.0, position, np.zeros(round(train.dead_time / period)), 0)
+    return model, NominalState(0.0, position, np.zeros(dead_time_steps(train, period)), 0)
+
+
+def dead_time_steps(train: TrainParameters, period: float) -> int:
+    """The periods a command waits inside `train`'s dead time before it acts."""
+    return round(train.dead_time / period)
 
 
 @jitable

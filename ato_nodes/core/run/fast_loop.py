@@ -20,9 +20,10 @@ The controller kind is chosen by the type of its state: controller_start() and
 controller_step() below resolve, while compiling, to the kind's own functions, so
 one loop serves every kind, compiled once per kind (and once for all the kinds
 without compiled steps; once more per kind for journeys, whose tables are an argument of
-their own, None in other runs, so that their loops compile without a journey's code) and
-cached on disk (numba keys its cache by the argument
-types; loop.warm() compiles them all).
+their own, None in other runs, so that their loops compile without a journey's code; once
+more per kind with the on-board estimator on, whose settings and state are None in the
+kind's when it is off, core/control/estimation.py) and cached on disk (numba keys its
+cache by the argument types; loop.warm() compiles them all).
 
 A run is computed in chunks of steps, each one call of the compiled loop lasting
 about CHUNK_SECONDS, so that simulate() can check its deadline between them (a

@@ -82,18 +82,21 @@ def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndar
 def warm(values: dict | None = None) -> None:
     """Compile the loop of core/run/fast_loop.py now, or load it from its cache beside that
     file, by a two-step run of `values` (default: the shipped seed000) with each
-    controller kind that has compiled steps, and one of seed000 with the first kind
-    without them that names a cheap run (its registry entry's warm_up: those kinds share
-    one signature), by default also the shipped journeys' kinds (a journey's loop reads
-    its tables: a signature of its own per kind); and the LSSVM's solves. Every other run of
-    a kind calls the loop with the same argument types, so these compilations serve them
-    all, in every process of this checkout."""
+    controller kind that has compiled steps (with the on-board estimator as `values` have
+    it, for the kinds that use it: on, a signature of its own), and one of seed000 with the
+    first kind without them that names a cheap run (its registry entry's warm_up: those
+    kinds share one signature), by default also the shipped journeys' kinds (a journey's
+    loop reads its tables: a signature of its own per kind); and the LSSVM's solves. Every
+    other run of a kind calls the loop with the same argument types, so these compilations
+    serve them all, in every process of this checkout."""
     warm_journeys = values is None  # setup's: a tuning warms its own run's kind
     values = load_scenario("seed000") if values is None else values
     shortest = SPEC_BY_NAME["run.duration"].low
     duration = max(2 * values["run.period"], shortest)
     for kind in fast_loop.compiled_kinds():
-        simulate(apply_overrides(values, {"run.duration": duration, "controller.kind": kind}))
+        simulate(apply_overrides(values, {
+            "run.duration": duration, "controller.kind": kind,
+            "estimator.enabled": values["estimator.enabled"] and CONTROLLERS[kind].estimates}))
     cheap = next((component for component in CONTROLLERS.components.values()
                   if not component.steps and component.warm_up), None)
     if cheap is not None:
