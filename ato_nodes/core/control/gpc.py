@@ -281,6 +281,7 @@ class GPC(Controller):
         self.expected: float | None = None  # the model's prediction of the next y(k)
         self.bias = 0.0
         self.added = 0
+        self.lags = np.zeros(0)  # 1 .. na, the weights of sum_j j a_j
         moves = np.arange(self.nu)
         self.cumulative = (moves[:, None] >= moves[None, :]).astype(float)  # u = u0 + C du
         self.move_weight = settings.r * np.eye(self.nu)
@@ -311,9 +312,11 @@ class GPC(Controller):
     def estimated_resistance_change(self, arx: Arx) -> float:
         """What the ARX constant gains from the estimated resistance (module docstring)."""
         train, speed = self.train, self.speeds[-1]
+        if len(self.lags) != len(arx.a):  # once: every ARX of the model has its na
+            self.lags = np.arange(1, len(arx.a) + 1)
         acceleration = -train.xi * (self.estimated.resistance_scale - 1.0) * train.resistance(
             speed)
-        return self.period * acceleration * float(np.arange(1, len(arx.a) + 1) @ arx.a)
+        return self.period * acceleration * float(self.lags @ arx.a)
 
     def step(self, target: float, measured: float, horizon) -> ControllerOutput:
         s = self.s
