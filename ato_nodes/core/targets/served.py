@@ -64,13 +64,17 @@ JOURNEY_PARAMETERS = (
           "that leaves a stop late drives the slowest that wins its lateness back, else the "
           "fastest (minimum-time); 0: a late train keeps its on-time curves", PROFILE_NODES,
           0, 32),
-    param("profile.journey.catch_up_share", 1.0, "the share of the envelope the faster curves "
-          "plan with (with profile.envelope_share > 0; the on-time curve keeps that share, the "
-          "rest for what the plan does not know): catching up spends the reserve",
-          PROFILE_NODES, 0.05, 1.0),
-    param("profile.journey.catch_up_deceleration", 0.8, "the service braking the faster curves "
-          "plan with (the on-time curve's is profile.ato.deceleration), m/s^2", PROFILE_NODES,
-          0.1, 2.0),
+    param("profile.journey.catch_up_share", 0.95, "the faster curves plan with at least this "
+          "share of the envelope (with profile.envelope_share > 0; the on-time curve's share "
+          "if higher): catching up spends part of the reserve for what the plan does not "
+          "know", PROFILE_NODES, 0.05, 1.0),
+    param("profile.journey.catch_up_braking", 1.08, "the faster curves' service braking over "
+          "the on-time curve's (profile.ato.deceleration): a harder braking wins the most "
+          "time; the stop's accuracy on a train heavier than weighed sets how much harder",
+          PROFILE_NODES, 1.0, 2.0),
+    param("profile.journey.catch_up_after", 1.0, "a train that leaves a stop less late than "
+          "this keeps its on-time curve (the first faster curve may win seconds more), s",
+          PROFILE_NODES, 0.0, 600.0),
     param("profile.journey.dwell_extension", "", "delays injected: STOP:SECONDS[,STOP:SECONDS"
           "...], the train held SECONDS longer at the timetable's stop number STOP (1 is the "
           "origin; a crowded platform, a door fault), s", PROFILE_NODES,
@@ -97,6 +101,7 @@ class JourneyTable(NamedTuple):
     dwells: np.ndarray      # sections, s
     extensions: np.ndarray  # sections, s
     berth: float            # m (profile.journey.berth)
+    catch_up_after: float   # s (profile.journey.catch_up_after)
 
 
 class JourneyState(NamedTuple):
@@ -128,8 +133,9 @@ def departure(journey: JourneyTable, state: JourneyState) -> float:
 @jitable
 def catch_up_level(journey: JourneyTable, section: int, lateness: float) -> int:
     """The curve of `section` for a train that leaves its start `lateness` s after the
-    timetable: the slowest that wins the lateness back, else the fastest."""
-    if lateness <= 0.0:
+    timetable: the slowest that wins the lateness back, else the fastest; the on-time
+    curve for a train less late than journey.catch_up_after."""
+    if lateness < journey.catch_up_after or lateness <= 0.0:
         return 0
     wanted = journey.times[section, 0] - lateness
     for level in range(journey.levels):
@@ -222,10 +228,9 @@ class JourneyPlan(Plan):
     def observe(self, t: float, position: float, speed: float) -> None:
         """Step k's time, position and speed over the last step in (see `observed`)."""
         before, self.state = self.state, observed(self.journey, self.state, t, position, speed)
-        if self.state.section != before.section and self.journey.levels > 1:
+        if self.state.section != before.section and self.state.level > 0:  # left late
             late = departure(self.journey, before) - self.journey.departures[before.section]
-            if late > 0.0:
-                self.replans.append(self._replan(t, late))
+            self.replans.append(self._replan(t, late))
 
     def _replan(self, t: float, lateness: float) -> Replan:
         section, level, times = self.state.section, self.state.level, self.journey.times
@@ -288,16 +293,18 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
         departures=np.array([*leaving_at, math.inf]),
         dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
         extensions=dwell_extensions(values["profile.journey.dwell_extension"], timetable),
-        berth=float(values["profile.journey.berth"])), notice
+        berth=float(values["profile.journey.berth"]),
+        catch_up_after=float(values["profile.journey.catch_up_after"])), notice
 
 
 def fastest_curve(values, line, train) -> AtoCurve:
-    """The section's ato curve at its highest cruise, profile.journey.catch_up_share of the
-    envelope and its catch-up braking (no time to meet: no bisection), its time counted as
-    the on-time one's."""
-    share = values["profile.journey.catch_up_share"] if values["profile.envelope_share"] else 0.0
-    faster = {**values, "profile.envelope_share": share,
-              "profile.ato.deceleration": values["profile.journey.catch_up_deceleration"]}
+    """The section's ato curve at its highest cruise, its catch-up share of the envelope and
+    braking (no time to meet: no bisection), its time counted as the on-time one's."""
+    share = values["profile.envelope_share"]
+    faster = {**values, "profile.envelope_share": share and max(
+                  share, values["profile.journey.catch_up_share"]),
+              "profile.ato.deceleration": values["profile.ato.deceleration"]
+              * values["profile.journey.catch_up_braking"]}
     return ato_curve(faster, dataclasses.replace(line, planned_run_time=None), train)
 
 
