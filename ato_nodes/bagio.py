@@ -78,6 +78,9 @@ class Run:
     # live controller parameters changed during the run: {step: {name: value}}, as
     # core.loop.simulate(changes=...) takes them
     parameter_changes: dict[int, dict[str, float]] = field(default_factory=dict)
+    # a journey's late departures and the curves they drove (the profile's /ato/profile/replans:
+    # served.Replan's fields and the step), in step order
+    replans: list[dict] = field(default_factory=list)
     status: str | None = None  # the run's status from its summary.json, if it has one
 
     @property
@@ -206,6 +209,7 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
         raws: dict[str, list[bytes]] = {role: [] for role in found}
         changes_topic = names["parameter_changes"]
         changes: dict[int, dict[str, float]] = {}
+        replans_topic, replans = names["replans"], []
         count = 0
         for topic, stamp, raw in messages:
             count += 1
@@ -216,6 +220,9 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
             elif topic == changes_topic:
                 change = json.loads(TYPESTORE.deserialize_cdr(raw, "std_msgs/msg/String").data)
                 changes.setdefault(change["step"], {}).update(change["parameters"])
+            elif topic == replans_topic:
+                replan = TYPESTORE.deserialize_cdr(raw, "std_msgs/msg/String").data
+                replans.append(json.loads(replan))
     except BagError:
         raise
     except Exception as exc:  # rosbags and mcap raise many unrelated types for bad files
@@ -226,6 +233,7 @@ def read_run(bag: str | Path, mapping: dict[str, str] | None = None) -> Run:
         raise BagError(f"{path}: 0 messages recorded{ended}; nothing to score")
     run = _assemble(path, found, stamps, raws, types)
     run.parameter_changes = changes
+    run.replans = replans
     run.status = status
     return run
 

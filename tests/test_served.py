@@ -1,20 +1,25 @@
 """The journey as the target (core/targets/served.py): each section's curve, the hold at
 each stop until its departure (or a late train's arrival plus the dwell), the state the
-profile derives, the horizon over a departure, bad input in one line."""
+profile derives, the horizon over a departure, a late train catching up (the re-plans,
+said and recorded through the stack as in-process), bad input in one line."""
 
 import math
+import subprocess
 
 import numpy as np
 import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import RunContext
-from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.bagio import read_run
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.core.config.schema import NodeValues
-from ato_nodes.core.targets.served import JourneyState, departure, journey_speed, observed
+from ato_nodes.core.targets.served import (JourneyState, Replan, catch_up_level, departure,
+                                           journey_speed, observed, replans)
 from ato_nodes.core.targets.timetable import load_timetable
+from commands import ROOT, invocation
 
 SCENARIO = "seed004-metro-line"
 
@@ -39,28 +44,28 @@ def test_a_section_is_its_curve_and_a_standing_train_waits_for_its_departure(pla
     assert start == metro()["profile.ato.start_speed"]
     assert plan.speed(0.0, market.position - 500.0) > 10.0
     assert plan.speed(0.0, market.position) == 0.0  # the curve stops at the mark
-    on_time = JourneyState(0, market.arrival - 3.0)
+    on_time = JourneyState(0, market.arrival - 3.0, 0)
     assert departure(journey, on_time) == market.departure
     assert journey_speed(journey, on_time, market.departure - 0.01, market.position) == 0.0
     assert journey_speed(journey, on_time, market.departure, market.position) == start
     dwell = {s.name: s.dwell for s in timetable.line.stations}[market.station]
-    late = JourneyState(0, market.departure - 5.0)  # the station's dwell from its arrival
+    late = JourneyState(0, market.departure - 5.0, 0)  # the station's dwell from its arrival
     assert departure(journey, late) == market.departure - 5.0 + dwell
     assert journey_speed(journey, late, market.departure + 1.0, market.position) == 0.0
     assert journey_speed(journey, late, departure(journey, late), market.position) == start
-    last = JourneyState(len(timetable.sections) - 1, 900.0)
+    last = JourneyState(len(timetable.sections) - 1, 900.0, 0)
     assert journey_speed(journey, last, 1e6, timetable.stops[-1].position) == 0.0
 
 
 def test_the_state_follows_the_position_and_time(plan, timetable):
     journey, mark = plan.journey, timetable.stops[1].position
-    running = JourneyState(0, math.nan)
+    running = JourneyState(0, math.nan, 0)
     berth = journey.berth
     assert observed(journey, running, 100.0, mark - 0.05, 0.5) == running  # still moving
     assert observed(journey, running, 100.0, mark - 2 * berth, 0.0) == running  # short
-    assert observed(journey, running, 100.0, mark - 0.05, 0.0) == JourneyState(0, 100.0)
-    assert observed(journey, running, 100.0, mark + 0.05, 0.0) == JourneyState(0, 100.0)
-    standing = JourneyState(0, 100.0)
+    assert observed(journey, running, 100.0, mark - 0.05, 0.0) == JourneyState(0, 100.0, 0)
+    assert observed(journey, running, 100.0, mark + 0.05, 0.0) == JourneyState(0, 100.0, 0)
+    standing = JourneyState(0, 100.0, 0)
     leaving = timetable.stops[1].departure
     assert observed(journey, standing, leaving - 0.1, mark, 0.0) == standing
     after = observed(journey, standing, leaving, mark, 0.0)  # the next section, running
@@ -71,7 +76,7 @@ def test_the_horizon_shows_the_departure_as_it_will_happen(timetable):
     market = timetable.stops[1]
     values = metro("controller.preview=30")
     stage = ProfileStage(NodeValues("profile", values))
-    stage.context.plan.state = JourneyState(0, market.arrival)
+    stage.context.plan.state = JourneyState(0, market.arrival, 0)
     period = values["run.period"]
     step = round(market.departure / period) - 10  # 1 s before the departure
     horizon = stage.context.horizon(step, market.position, 30)
@@ -121,10 +126,71 @@ def test_a_late_train_leaves_its_dwell_after_it_arrived_compiled_as_in_python(tm
     assert left == pytest.approx(arrived + 25.0, abs=0.5)
 
 
+def test_a_late_train_drives_the_slowest_curve_that_wins_its_lateness_back(plan):
+    journey = plan.journey
+    assert journey.levels == 1 + metro()["profile.journey.catch_up"]
+    assert np.all(np.diff(journey.times, axis=1) <= 0.0)  # each curve at least as fast
+    times = journey.times[1]
+    assert times[-1] < times[0] - 1.0  # the fastest wins a second and more back
+    assert catch_up_level(journey, 1, 0.0) == 0 and catch_up_level(journey, 1, -3.0) == 0
+    assert catch_up_level(journey, 1, 0.99 * journey.catch_up_after) == 0
+    for level in range(1, journey.levels):
+        gain = max(times[0] - times[level], journey.catch_up_after)
+        chosen = catch_up_level(journey, 1, gain)
+        assert times[chosen] <= times[0] - gain and (chosen == 0 or times[chosen - 1] > times[
+            0] - gain)
+    assert catch_up_level(journey, 1, 1e3) == journey.levels - 1  # minimum-time
+
+
+def arrival(run, mark):
+    """When the train first stood within the berth of `mark`, s."""
+    standing = (np.abs(run["position"] - mark) < 1.0) & (run["speed"] < 0.01)
+    return run["t"][np.argmax(standing)]
+
+
+def test_a_delayed_train_catches_up_compiled_as_in_python(timetable):
+    delayed = ("profile.journey.dwell_extension=2:30", "run.duration=430")
+    values = metro(*delayed)
+    compiled, python = simulate(values), simulate(values, compiled=False)
+    for name in python:
+        assert np.array_equal(compiled[name], python[name], equal_nan=True), name
+    first, second = replans(RunContext(values).plan, values["run.period"], python["position"])
+    market, riverside = timetable.stops[1:3]
+    assert first.origin == market.station and first.lateness == 30.0  # it arrived early
+    assert first.time == pytest.approx(market.departure + 30.0, abs=values["run.period"])
+    assert first.running_time < first.on_time and first.minimum_time
+    assert second.origin == riverside.station and second.lateness < first.lateness
+    kept = simulate(metro(*delayed, "profile.journey.catch_up=0"))
+    late, caught = (arrival(run, riverside.position) - riverside.arrival for run in (kept, python))
+    assert late > 25.0 and caught < late - 1.0
+
+
+@pytest.mark.integration
+def test_the_stack_says_and_records_the_replans_the_in_process_run_makes(tmp_path):
+    overrides = ["profile.journey.dwell_extension=2:30", "run.duration=330"]
+    bag = tmp_path / "bag"
+    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out", str(bag),
+                           *(f"--set={item}" for item in overrides)],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert done.returncode == 0, done.stdout + done.stderr
+    run, values = read_run(bag), prepare(SCENARIO, overrides)
+    series = simulate(values)
+    for name in ("position", "speed", "target", "command"):
+        assert np.array_equal(run.series[name], series[name]), name
+    made = replans(RunContext(values).plan, values["run.period"], series["position"])
+    assert made and made[0].lateness == 30.0
+    assert [{name: replan[name] for name in Replan._fields} for replan in run.replans] == [
+        replan._asdict() for replan in made]
+    assert run.replans[0]["step"] == round(made[0].time / values["run.period"])
+
+
 @pytest.mark.parametrize("override,message", [
     ("profile.journey.timetable=", "profile.journey.timetable is empty"),
     ("profile.journey.timetable=timetables/hsr-journey.yaml", "is of line"),
     ("plant.initial_position=100", "plant.initial_position is 100"),
+    ("profile.journey.dwell_extension=1:30", "stop 1 is not a stop between the ends"),
+    ("profile.journey.dwell_extension=2:30,7:10", "stop 7 is not a stop between the ends"),
+    ("profile.journey.dwell_extension=2", "must be STOP:SECONDS"),
 ])
 def test_bad_input_is_one_line(override, message):
     with pytest.raises(ScenarioError, match=message) as error:

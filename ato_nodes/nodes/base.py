@@ -66,7 +66,7 @@ FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledg
 # fixed order, so another might not have heard it before the shutdown, and the fewer
 # records come at once at the end, the fewer a keep-last-10 `ros2 topic echo` drops.
 HEARD_EVENTS = ("start",)
-ANNOUNCED_EVENTS = ("finished", "recorded")
+ANNOUNCED_EVENTS = ("finished", "recorded", "replanned")
 # What rclpy.node.Node declares itself (start_type_description_service read-only already)
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 # The lockstep fast path's private rclpy calls (SubscriptionWaitSet) were written and

@@ -1,9 +1,13 @@
 """Target-speed profile node: on step k's position, the target horizon of step k+2
-(see ato_nodes.core.run.stages for why two steps ahead) and the speed limit of step k."""
+(see ato_nodes.core.run.stages for why two steps ahead) and the speed limit of step k;
+on a journey, each re-plan of a late departure said on the events topic and published
+for the recorder."""
 
 from __future__ import annotations
 
-from std_msgs.msg import Float64, Float64MultiArray
+import json
+
+from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.nodes.base import AtoNode, run_node
@@ -22,6 +26,7 @@ class ProfileNode(AtoNode):
         self.horizon_pub = self.publisher("target_preview")
         self.target_pub = self.publisher("target_speed")
         self.limit_pub = self.publisher("speed_limit")
+        self.replans_pub, self.replans_said = self.publisher("replans"), 0
         self.subscription("position", self.on_position)
         self.ready_when_matched()
 
@@ -34,6 +39,18 @@ class ProfileNode(AtoNode):
             self.target_pub.publish(self.target_msg)
         self.limit_msg.data = self.stage.speed_limit(msg.data)
         self.limit_pub.publish(self.limit_msg)
+        self.say_replans()
+
+    def say_replans(self) -> None:
+        """The plan's new re-plans (a journey's late departures): on the events topic (an
+        INFO record on /rosout) and, stamped with their step, for the recorder."""
+        made = getattr(self.stage.context.plan, "replans", ())
+        for replan in made[self.replans_said:]:
+            self.announce(f"replanned {replan.text()}")
+            step = round(replan.time / self.values["run.period"])
+            self.replans_pub.publish(String(data=json.dumps({"step": step,
+                                                             **replan._asdict()})))
+        self.replans_said = len(made)
 
 
 def main() -> None:

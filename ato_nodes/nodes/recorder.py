@@ -1,6 +1,6 @@
 """Recorder node: writes every per-step topic of the topic map to a rosbag2
-MCAP bag, as the raw CDR bytes received, and the controller's live parameter
-changes (stamped with the step they took effect at).
+MCAP bag, as the raw CDR bytes received, the controller's live parameter
+changes and a journey's re-plans (each stamped with the step it took effect at).
 
 Each message is stamped with the simulated time of its step (the k-th message
 of a topic belongs to step k), so a run's bag is identical however the
@@ -57,6 +57,9 @@ SIDECAR = "parameters.json"
 # the loop's critical path and out of its way on a shared CPU. A message that arrives
 # after its step's /clock waits in its reliable keep-all reader for the next one.
 WAKING_TOPIC = "clock"
+# Topics of what happened at a step (not one message a step): the controller's live gain
+# changes and a journey's re-plans, recorded as they come
+STEP_STAMPED = ("parameter_changes", "replans")
 
 
 class RecorderNode(AtoNode):
@@ -86,8 +89,9 @@ class RecorderNode(AtoNode):
             self.subscription(topic.key, self._make_callback(topic.name, connection), raw=True,
                               wakes=None if topic.key == WAKING_TOPIC else self._ending)
         self.typestore = typestore
-        self.changes_connection = None  # added with the first change: most runs have none
-        self.subscription("parameter_changes", self.record_change, raw=True)
+        self.event_connections: dict[str, object] = {}  # added with the first: most runs have none
+        for key in STEP_STAMPED:
+            self.subscription(key, self._stamped_recorder(key), raw=True)
         self.flush(0)  # the topics are on disk before any step: a kill leaves a bag to repair
         self.ready_when_matched()
 
@@ -118,20 +122,23 @@ class RecorderNode(AtoNode):
                 self._check_complete()
         return record
 
-    def record_change(self, data: bytes) -> None:
-        """A live parameter change, stamped with the time of the step it took effect at."""
-        if self.writer is None:
-            return
-        step = json.loads(deserialize_message(data, String).data)["step"]
-        try:
-            if self.changes_connection is None:
-                topic = self.topics["parameter_changes"]
-                self.changes_connection = self.writer.add_connection(
-                    topic.name, topic.type, typestore=self.typestore,
-                    offered_qos_profiles=offered_qos(topic))
-            self.writer.write(self.changes_connection, round(step * self.period_ns), data)
-        except OSError as exc:
-            self.write_failed(exc)
+    def _stamped_recorder(self, key: str):
+        """A callback recording topic `key`'s messages (JSON with a "step"), each stamped
+        with the time of the step it took effect at."""
+        def record(data: bytes) -> None:
+            if self.writer is None:
+                return
+            step = json.loads(deserialize_message(data, String).data)["step"]
+            try:
+                if key not in self.event_connections:
+                    topic = self.topics[key]
+                    self.event_connections[key] = self.writer.add_connection(
+                        topic.name, topic.type, typestore=self.typestore,
+                        offered_qos_profiles=offered_qos(topic))
+                self.writer.write(self.event_connections[key], round(step * self.period_ns), data)
+            except OSError as exc:
+                self.write_failed(exc)
+        return record
 
     def flush(self, steps: int) -> None:
         """Close the MCAP chunk being filled and hand it to the operating system, then

@@ -49,7 +49,8 @@ from ..config.schema import NodeValues
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
 from ..targets.profiles import PlanTable, plan_table, table_limit, table_speed
-from ..targets.served import JourneyState, JourneyTable, journey_limit, journey_speed, observed
+from ..targets.served import (START, JourneyState, JourneyTable, journey_limit,
+                              journey_speed, observed)
 from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
 from ..train.plant import (
     TrainConstants,
@@ -254,7 +255,7 @@ def _first_state(profile, plant, controller, controller_state, running_index) ->
             delayed=np.array(train.delayed, dtype=float), oldest=0),
         profile=ProfileState(last_position=float(profile.last_position), stair=math.nan,
                              journey=JourneyState(*getattr(profile.context.plan, "state",
-                                                           (0, math.nan)))),
+                                                           START))),
         controller=controller_state, last=float(controller.limiter.last),
         fitness=FitnessState(float(running_index.value), float(running_index.last_t),
                              float(running_index.last_w)),

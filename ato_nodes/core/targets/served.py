@@ -40,11 +40,13 @@ import numpy as np
 from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Plan
-from ..base.spec import PROFILE_NODES, param
-from .profiles import ATO_PARAMETERS, PlanTable, ato_curve, cell_of, table_limit, table_speed
+from ..base.spec import PROFILE_NODES, TextForm, param
+from .profiles import (ATO_PARAMETERS, AtoCurve, PlanTable, ato_curve, cell_of, plan_table,
+                       table_limit, table_speed)
 from .timetable import Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
+_EXTENSION = r"\s*\d+\s*:\s*\d+(?:\.\d*)?\s*"
 
 JOURNEY_PARAMETERS = (
     param("profile.journey.timetable", "", "timetable file (msg_config/timetables/*.yaml) of "
@@ -57,22 +59,49 @@ JOURNEY_PARAMETERS = (
           "its running time (with profile.ato.on_time), kept back for what the curve does not "
           "count (the holding brake's release, the tracking's lag); an early train waits for "
           "its departure at the next stop, s", PROFILE_NODES, 0.0, 60.0),
+    param("profile.journey.catch_up", 8, "faster curves planned per section beside its on-time "
+          "one (cruise speeds up to the highest, at profile.journey.catch_up_share): a train "
+          "that leaves a stop late drives the slowest that wins its lateness back, else the "
+          "fastest (minimum-time); 0: a late train keeps its on-time curves", PROFILE_NODES,
+          0, 32),
+    param("profile.journey.catch_up_share", 0.95, "the faster curves plan with at least this "
+          "share of the envelope (with profile.envelope_share > 0; the on-time curve's share "
+          "if higher): catching up spends part of the reserve for what the plan does not "
+          "know", PROFILE_NODES, 0.05, 1.0),
+    param("profile.journey.catch_up_braking", 1.08, "the faster curves' service braking over "
+          "the on-time curve's (profile.ato.deceleration): a harder braking wins the most "
+          "time; the stop's accuracy on a train heavier than weighed sets how much harder",
+          PROFILE_NODES, 1.0, 2.0),
+    param("profile.journey.catch_up_after", 1.0, "a train that leaves a stop less late than "
+          "this keeps its on-time curve (the first faster curve may win seconds more), s",
+          PROFILE_NODES, 0.0, 600.0),
+    param("profile.journey.dwell_extension", "", "delays injected: STOP:SECONDS[,STOP:SECONDS"
+          "...], the train held SECONDS longer at the timetable's stop number STOP (1 is the "
+          "origin; a crowded platform, a door fault), s", PROFILE_NODES,
+          form=TextForm(rf"\s*|{_EXTENSION}(?:,{_EXTENSION})*",
+                        "STOP:SECONDS[,STOP:SECONDS...] (stop numbers from 1, seconds >= 0)")),
 )
 
 
 class JourneyTable(NamedTuple):
-    """A journey as the target reads it: section i's ato curve is grid[:, bounds[i]:
-    bounds[i + 1]] (positions from the section's start, speeds, the belt's limits);
-    the section runs from stops[i] to stops[i + 1] (m along the line); the train may
-    leave its end at departures[i] (s, run clock; inf at the last stop), or dwells[i]
-    after it arrived there if later."""
+    """A journey as the target reads it: section i has `levels` curves, its on-time curve
+    (level 0) and faster ones in order; curve l of section i is grid[:, bounds[c]:
+    bounds[c + 1]] with c = i * levels + l (positions from the section's start, speeds,
+    the belt's limits), its running time times[i, l]. The section runs from stops[i] to
+    stops[i + 1] (m along the line); the train may leave its end at departures[i] (s, run
+    clock; inf at the last stop), or dwells[i] after it arrived there if later, and in
+    either case extensions[i] later (profile.journey.dwell_extension)."""
 
     grid: np.ndarray        # 3 x points
-    bounds: np.ndarray      # sections + 1 column indices
+    bounds: np.ndarray      # sections * levels + 1 column indices
+    levels: int             # curves per section: 1 + profile.journey.catch_up
+    times: np.ndarray       # sections x levels, s
     stops: np.ndarray       # sections + 1 positions, m
     departures: np.ndarray  # sections, s
     dwells: np.ndarray      # sections, s
+    extensions: np.ndarray  # sections, s
     berth: float            # m (profile.journey.berth)
+    catch_up_after: float   # s (profile.journey.catch_up_after)
 
 
 class JourneyState(NamedTuple):
@@ -80,15 +109,17 @@ class JourneyState(NamedTuple):
 
     section: int    # the section served: the train is on it or stands at its end
     arrival: float  # s: when the train was found standing at the section's end (NaN: not yet)
+    level: int      # the section's curve it drives (0: on time; chosen as it left)
 
 
-START = JourneyState(0, math.nan)  # the first section, from the first departure at t = 0
+START = JourneyState(0, math.nan, 0)  # the first section, from the first departure at t = 0
 
 
 @jitable
-def section_table(journey: JourneyTable, section: int) -> PlanTable:
-    """Section `section`'s ato curve as a PlanTable (a view of the journey's grid)."""
-    columns = journey.grid[:, journey.bounds[section]:journey.bounds[section + 1]]
+def section_table(journey: JourneyTable, section: int, level: int) -> PlanTable:
+    """Curve `level` of section `section` as a PlanTable (a view of the journey's grid)."""
+    curve = section * journey.levels + level
+    columns = journey.grid[:, journey.bounds[curve]:journey.bounds[curve + 1]]
     return PlanTable(columns, False, True, True)
 
 
@@ -96,19 +127,42 @@ def section_table(journey: JourneyTable, section: int) -> PlanTable:
 def departure(journey: JourneyTable, state: JourneyState) -> float:
     """When a train that has arrived at its section's end leaves it, s."""
     return max(journey.departures[state.section],
-               state.arrival + journey.dwells[state.section])
+               state.arrival + journey.dwells[state.section]) + journey.extensions[state.section]
+
+
+@jitable
+def catch_up_level(journey: JourneyTable, section: int, lateness: float) -> int:
+    """The curve of `section` for a train that leaves its start `lateness` s after the
+    timetable: the slowest that wins the lateness back, else the fastest; the on-time
+    curve for a train less late than journey.catch_up_after."""
+    if lateness < journey.catch_up_after or lateness <= 0.0:
+        return 0
+    wanted = journey.times[section, 0] - lateness
+    for level in range(journey.levels):
+        if journey.times[section, level] <= wanted:
+            return level
+    return journey.levels - 1
+
+
+@jitable
+def leaving(journey: JourneyTable, state: JourneyState) -> JourneyState:
+    """The state of a train as it leaves the end of its section: the next section, on the
+    curve its lateness picks (re-planned from the actual time of leaving)."""
+    late = departure(journey, state) - journey.departures[state.section]
+    return JourneyState(state.section + 1, math.nan,
+                        catch_up_level(journey, state.section + 1, late))
 
 
 @jitable
 def journey_speed(journey: JourneyTable, state: JourneyState, t: float, position: float
                   ) -> float:
     """The target at time t with the head at `position` (m along the line), m/s."""
-    section = state.section
     if state.arrival == state.arrival:  # standing at the end of its section
         if t < departure(journey, state):
             return 0.0
-        section += 1
-    return table_speed(section_table(journey, section), position - journey.stops[section])
+        state = leaving(journey, state)
+    table = section_table(journey, state.section, state.level)
+    return table_speed(table, position - journey.stops[state.section])
 
 
 @jitable
@@ -120,10 +174,10 @@ def observed(journey: JourneyTable, state: JourneyState, t: float, position: flo
     if state.arrival == state.arrival:
         if t < departure(journey, state):
             return state
-        state = JourneyState(state.section + 1, math.nan)
+        state = leaving(journey, state)
     end = journey.stops[state.section + 1]
     if abs(speed) < STANDSTILL and position >= end - journey.berth:
-        return JourneyState(state.section, t)
+        return JourneyState(state.section, t, state.level)
     return state
 
 
@@ -132,24 +186,57 @@ def journey_limit(journey: JourneyTable, position: float) -> float:
     """The belt's limit with the head at `position`, m/s: that of the section it is on
     (the first before the journey, the last after it)."""
     section = min(max(cell_of(journey.stops, position), 0), len(journey.stops) - 2)
-    return table_limit(section_table(journey, section), position - journey.stops[section])
+    return table_limit(section_table(journey, section, 0),
+                       position - journey.stops[section])
+
+
+class Replan(NamedTuple):
+    """A train that left a stop late and the curve it drives to the next: what the profile
+    says on the run's events topic and records in the bag (`replans` derives the same
+    from a run's series)."""
+
+    time: float          # s: the step at which it left
+    origin: str          # the stop it left
+    destination: str
+    lateness: float      # s after the timetable's departure
+    running_time: float  # s: the chosen curve's, standstill to standstill
+    on_time: float       # s: the section's on-time curve's
+    minimum_time: bool   # the fastest curve at the envelope share: not all won back
+
+    def text(self) -> str:
+        said = (f"{self.origin} - {self.destination}: left {self.lateness:.1f} s late, "
+                f"{self.running_time:.1f} s planned instead of {self.on_time:.1f} s")
+        if self.minimum_time:
+            late = self.lateness - (self.on_time - self.running_time)
+            said += f"; driving minimum-time, {late:.1f} s late at {self.destination}"
+        return said
 
 
 class JourneyPlan(Plan):
-    """The journey's target for one run: the tables and the state `observe` derives
-    (a plan per run context: never shared between runs)."""
+    """The journey's target for one run: the tables, the state `observe` derives and the
+    re-plans it made (a plan per run context: never shared between runs)."""
 
     position_indexed = True
     shapes_itself = True  # its curves apply profile.envelope_share and profile.jerk
     limits_speed = True   # the curves' belt limits
 
-    def __init__(self, journey: JourneyTable, notice: str | None):
-        self.journey, self.notice = journey, notice
+    def __init__(self, journey: JourneyTable, notice: str | None, stations: tuple[str, ...]):
+        self.journey, self.notice, self.stations = journey, notice, stations
         self.state = START
+        self.replans: list[Replan] = []
 
     def observe(self, t: float, position: float, speed: float) -> None:
         """Step k's time, position and speed over the last step in (see `observed`)."""
-        self.state = observed(self.journey, self.state, t, position, speed)
+        before, self.state = self.state, observed(self.journey, self.state, t, position, speed)
+        if self.state.section != before.section and self.state.level > 0:  # left late
+            late = departure(self.journey, before) - self.journey.departures[before.section]
+            self.replans.append(self._replan(t, late))
+
+    def _replan(self, t: float, lateness: float) -> Replan:
+        section, level, times = self.state.section, self.state.level, self.journey.times
+        return Replan(t, self.stations[section], self.stations[section + 1], float(lateness),
+                      float(times[section, level]), float(times[section, 0]),
+                      level == self.journey.levels - 1)
 
     def speed(self, t: float, position: float = 0.0) -> float:
         return float(journey_speed(self.journey, self.state, t, position))
@@ -158,29 +245,81 @@ class JourneyPlan(Plan):
         return float(journey_limit(self.journey, position))
 
 
+def replans(plan: JourneyPlan, period: float, position: np.ndarray) -> list[Replan]:
+    """The re-plans of a run from its positions (s_k at t_k = k * period), as its profile
+    made them: a fresh copy of the run's plan observes each step as the profile node does."""
+    copy = JourneyPlan(plan.journey, plan.notice, plan.stations)
+    for k, travelled in enumerate(np.diff(position, prepend=position[:1])):
+        copy.observe(k * period, float(position[k]), float(travelled) / period)
+    return copy.replans
+
+
+def catch_up_curves(on_time: AtoCurve, fastest: AtoCurve, levels: int
+                    ) -> tuple[list[np.ndarray], list[float]]:
+    """A section's on-time curve and levels - 1 faster ones, and their running times: the
+    `fastest` curve's shape (its share) at cruise speeds from the on-time curve's up to its
+    highest, evenly spaced in 1 / cruise (what a cruise's time goes with)."""
+    cruises = 1.0 / np.linspace(1.0 / on_time.cruise, 1.0 / fastest.cruise, levels)[1:]
+    return ([on_time.speeds, *(fastest.curve(cruise) for cruise in cruises)],
+            [on_time.planned_run_time, *(fastest.run_time(cruise) for cruise in cruises)])
+
+
 def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTable, str | None]:
     """The sections' ato curves on `line` for `train`, each on time for its running time
-    in the timetable less the recovery (with profile.ato.on_time), and the first
-    section's notice of a running time it cannot meet."""
-    curves, notice = [], None
+    in the timetable less the recovery (with profile.ato.on_time) and its faster curves
+    (profile.journey.catch_up), and the first section's notice of a running time it
+    cannot meet."""
+    levels = 1 + values["profile.journey.catch_up"]
+    tables, times, notice = [], [], None
     for section in timetable.sections:
         own = dataclasses.replace(section_line(line, section.start, section.end),
                                   planned_run_time=section.running_time
                                   - values["profile.journey.recovery"])
         curve = ato_curve(values, own, train)
-        curves.append(curve)
         if curve.notice and notice is None:
             notice = f"{section.origin} - {section.destination}: {curve.notice}"
+        speeds, section_times = catch_up_curves(curve, fastest_curve(values, own, train), levels)
+        tables += [plan_table(curve.positions, level, stops_at_end=True, limits=curve.limits)
+                   for level in speeds]
+        times.append(section_times)
     dwells = {station.name: station.dwell for station in line.stations}
     stops = timetable.stops
-    leaving = [stop.departure - stops[0].departure for stop in stops[1:-1]]
+    leaving_at = [stop.departure - stops[0].departure for stop in stops[1:-1]]
     return JourneyTable(
-        grid=np.concatenate([curve.table().grid for curve in curves], axis=1),
-        bounds=np.cumsum([0] + [len(curve.positions) for curve in curves], dtype=np.int64),
+        grid=np.concatenate([table.grid for table in tables], axis=1),
+        bounds=np.cumsum([0] + [table.grid.shape[1] for table in tables], dtype=np.int64),
+        levels=levels, times=np.array(times),
         stops=np.array([stop.position for stop in stops]),
-        departures=np.array([*leaving, math.inf]),
+        departures=np.array([*leaving_at, math.inf]),
         dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
-        berth=float(values["profile.journey.berth"])), notice
+        extensions=dwell_extensions(values["profile.journey.dwell_extension"], timetable),
+        berth=float(values["profile.journey.berth"]),
+        catch_up_after=float(values["profile.journey.catch_up_after"])), notice
+
+
+def fastest_curve(values, line, train) -> AtoCurve:
+    """The section's ato curve at its highest cruise, its catch-up share of the envelope and
+    braking (no time to meet: no bisection), its time counted as the on-time one's."""
+    share = values["profile.envelope_share"]
+    faster = {**values, "profile.envelope_share": share and max(
+                  share, values["profile.journey.catch_up_share"]),
+              "profile.ato.deceleration": values["profile.ato.deceleration"]
+              * values["profile.journey.catch_up_braking"]}
+    return ato_curve(faster, dataclasses.replace(line, planned_run_time=None), train)
+
+
+def dwell_extensions(text: str, timetable: Timetable) -> np.ndarray:
+    """profile.journey.dwell_extension (STOP:SECONDS, ...) as the s added to the hold at
+    each section's end; ScenarioError for a stop that is not between the journey's ends."""
+    extensions = np.zeros(len(timetable.sections))
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        number, seconds = (int(item.split(":")[0]), float(item.split(":")[1]))
+        if not 2 <= number <= len(timetable.stops) - 1:
+            raise ScenarioError(f"profile.journey.dwell_extension: stop {number} is not a stop "
+                                f"between the ends of {timetable.path} (2 to "
+                                f"{len(timetable.stops) - 1})")
+        extensions[number - 2] += seconds
+    return extensions
 
 
 def _journey(values, context) -> JourneyPlan:
@@ -201,7 +340,8 @@ def _journey(values, context) -> JourneyPlan:
         raise ScenarioError(f"timetable {path} starts at {first.station} "
                             f"({first.position:g} m); plant.initial_position is "
                             f"{values['plant.initial_position']:g} m")
-    return JourneyPlan(*journey_table(timetable, values, context.line, context.train))
+    return JourneyPlan(*journey_table(timetable, values, context.line, context.train),
+                       tuple(stop.station for stop in timetable.stops))
 
 
 JOURNEY = Component("journey", "a timetable's stops served one after another: each "
