@@ -7,6 +7,8 @@ journey's traction energy, and the re-plans the profile made.
 
     python scripts/journey_delay.py seed004-metro-line --delay 2:30
     python scripts/journey_delay.py seed004-metro-line --delay 2:30 --out bags/delay-metro
+    python scripts/journey_delay.py seed004-metro-line --delay 2:30 \
+        --set profile.journey.catch_up_share=1 --set profile.journey.catch_up_braking=1.23
 
 Prints the table; with --out, writes delay.md and delay.json there.
 """
@@ -21,6 +23,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.scoring.journey import STOPPED
 from ato_nodes.core.targets.served import replans
 from ato_nodes.journeys import run_journey, run_timetable
 from ato_nodes.studies import write_outputs
@@ -39,11 +42,18 @@ def journey_run(values: dict) -> dict:
     series = simulate(values)
     indices = run_journey(series, values, run_timetable(values))
     made = replans(RunContext(values).plan, values["run.period"], series["position"])
-    return {"stations": {station.station: {"arrival_lateness_s": station.arrival_lateness,
+    return {"stations": {station.station: {"outcome": station.outcome,
+                                           "arrival_lateness_s": station.arrival_lateness,
                                            "stop_error_m": station.stop_error}
                          for station in indices.stations[1:]},
             "traction_energy_kwh": indices.traction_energy_kwh,
             "replans": [replan.text() for replan in made]}
+
+
+def station_cell(cell: dict) -> str:
+    if cell["outcome"] != STOPPED:  # passed, or not reached before the run's end
+        return cell["outcome"]
+    return f"{cell['arrival_lateness_s']:+.1f}, {cell['stop_error_m']:+.3f}"
 
 
 def table(runs: dict[str, dict]) -> str:
@@ -53,9 +63,7 @@ def table(runs: dict[str, dict]) -> str:
              + " |", "|---|" + "---|" * len(labels)]
     for station in runs[labels[0]]["stations"]:
         cells = [runs[label]["stations"][station] for label in labels]
-        lines.append(f"| {station} | " + " | ".join(
-            f"{cell['arrival_lateness_s']:+.1f}, {cell['stop_error_m']:+.3f}" for cell in cells)
-            + " |")
+        lines.append(f"| {station} | " + " | ".join(map(station_cell, cells)) + " |")
     lines.append("| traction energy kWh | " + " | ".join(
         f"{runs[label]['traction_energy_kwh']:.2f}" for label in labels) + " |")
     said = [f"- {text}" for text in runs[CAUGHT_UP]["replans"]]
@@ -67,10 +75,12 @@ def main() -> None:
     parser.add_argument("scenario", help="a journey scenario (profile.kind journey)")
     parser.add_argument("--delay", required=True, metavar="STOP:SECONDS",
                         help="the dwell extension (profile.journey.dwell_extension)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a parameter in every run (repeatable)")
     parser.add_argument("--out", type=Path, help="directory to create for delay.md/.json")
     args = parser.parse_args()
     try:
-        prepared = {label: prepare(args.scenario, overrides)
+        prepared = {label: prepare(args.scenario, [*args.set, *overrides])
                     for label, overrides in variants(args.delay).items()}
         if run_timetable(prepared[ON_TIME]) is None:
             raise ScenarioError(f"{args.scenario} is not a journey (profile.kind journey)")

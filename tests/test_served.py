@@ -196,3 +196,11 @@ def test_bad_input_is_one_line(override, message):
     with pytest.raises(ScenarioError, match=message) as error:
         _ = RunContext(metro(override)).plan
     assert "\n" not in str(error.value)
+
+
+def test_the_delay_study_refuses_a_delay_outside_the_journey_in_one_line():
+    done = subprocess.run([*invocation("journey_delay.py"), SCENARIO, "--delay", "1:30"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and "stop 1 is not a stop between" in done.stderr
+
