@@ -554,7 +554,10 @@ class AtoCurve(Plan):
 
     def run_time(self, cruise: float) -> float:
         """The running time of the curve for a cruise speed, s (see the class docstring)."""
-        v = self.curve(cruise)
+        return self.time_of(self.curve(cruise))
+
+    def time_of(self, v: np.ndarray) -> float:
+        """The running time of the speeds `v` on this curve's grid (one of its curves), s."""
         cells = 2.0 * np.diff(self.positions) / (v[:-1] + v[1:])
         if self.departure is None:
             return float(np.sum(cells))
@@ -634,7 +637,8 @@ def departure_time(values: dict, train: TrainParameters) -> float:
     return train.dead_time + train.actuator_lag + rise
 
 
-@functools.lru_cache(maxsize=8)
+# a journey asks for two curves per section (on time, fastest): the metro line's twelve
+@functools.lru_cache(maxsize=16)
 def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
                power_speed, stop_jerk, train, envelope_share, jerk, departure) -> AtoCurve:
     """One curve per distinct line and parameters (the profile and the scorer both need

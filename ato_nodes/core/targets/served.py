@@ -145,12 +145,18 @@ def catch_up_level(journey: JourneyTable, section: int, lateness: float) -> int:
 
 
 @jitable
+def lateness(journey: JourneyTable, state: JourneyState) -> float:
+    """How late a train that has arrived at its section's end leaves it, against the
+    timetable's departure, s."""
+    return departure(journey, state) - journey.departures[state.section]
+
+
+@jitable
 def leaving(journey: JourneyTable, state: JourneyState) -> JourneyState:
     """The state of a train as it leaves the end of its section: the next section, on the
-    curve its lateness picks (re-planned from the actual time of leaving)."""
-    late = departure(journey, state) - journey.departures[state.section]
+    curve its lateness picks (re-planned from the time it is released)."""
     return JourneyState(state.section + 1, math.nan,
-                        catch_up_level(journey, state.section + 1, late))
+                        catch_up_level(journey, state.section + 1, lateness(journey, state)))
 
 
 @jitable
@@ -229,8 +235,7 @@ class JourneyPlan(Plan):
         """Step k's time, position and speed over the last step in (see `observed`)."""
         before, self.state = self.state, observed(self.journey, self.state, t, position, speed)
         if self.state.section != before.section and self.state.level > 0:  # left late
-            late = departure(self.journey, before) - self.journey.departures[before.section]
-            self.replans.append(self._replan(t, late))
+            self.replans.append(self._replan(t, lateness(self.journey, before)))
 
     def _replan(self, t: float, lateness: float) -> Replan:
         section, level, times = self.state.section, self.state.level, self.journey.times
@@ -260,8 +265,9 @@ def catch_up_curves(on_time: AtoCurve, fastest: AtoCurve, levels: int
     `fastest` curve's shape (its share) at cruise speeds from the on-time curve's up to its
     highest, evenly spaced in 1 / cruise (what a cruise's time goes with)."""
     cruises = 1.0 / np.linspace(1.0 / on_time.cruise, 1.0 / fastest.cruise, levels)[1:]
-    return ([on_time.speeds, *(fastest.curve(cruise) for cruise in cruises)],
-            [on_time.planned_run_time, *(fastest.run_time(cruise) for cruise in cruises)])
+    faster = [fastest.curve(cruise) for cruise in cruises]
+    return ([on_time.speeds, *faster],
+            [on_time.planned_run_time, *(fastest.time_of(speeds) for speeds in faster)])
 
 
 def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTable, str | None]:
@@ -278,7 +284,8 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
         curve = ato_curve(values, own, train)
         if curve.notice and notice is None:
             notice = f"{section.origin} - {section.destination}: {curve.notice}"
-        speeds, section_times = catch_up_curves(curve, fastest_curve(values, own, train), levels)
+        speeds, section_times = (catch_up_curves(curve, fastest_curve(values, own, train), levels)
+                                 if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
         tables += [plan_table(curve.positions, level, stops_at_end=True, limits=curve.limits)
                    for level in speeds]
         times.append(section_times)
