@@ -15,10 +15,11 @@ from ato_nodes.core.control.adrc import LinearADRCGains, linear_adrc_of
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.control.limiter import CommandLimiter
-from ato_nodes.core.train.line import load_line
+from ato_nodes.core.train.line import Station, load_line
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
 from ato_nodes.core.targets.profiles import AtoCurve, FeasiblePlan, Seed000Profile
+from ato_nodes.core.targets.timetable import section_line
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.run.scoring import score_series
@@ -160,6 +161,36 @@ def test_a_rounded_curve_has_its_jerk_and_brakes_no_later_than_the_corners():
     falling = np.diff(corners.speeds) < 0
     assert np.all(rounded.speeds[1:][falling] <= corners.speeds[1:][falling] + 0.7 * 1.4 / 8)
     assert np.mean(rounded.speeds[1:][falling] <= corners.speeds[1:][falling] + 1e-6) > 0.95
+
+
+def test_a_rounded_traction_turning_straight_into_braking_keeps_its_jerk():
+    # 600 m of metro-line at 80 km/h: the fastest curve turns from traction into braking
+    # at 20 m/s, with no cruise between (seed004-metro-line's rates, share and jerk).
+    train = metro()
+    metro_line = load_line(ROOT / "msg_config/lines/metro-line.yaml")
+    line = replace(section_line(metro_line, 4000.0, 4600.0),
+                   stations=(Station("A", 0.0, 0.0), Station("B", 600.0, 0.0)))
+    jerk = 0.6
+
+    def curve(rounding):
+        return AtoCurve(line, 0.8, 0.65, margin=0.5, start_speed=0.1,
+                        train_length=train.length, stop_jerk=0.3, train=train,
+                        envelope_share=0.95, jerk=rounding)
+
+    rounded, corners = curve(jerk), curve(0.0)
+    assert corners.speeds.max() < corners.caps.max() - 1.0  # a turn, not a cruise
+    t = time_along(rounded.positions, rounded.speeds)
+    grid = np.arange(0.0, t[-1], 0.01)
+    acceleration = np.diff(np.interp(grid, t, rounded.speeds)) / 0.01
+    window = 25  # 0.25 s: a jump in the acceleration shows fully
+    jerks = np.abs(acceleration[window:] - acceleration[:-window]) / (window * 0.01)
+    # Past the start's rounding (round_corners' own from start_speed: T + W = 3.5 s).
+    assert jerks[grid[window:len(jerks) + window] > 3.5].max() <= 1.02 * jerk
+    assert np.all(rounded.speeds <= rounded.limits - 0.25 + 1e-9)
+    # Braking no later than the corners' curve, to the eased stop's last metres (those
+    # are round_corners' own, which passes over the convex easing by stop_jerk T^2 / 24).
+    falling = (np.diff(corners.speeds) < 0) & (rounded.positions[1:] < line.stop_position - 2.0)
+    assert np.all(rounded.speeds[1:][falling] <= corners.speeds[1:][falling] + 1e-9)
 
 
 def test_a_feasible_time_plan_falls_behind_where_the_plan_asks_too_much():

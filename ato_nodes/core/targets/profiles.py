@@ -152,17 +152,24 @@ class Seed000Profile(Plan):
 ROUNDING_WIDTH = 20  # samples per averaging window of round_corners
 
 
+def moving_means(samples: np.ndarray, width: int, after: float, leads) -> list[np.ndarray]:
+    """Means over `width` samples of a curve sampled evenly, one array per lead: the
+    window of sample i ends `lead` samples after it (0: the past; width // 2 of an odd
+    width: centred). Before its start the curve holds its first value, after its end
+    `after`."""
+    padded = np.concatenate((np.full(width, samples[0]), samples, np.full(width, after)))
+    sums = np.concatenate(([0.0], np.cumsum(padded)))
+    i = np.arange(len(samples))
+    return [(sums[i + width + lead + 1] - sums[i + lead + 1]) / width for lead in leads]
+
+
 def round_corners(samples: np.ndarray, width: int, after: float) -> np.ndarray:
     """A speed curve sampled evenly in time, its acceleration made continuous: the mean
     over `width` samples centred where it falls, over the past where it rises, so it
     brakes earlier and accelerates later than the corners, never the other way (the
     lower of the two means; the curve before its start holds its first value, after its
     end `after`). An acceleration step of da becomes a ramp of da / (width * tick)."""
-    padded = np.concatenate((np.full(width, samples[0]), samples, np.full(width, after)))
-    sums = np.concatenate(([0.0], np.cumsum(padded)))
-    i = np.arange(len(samples))
-    past = (sums[i + width + 1] - sums[i + 1]) / width
-    centred = (sums[i + width + width // 2 + 1] - sums[i + width // 2 + 1]) / width
+    past, centred = moving_means(samples, width, after, (0, width // 2))
     return np.minimum(past, centred)
 
 
@@ -357,14 +364,17 @@ class AtoCurve(Plan):
       weighed train at c): there the curve falls from c as the forward pass does, until
       back on the cap; the rounded curve is held to the coasting in neutral sections
       too (its centred mean would start the coasting inside the section).
-    * `jerk` > 0: the acceleration is made continuous with at most this jerk, the
-      curve in time averaged over T = max(acceleration, deceleration) / jerk:
-      centred where it falls (the braking starts T/2 earlier, never later), over
-      the past where it rises (the acceleration starts later, never earlier). Where a
-      braking ends at a lower limit the centred mean passes over the corner by at
-      most da T / 8 (0.12 m/s for 0.7 m/s^2 at 0.5 m/s^3); the rounded curve is
-      kept half the margin under the limits, never clipped to the cap (a clip
-      would bring the corner back).
+    * `jerk` > 0: the acceleration changes at most at this jerk, a traction turning
+      straight into braking included: the curve in time averaged over T =
+      max(acceleration, deceleration) / jerk, centred where it falls (the braking
+      starts T/2 earlier, never later), over the past where it rises (the acceleration
+      starts later, never earlier), and around each turn from traction straight into
+      braking that averaged again, centred, over W = (acceleration + deceleration) /
+      jerk (_rounded says why). Where a braking ends at a lower limit the centred mean
+      passes over the corner by at most da T / 8 (0.12 m/s for 0.7 m/s^2 at 0.5
+      m/s^3); the rounded curve is kept half the margin under the limits, never
+      clipped to the cap (a clip would bring the corner back). The eased stop is
+      round_corners' alone.
 
     The running time bisected on is the curve's own time (its rounding and its share
     included) from start_speed at the departure point to the mark. With `departure`
@@ -530,16 +540,71 @@ class AtoCurve(Plan):
         return np.sqrt(squared)
 
     def _rounded(self, speeds: np.ndarray) -> np.ndarray:
-        """The curve with its acceleration made continuous (see the class docstring), in
-        time along the curve itself, then back onto the grid."""
+        """The curve with its acceleration changing at most at `jerk` (see the class
+        docstring), in time along the curve itself, then back onto the grid: round_corners
+        over T = max(a, b) / jerk (a, b the planned acceleration and deceleration), and
+        around each turn from traction straight into braking the centred mean of that
+        over W = (a + b) / jerk (an odd number of ticks).
+
+        Why the second mean: round_corners alone turns a traction straight into braking
+        with a jump of about (a + b) / 2 in acceleration where its two means cross (the
+        lower of them switches), and its ramps there change a + b over T: 1.4 m/s^3 for a
+        0.6 m/s^3 jerk. A centred mean over W of any curve whose acceleration stays within
+        [-b, a] (round_corners' means of the curve do) changes its acceleration by at most
+        (a + b) / W = jerk, whatever the curve does. Centred, it stays under a concave
+        corner, so braking still starts no later than the turn. Only around the turns
+        (`_turn_weights`): elsewhere round_corners' ramps already keep the jerk, and a
+        curve without such a turn keeps round_corners' bits."""
         x = self.positions
         times = np.concatenate(([0.0], np.cumsum(2.0 * np.diff(x) / (speeds[:-1] + speeds[1:]))))
         tick = max(self.acceleration, self.deceleration) / self.jerk / ROUNDING_WIDTH
         grid = np.arange(0.0, times[-1] + tick / 2, tick)
-        rounded = round_corners(np.interp(grid, times, speeds), ROUNDING_WIDTH, 0.0)
-        rounded = np.minimum(np.interp(times, grid, rounded), self.limits - self.margin / 2)
+        timed = np.interp(grid, times, speeds)
+        cornered = round_corners(timed, ROUNDING_WIDTH, 0.0)
+        width = 2 * math.ceil((self.acceleration + self.deceleration) / self.jerk / tick / 2) + 1
+        weights = self._turn_weights(timed, tick, width)
+        if weights is None:
+            rounded = np.interp(times, grid, cornered)
+        else:
+            smoothed = moving_means(cornered, width, 0.0, (width // 2,))[0]
+            turned = np.interp(times, grid, cornered + weights * (smoothed - cornered))
+            # The stop as round_corners rounds it: the wider mean would pass over the eased
+            # stop, a convex curve, by stop_jerk W^2 / 24.
+            rounded = np.minimum(turned, np.maximum(self._stop_curve,
+                                                    np.interp(times, grid, cornered)))
+        rounded = np.minimum(rounded, self.limits - self.margin / 2)
         rounded[0], rounded[-1] = speeds[0], 0.0
         return rounded
+
+    def _turn_weights(self, timed: np.ndarray, tick: float, width: int) -> np.ndarray | None:
+        """Where the second mean of _rounded applies, per tick of the curve in time: 1
+        within T + W of a turn from traction (accelerating) into braking (at least half
+        the service deceleration) less than W apart, so that round_corners' ramps there
+        are averaged whole, falling to 0 over a further W where round_corners' curve is
+        straight (the two agree); None without a turn. A fall where the share cannot hold
+        the speed on a climb brakes more gently and is not a turn: its mean would ask
+        more than the share."""
+        accelerations = np.diff(timed) / tick
+        braking = accelerations < -0.5 * self.deceleration
+        ticks = np.arange(len(accelerations))
+        last_traction = np.maximum.accumulate(np.where(accelerations > 0.0, ticks, -1))
+        entries = np.flatnonzero(braking & ~np.concatenate(([False], braking[:-1])))
+        centres = [(entry + last_traction[entry]) / 2.0 for entry in entries
+                   if last_traction[entry] >= 0 and entry - last_traction[entry] < width]
+        if not centres:
+            return None
+        reach = ROUNDING_WIDTH + width
+        samples = np.arange(len(timed))
+        distance = np.min(np.abs(samples[:, None] - np.array(centres)[None, :]), axis=1)
+        return np.clip((reach + width - distance) / width, 0.0, 1.0)
+
+    @functools.cached_property
+    def _stop_curve(self) -> np.ndarray:
+        """The speed the braking into the mark allows at every grid point, m/s."""
+        distance = self.positions[-1] - self.positions
+        if self.stop_jerk > 0.0:
+            return self.stopping(distance)
+        return np.sqrt(2.0 * self.deceleration * distance)
 
     def stopping(self, distance: np.ndarray) -> np.ndarray:
         """Speed at `distance` before the mark on a stop whose braking eases off at
