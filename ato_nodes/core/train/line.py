@@ -17,6 +17,7 @@ wholly on one section and varies linearly while it straddles a change:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -81,6 +82,29 @@ class Line:
     def tables(self) -> LineTables:
         """The sections as the line functions below read them (tuples: fast in Python)."""
         return line_tables(self, tuple)
+
+
+def with_speed_restrictions(line: Line, restrictions: tuple[Section, ...]) -> Line:
+    """`line` with its speed limits lowered to at most each restriction's value (m/s) from
+    its start to its end (m): the limits split at the restrictions' ends, so that they
+    still cover the line in order without overlapping and every reader of a line's
+    limits (speed_limit, the ato curve's belt) reads the restricted ones."""
+    limits = line.speed_limits
+    for restriction in restrictions:
+        limits = tuple(piece for section in limits
+                       for piece in _restricted(section, restriction))
+    return dataclasses.replace(line, speed_limits=limits)
+
+
+def _restricted(section: Section, restriction: Section) -> tuple[Section, ...]:
+    """A limit's section as the pieces before, inside and after `restriction`, the
+    inside at the lower of the two limits."""
+    inside_start = max(section.start, restriction.start)
+    inside_end = min(section.end, restriction.end)
+    pieces = (Section(section.start, min(section.end, restriction.start), section.value),
+              Section(inside_start, inside_end, min(section.value, restriction.value)),
+              Section(max(section.start, restriction.end), section.end, section.value))
+    return tuple(piece for piece in pieces if piece.end > piece.start)
 
 
 START, END, VALUE = 0, 1, 2  # a section's columns in LineTables.sections
