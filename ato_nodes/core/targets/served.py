@@ -41,8 +41,10 @@ from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
+from ..train.line import with_speed_restrictions
 from .profiles import (ATO_PARAMETERS, AtoCurve, PlanTable, ato_curve, cell_of, plan_table,
                        table_limit, table_speed)
+from .restriction import SPEED_RESTRICTION, speed_restrictions
 from .timetable import Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
@@ -273,17 +275,19 @@ def catch_up_curves(on_time: AtoCurve, fastest: AtoCurve, levels: int
 def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTable, str | None]:
     """The sections' ato curves on `line` for `train`, each on time for its running time
     in the timetable less the recovery (with profile.ato.on_time) and its faster curves
-    (profile.journey.catch_up), and the first section's notice of a running time it
-    cannot meet."""
+    (profile.journey.catch_up), under the run's speed restrictions
+    (profile.journey.speed_restriction); and the notices of the running times they
+    cannot meet, in one line."""
     levels = 1 + values["profile.journey.catch_up"]
-    tables, times, notice = [], [], None
+    line = with_speed_restrictions(line, speed_restrictions(values, line))
+    tables, times, notices = [], [], []
     for section in timetable.sections:
         own = dataclasses.replace(section_line(line, section.start, section.end),
                                   planned_run_time=section.running_time
                                   - values["profile.journey.recovery"])
         curve = ato_curve(values, own, train)
-        if curve.notice and notice is None:
-            notice = f"{section.origin} - {section.destination}: {curve.notice}"
+        if curve.notice:
+            notices.append(f"{section.origin} - {section.destination}: {curve.notice}")
         speeds, section_times = (catch_up_curves(curve, fastest_curve(values, own, train), levels)
                                  if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
         tables += [plan_table(curve.positions, level, stops_at_end=True, limits=curve.limits)
@@ -301,7 +305,8 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
         dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
         extensions=dwell_extensions(values["profile.journey.dwell_extension"], timetable),
         berth=float(values["profile.journey.berth"]),
-        catch_up_after=float(values["profile.journey.catch_up_after"])), notice
+        catch_up_after=float(values["profile.journey.catch_up_after"])), \
+        " | ".join(notices) or None
 
 
 def fastest_curve(values, line, train) -> AtoCurve:
@@ -353,4 +358,4 @@ def _journey(values, context) -> JourneyPlan:
 
 JOURNEY = Component("journey", "a timetable's stops served one after another: each "
                     "section's ato curve, held at each stop until its departure",
-                    (*JOURNEY_PARAMETERS, *ATO_PARAMETERS), _journey)
+                    (*JOURNEY_PARAMETERS, SPEED_RESTRICTION, *ATO_PARAMETERS), _journey)
