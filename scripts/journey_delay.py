@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
 """A delay on a journey and what re-planning wins back: the journey run on time, then with
-a dwell extended (profile.journey.dwell_extension STOP:SECONDS) twice, keeping its
-on-time curves (profile.journey.catch_up 0) and catching up (the scenario's catch-up
-curves), side by side, in-process: per station the arrival lateness and the stop, the
-journey's traction energy, and the re-plans the profile made.
+a dwell extended (--delay: profile.journey.dwell_extension STOP:SECONDS) or a temporary
+speed restriction (--restriction: profile.journey.speed_restriction START:END:SPEED), or
+both, twice, keeping its on-time curves (profile.journey.catch_up 0) and catching up (the
+scenario's catch-up curves), side by side, in-process: per station the arrival lateness
+and the stop, the journey's traction energy, and the re-plans the profile made.
 
     python scripts/journey_delay.py seed004-metro-line --delay 2:30
+    python scripts/journey_delay.py seed004-metro-line --restriction 4000:4600:8.33
     python scripts/journey_delay.py seed004-metro-line --delay 2:30 --out bags/delay-metro
     python scripts/journey_delay.py seed004-metro-line --delay 2:30 \
         --set profile.journey.catch_up_share=1 --set profile.journey.catch_up_braking=1.23
@@ -31,10 +33,10 @@ from ato_nodes.studies import write_outputs
 ON_TIME, KEPT, CAUGHT_UP = "on time", "delayed, on-time curves kept", "delayed, catching up"
 
 
-def variants(delay: str) -> dict[str, list[str]]:
-    extension = f"profile.journey.dwell_extension={delay}"
-    return {ON_TIME: [], KEPT: [extension, "profile.journey.catch_up=0"],
-            CAUGHT_UP: [extension]}
+def variants(delay: str | None, restriction: str | None) -> dict[str, list[str]]:
+    faults = [f"profile.journey.{name}={value}" for name, value in
+              (("dwell_extension", delay), ("speed_restriction", restriction)) if value]
+    return {ON_TIME: [], KEPT: [*faults, "profile.journey.catch_up=0"], CAUGHT_UP: faults}
 
 
 def journey_run(values: dict) -> dict:
@@ -73,15 +75,20 @@ def table(runs: dict[str, dict]) -> str:
 def main() -> None:
     parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenario", help="a journey scenario (profile.kind journey)")
-    parser.add_argument("--delay", required=True, metavar="STOP:SECONDS",
+    parser.add_argument("--delay", metavar="STOP:SECONDS",
                         help="the dwell extension (profile.journey.dwell_extension)")
+    parser.add_argument("--restriction", metavar="START:END:SPEED",
+                        help="the temporary speed restriction, m and m/s "
+                        "(profile.journey.speed_restriction)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a parameter in every run (repeatable)")
     parser.add_argument("--out", type=Path, help="directory to create for delay.md/.json")
     args = parser.parse_args()
+    if not (args.delay or args.restriction):
+        _cli.fail("give the delay: --delay STOP:SECONDS, --restriction START:END:SPEED or both")
     try:
         prepared = {label: prepare(args.scenario, [*args.set, *overrides])
-                    for label, overrides in variants(args.delay).items()}
+                    for label, overrides in variants(args.delay, args.restriction).items()}
         if run_timetable(prepared[ON_TIME]) is None:
             raise ScenarioError(f"{args.scenario} is not a journey (profile.kind journey)")
     except ScenarioError as exc:
