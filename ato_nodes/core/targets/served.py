@@ -89,7 +89,9 @@ class JourneyTable(NamedTuple):
     """A journey as the target reads it: section i has `levels` curves, its on-time curve
     (level 0) and faster ones in order; curve l of section i is grid[:, bounds[c]:
     bounds[c + 1]] with c = i * levels + l (positions from the section's start, speeds,
-    the belt's limits), its running time times[i, l]. The section runs from stops[i] to
+    the belt's limits), its running time times[i, l], the timetable's less the recovery
+    scheduled[i] (more than times[i, 0] where a speed restriction makes it unmet). The
+    section runs from stops[i] to
     stops[i + 1] (m along the line); the train may leave its end at departures[i] (s, run
     clock; inf at the last stop), or dwells[i] after it arrived there if later, and in
     either case extensions[i] later (profile.journey.dwell_extension)."""
@@ -98,6 +100,7 @@ class JourneyTable(NamedTuple):
     bounds: np.ndarray      # sections * levels + 1 column indices
     levels: int             # curves per section: 1 + profile.journey.catch_up
     times: np.ndarray       # sections x levels, s
+    scheduled: np.ndarray   # sections, s
     stops: np.ndarray       # sections + 1 positions, m
     departures: np.ndarray  # sections, s
     dwells: np.ndarray      # sections, s
@@ -209,13 +212,14 @@ class Replan(NamedTuple):
     lateness: float      # s after the timetable's departure
     running_time: float  # s: the chosen curve's, standstill to standstill
     on_time: float       # s: the section's on-time curve's
+    scheduled: float     # s: the timetable's less the recovery (on_time unless unmet)
     minimum_time: bool   # the fastest curve at the envelope share: not all won back
 
     def text(self) -> str:
         said = (f"{self.origin} - {self.destination}: left {self.lateness:.1f} s late, "
                 f"{self.running_time:.1f} s planned instead of {self.on_time:.1f} s")
         if self.minimum_time:
-            late = self.lateness - (self.on_time - self.running_time)
+            late = self.lateness + self.running_time - self.scheduled
             said += f"; driving minimum-time, {late:.1f} s late at {self.destination}"
         return said
 
@@ -243,7 +247,7 @@ class JourneyPlan(Plan):
         section, level, times = self.state.section, self.state.level, self.journey.times
         return Replan(t, self.stations[section], self.stations[section + 1], float(lateness),
                       float(times[section, level]), float(times[section, 0]),
-                      level == self.journey.levels - 1)
+                      float(self.journey.scheduled[section]), level == self.journey.levels - 1)
 
     def speed(self, t: float, position: float = 0.0) -> float:
         return float(journey_speed(self.journey, self.state, t, position))
@@ -281,10 +285,11 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
     levels = 1 + values["profile.journey.catch_up"]
     line = with_speed_restrictions(line, speed_restrictions(values, line))
     tables, times, notices = [], [], []
-    for section in timetable.sections:
+    scheduled = [section.running_time - values["profile.journey.recovery"]
+                 for section in timetable.sections]
+    for section, planned in zip(timetable.sections, scheduled, strict=True):
         own = dataclasses.replace(section_line(line, section.start, section.end),
-                                  planned_run_time=section.running_time
-                                  - values["profile.journey.recovery"])
+                                  planned_run_time=planned)
         curve = ato_curve(values, own, train)
         if curve.notice:
             notices.append(f"{section.origin} - {section.destination}: {curve.notice}")
@@ -299,7 +304,7 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
     return JourneyTable(
         grid=np.concatenate([table.grid for table in tables], axis=1),
         bounds=np.cumsum([0] + [table.grid.shape[1] for table in tables], dtype=np.int64),
-        levels=levels, times=np.array(times),
+        levels=levels, times=np.array(times), scheduled=np.array(scheduled),
         stops=np.array([stop.position for stop in stops]),
         departures=np.array([*leaving_at, math.inf]),
         dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
