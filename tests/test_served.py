@@ -16,8 +16,8 @@ from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepa
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.core.config.schema import NodeValues
-from ato_nodes.core.targets.served import (JourneyState, Replan, catch_up_level, departure,
-                                           journey_speed, observed, replans)
+from ato_nodes.core.targets.served import (JourneyPlan, JourneyState, Replan, catch_up_level,
+                                           departure, journey_speed, observed, replans)
 from ato_nodes.core.targets.timetable import load_timetable
 from commands import ROOT, invocation
 
@@ -140,6 +140,29 @@ def test_a_late_train_drives_the_slowest_curve_that_wins_its_lateness_back(plan)
         assert times[chosen] <= times[0] - gain and (chosen == 0 or times[chosen - 1] > times[
             0] - gain)
     assert catch_up_level(journey, 1, 1e3) == journey.levels - 1  # minimum-time
+
+
+def leaving_late(plan, lateness):
+    """The re-plan of a train released from Market `lateness` s after its departure."""
+    journey = plan.journey
+    extended = journey._replace(extensions=np.array([lateness, *journey.extensions[1:]]))
+    fresh = JourneyPlan(extended, plan.notice, plan.stations)
+    fresh.state = JourneyState(0, journey.departures[0] - journey.dwells[0] - 10.0, 0)  # early
+    fresh.observe(departure(extended, fresh.state), journey.stops[1], 0.0)
+    [made] = fresh.replans
+    assert made.lateness == pytest.approx(lateness)
+    return made
+
+
+def test_a_replan_is_minimum_time_only_when_the_fastest_curve_does_not_win_it_all_back(plan):
+    times = plan.journey.times[1]
+    # the fastest curve is the slowest that wins this back (the next slower does not)
+    exact = leaving_late(plan, times[0] - (times[-2] + times[-1]) / 2)
+    assert exact.running_time == times[-1] and not exact.minimum_time
+    assert "minimum-time" not in exact.text()
+    short = leaving_late(plan, times[0] - times[-1] + 1.0)
+    assert short.running_time == times[-1] and short.minimum_time
+    assert "minimum-time, 1.0 s late" in short.text()
 
 
 def arrival(run, mark):

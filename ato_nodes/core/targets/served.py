@@ -207,7 +207,7 @@ class Replan(NamedTuple):
     lateness: float      # s after the timetable's departure
     running_time: float  # s: the chosen curve's, standstill to standstill
     on_time: float       # s: the section's on-time curve's
-    minimum_time: bool   # the fastest curve at the envelope share: not all won back
+    minimum_time: bool   # the fastest curve, and it does not win the lateness all back
 
     def text(self) -> str:
         said = (f"{self.origin} - {self.destination}: left {self.lateness:.1f} s late, "
@@ -239,9 +239,10 @@ class JourneyPlan(Plan):
 
     def _replan(self, t: float, lateness: float) -> Replan:
         section, level, times = self.state.section, self.state.level, self.journey.times
+        # minimum-time when the chosen curve (the fastest then) does not win it all back
         return Replan(t, self.stations[section], self.stations[section + 1], float(lateness),
                       float(times[section, level]), float(times[section, 0]),
-                      level == self.journey.levels - 1)
+                      bool(times[section, level] > times[section, 0] - lateness))
 
     def speed(self, t: float, position: float = 0.0) -> float:
         return float(journey_speed(self.journey, self.state, t, position))
