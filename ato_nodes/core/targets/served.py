@@ -25,6 +25,16 @@ running sees the stop and then 0: it cannot leave within a horizon, since it lea
 least a dwell after it arrives (seconds; a horizon is LOOKAHEAD + controller.preview
 steps).
 
+A train that leaves a stop late catches up (profile.journey.catch_up): each section has
+faster curves beside its on-time one, and as the train leaves a stop (`leaving`, inside
+the state, so the node, simulate() and the compiled loop choose alike) its lateness, its
+release less the timetable's departure, picks the slowest that wins it back, else the
+fastest (minimum-time); under profile.journey.catch_up_after late it keeps its on-time
+curve. Each such re-plan is a Replan (JourneyPlan.replans): the profile node says it on
+the run's events topic ('replanned ...') and publishes it for the recorder; `replans`
+derives the same from a run's positions. profile.journey.dwell_extension holds the train
+longer at given stops (an injected delay).
+
 The tables (JourneyTable) are the sections' curves one after another, read by the same
 functions in Python and compiled code (core/run/fast_loop.py), to the same bits.
 """
