@@ -214,11 +214,21 @@ def test_the_stack_says_and_records_the_replans_the_in_process_run_makes(tmp_pat
     ("profile.journey.dwell_extension=1:30", "stop 1 is not a stop between the ends"),
     ("profile.journey.dwell_extension=2:30,7:10", "stop 7 is not a stop between the ends"),
     ("profile.journey.dwell_extension=2", "must be STOP:SECONDS"),
+    ("profile.journey.dwell_extension=2:3600.5", "3600.5 s at stop 2 is more than 3600 s"),
+    ("profile.journey.dwell_extension=3:10,2:1800,2:1801", "3601 s at stop 2 is more than"),
 ])
 def test_bad_input_is_one_line(override, message):
     with pytest.raises(ScenarioError, match=message) as error:
         _ = RunContext(metro(override)).plan
     assert "\n" not in str(error.value)
+
+
+def test_run_stack_refuses_a_dwell_extension_beyond_an_hour_in_one_line(tmp_path):
+    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out",
+                           str(tmp_path / "bag"), "--set=profile.journey.dwell_extension=2:3601"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 2 and not (tmp_path / "bag").exists()
+    assert done.stderr.count("\n") == 1 and "is more than 3600 s" in done.stderr
 
 
 def test_the_delay_study_refuses_a_delay_outside_the_journey_in_one_line():

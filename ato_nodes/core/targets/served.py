@@ -57,6 +57,7 @@ from .timetable import Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
 _EXTENSION = r"\s*\d+\s*:\s*\d+(?:\.\d*)?\s*"
+LONGEST_EXTENSION = 3600.0  # s: a dwell extended longer is a service cancelled, not a delay
 
 JOURNEY_PARAMETERS = (
     param("profile.journey.timetable", "", "timetable file (msg_config/timetables/*.yaml) of "
@@ -328,7 +329,8 @@ def fastest_curve(values, line, train) -> AtoCurve:
 
 def dwell_extensions(text: str, timetable: Timetable) -> np.ndarray:
     """profile.journey.dwell_extension (STOP:SECONDS, ...) as the s added to the hold at
-    each section's end; ScenarioError for a stop that is not between the journey's ends."""
+    each section's end; ScenarioError for a stop that is not between the journey's ends
+    or more than LONGEST_EXTENSION s at one."""
     extensions = np.zeros(len(timetable.sections))
     for item in filter(None, (part.strip() for part in text.split(","))):
         number, seconds = (int(item.split(":")[0]), float(item.split(":")[1]))
@@ -336,6 +338,10 @@ def dwell_extensions(text: str, timetable: Timetable) -> np.ndarray:
             raise ScenarioError(f"profile.journey.dwell_extension: stop {number} is not a stop "
                                 f"between the ends of {timetable.path} (2 to "
                                 f"{len(timetable.stops) - 1})")
+        if extensions[number - 2] + seconds > LONGEST_EXTENSION:
+            raise ScenarioError(f"profile.journey.dwell_extension: "
+                                f"{extensions[number - 2] + seconds:g} s at stop {number} is "
+                                f"more than {LONGEST_EXTENSION:g} s")
         extensions[number - 2] += seconds
     return extensions
 
