@@ -80,10 +80,11 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="directory to create for delay.md/.json")
     args = parser.parse_args()
     try:
-        prepared = {label: prepare(args.scenario, [*args.set, *overrides])
-                    for label, overrides in variants(args.delay).items()}
-        if run_timetable(prepared[ON_TIME]) is None:
+        on_time = prepare(args.scenario, args.set)  # a journey before the journey's overrides
+        if run_timetable(on_time) is None:
             raise ScenarioError(f"{args.scenario} is not a journey (profile.kind journey)")
+        prepared = {label: prepare(args.scenario, [*args.set, *overrides]) if overrides
+                    else on_time for label, overrides in variants(args.delay).items()}
     except ScenarioError as exc:
         _cli.fail(str(exc))
     if args.out is not None:

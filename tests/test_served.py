@@ -231,6 +231,13 @@ def test_run_stack_refuses_a_dwell_extension_beyond_an_hour_in_one_line(tmp_path
     assert done.stderr.count("\n") == 1 and "is more than 3600 s" in done.stderr
 
 
+def test_the_delay_study_refuses_a_run_that_is_not_a_journey_first_in_one_line():
+    done = subprocess.run([*invocation("journey_delay.py"), "seed004-metro", "--delay", "2:30"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 2 and done.stdout == "" and done.stderr.count("\n") == 1
+    assert "seed004-metro is not a journey" in done.stderr
+
+
 def test_the_delay_study_refuses_a_delay_outside_the_journey_in_one_line():
     done = subprocess.run([*invocation("journey_delay.py"), SCENARIO, "--delay", "1:30"],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
