@@ -207,6 +207,25 @@ def test_the_stack_says_and_records_the_replans_the_in_process_run_makes(tmp_pat
     assert run.replans[0]["step"] == round(made[0].time / values["run.period"])
 
 
+@pytest.mark.integration
+def test_a_replan_at_the_last_step_of_a_run_is_in_its_bag(tmp_path):
+    delayed = metro("profile.journey.dwell_extension=2:30", "run.duration=330")
+    period = delayed["run.period"]
+    first = replans(RunContext(delayed).plan, period, simulate(delayed)["position"])[0]
+    overrides = ["profile.journey.dwell_extension=2:30",
+                 f"run.duration={(round(first.time / period) + 1) * period!r}"]  # its step last
+    bag = tmp_path / "bag"
+    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out", str(bag),
+                           *(f"--set={item}" for item in overrides)],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert done.returncode == 0, done.stdout + done.stderr
+    values = prepare(SCENARIO, overrides)
+    made = replans(RunContext(values).plan, period, simulate(values)["position"])
+    assert [replan.time for replan in made] == [first.time]  # made at the run's last step
+    assert [{name: replan[name] for name in Replan._fields}
+            for replan in read_run(bag).replans] == [first._asdict()]
+
+
 @pytest.mark.parametrize("override,message", [
     ("profile.journey.timetable=", "profile.journey.timetable is empty"),
     ("profile.journey.timetable=timetables/hsr-journey.yaml", "is of line"),

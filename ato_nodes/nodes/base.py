@@ -485,6 +485,15 @@ class SubscriptionWaitSet:
         return None if taken is None else taken[0]
 
 
+def take_queued(subscription) -> list:
+    """The messages queued on `subscription` now, taken as rclpy's executor takes them."""
+    taken = []
+    while (message := subscription.handle.take_message(subscription.msg_type,
+                                                        subscription.raw)) is not None:
+        taken.append(message[0])
+    return taken
+
+
 class LockstepInputs:
     """A node's per-step subscriptions and run events: wait, then take and handle every
     queued message of each ready one (in arrival order per topic), and of each not
