@@ -5,7 +5,8 @@ against the same run in-process.
     python scripts/compare_scenarios.py seed004-metro-tuned seed004-metro-ato \\
         --out bags/compare-metro
 
-A scenario may carry overrides after colons (seed000:controller.preview=1). Prints and
+A scenario may carry overrides after colons (seed000:controller.preview=1), whose values
+may hold colons (seed004-metro-line:profile.journey.dwell_extension=2:30). Prints and
 writes (comparison.md, comparison.json) one row per run: max |e| (outside seed 003's
 stepped approach where it has one), p95 |e|, ITAE, stopping error, max jerk over 1 s,
 traction/brake switches, overspeed, net energy and whether the stack and the
@@ -14,6 +15,7 @@ in-process run agree.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import _cli
@@ -23,10 +25,14 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies import Outcome, Variant, numeric, prepare_variants, run_study, write_outputs
 
 
+# a ':' that starts the next NAME=VALUE; any other stays in its value (dwell_extension=2:30)
+OVERRIDE_START = re.compile(r":(?=[A-Za-z_][\w.]*=)")
+
+
 def variant(text: str) -> Variant:
     """SCENARIO[:NAME=VALUE...] as a variant."""
-    scenario, *overrides = text.split(":")
-    return Variant(scenario, overrides)
+    scenario, _, overrides = text.partition(":")
+    return Variant(scenario, OVERRIDE_START.split(overrides) if overrides else [])
 
 
 def progress(label: str, outcome: Outcome) -> None:

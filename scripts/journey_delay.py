@@ -87,10 +87,12 @@ def main() -> None:
     if not (args.delay or args.restriction):
         _cli.fail("give the delay: --delay STOP:SECONDS, --restriction START:END:SPEED or both")
     try:
-        prepared = {label: prepare(args.scenario, [*args.set, *overrides])
-                    for label, overrides in variants(args.delay, args.restriction).items()}
-        if run_timetable(prepared[ON_TIME]) is None:
+        on_time = prepare(args.scenario, args.set)  # a journey before the journey's overrides
+        if run_timetable(on_time) is None:
             raise ScenarioError(f"{args.scenario} is not a journey (profile.kind journey)")
+        faulted = variants(args.delay, args.restriction)
+        prepared = {label: prepare(args.scenario, [*args.set, *overrides]) if overrides
+                    else on_time for label, overrides in faulted.items()}
     except ScenarioError as exc:
         _cli.fail(str(exc))
     if args.out is not None:

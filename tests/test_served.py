@@ -16,8 +16,8 @@ from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepa
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.core.config.schema import NodeValues
-from ato_nodes.core.targets.served import (JourneyState, Replan, catch_up_level, departure,
-                                           journey_speed, observed, replans)
+from ato_nodes.core.targets.served import (JourneyPlan, JourneyState, Replan, catch_up_level,
+                                           departure, journey_speed, observed, replans)
 from ato_nodes.core.targets.timetable import load_timetable
 from commands import ROOT, invocation
 
@@ -142,6 +142,29 @@ def test_a_late_train_drives_the_slowest_curve_that_wins_its_lateness_back(plan)
     assert catch_up_level(journey, 1, 1e3) == journey.levels - 1  # minimum-time
 
 
+def leaving_late(plan, lateness):
+    """The re-plan of a train released from Market `lateness` s after its departure."""
+    journey = plan.journey
+    extended = journey._replace(extensions=np.array([lateness, *journey.extensions[1:]]))
+    fresh = JourneyPlan(extended, plan.notice, plan.stations)
+    fresh.state = JourneyState(0, journey.departures[0] - journey.dwells[0] - 10.0, 0)  # early
+    fresh.observe(departure(extended, fresh.state), journey.stops[1], 0.0)
+    [made] = fresh.replans
+    assert made.lateness == pytest.approx(lateness)
+    return made
+
+
+def test_a_replan_is_minimum_time_only_when_the_fastest_curve_does_not_win_it_all_back(plan):
+    times = plan.journey.times[1]
+    # the fastest curve is the slowest that wins this back (the next slower does not)
+    exact = leaving_late(plan, times[0] - (times[-2] + times[-1]) / 2)
+    assert exact.running_time == times[-1] and not exact.minimum_time
+    assert "minimum-time" not in exact.text()
+    short = leaving_late(plan, times[0] - times[-1] + 1.0)
+    assert short.running_time == times[-1] and short.minimum_time
+    assert "minimum-time, 1.0 s late" in short.text()
+
+
 def arrival(run, mark):
     """When the train first stood within the berth of `mark`, s."""
     standing = (np.abs(run["position"] - mark) < 1.0) & (run["speed"] < 0.01)
@@ -184,6 +207,25 @@ def test_the_stack_says_and_records_the_replans_the_in_process_run_makes(tmp_pat
     assert run.replans[0]["step"] == round(made[0].time / values["run.period"])
 
 
+@pytest.mark.integration
+def test_a_replan_at_the_last_step_of_a_run_is_in_its_bag(tmp_path):
+    delayed = metro("profile.journey.dwell_extension=2:30", "run.duration=330")
+    period = delayed["run.period"]
+    first = replans(RunContext(delayed).plan, period, simulate(delayed)["position"])[0]
+    overrides = ["profile.journey.dwell_extension=2:30",
+                 f"run.duration={(round(first.time / period) + 1) * period!r}"]  # its step last
+    bag = tmp_path / "bag"
+    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out", str(bag),
+                           *(f"--set={item}" for item in overrides)],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert done.returncode == 0, done.stdout + done.stderr
+    values = prepare(SCENARIO, overrides)
+    made = replans(RunContext(values).plan, period, simulate(values)["position"])
+    assert [replan.time for replan in made] == [first.time]  # made at the run's last step
+    assert [{name: replan[name] for name in Replan._fields}
+            for replan in read_run(bag).replans] == [first._asdict()]
+
+
 @pytest.mark.parametrize("override,message", [
     ("profile.journey.timetable=", "profile.journey.timetable is empty"),
     ("profile.journey.timetable=timetables/hsr-journey.yaml", "is of line"),
@@ -191,11 +233,28 @@ def test_the_stack_says_and_records_the_replans_the_in_process_run_makes(tmp_pat
     ("profile.journey.dwell_extension=1:30", "stop 1 is not a stop between the ends"),
     ("profile.journey.dwell_extension=2:30,7:10", "stop 7 is not a stop between the ends"),
     ("profile.journey.dwell_extension=2", "must be STOP:SECONDS"),
+    ("profile.journey.dwell_extension=2:3600.5", "3600.5 s at stop 2 is more than 3600 s"),
+    ("profile.journey.dwell_extension=3:10,2:1800,2:1801", "3601 s at stop 2 is more than"),
 ])
 def test_bad_input_is_one_line(override, message):
     with pytest.raises(ScenarioError, match=message) as error:
         _ = RunContext(metro(override)).plan
     assert "\n" not in str(error.value)
+
+
+def test_run_stack_refuses_a_dwell_extension_beyond_an_hour_in_one_line(tmp_path):
+    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out",
+                           str(tmp_path / "bag"), "--set=profile.journey.dwell_extension=2:3601"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 2 and not (tmp_path / "bag").exists()
+    assert done.stderr.count("\n") == 1 and "is more than 3600 s" in done.stderr
+
+
+def test_the_delay_study_refuses_a_run_that_is_not_a_journey_first_in_one_line():
+    done = subprocess.run([*invocation("journey_delay.py"), "seed004-metro", "--delay", "2:30"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 2 and done.stdout == "" and done.stderr.count("\n") == 1
+    assert "seed004-metro is not a journey" in done.stderr
 
 
 def test_the_delay_study_refuses_a_delay_outside_the_journey_in_one_line():

@@ -272,3 +272,15 @@ def test_compare_scenarios_runs_each_through_the_stack_and_checks_it_in_process(
         assert report[text]["bit_identical"] is True
         assert report[text]["itae"] == score_series(simulate(values), values)["itae"]
     assert "| seed004-metro-ato:run.duration=15 |" in result.stdout
+
+
+@pytest.mark.parametrize("text, words", [
+    # the value's colon is its own: the stop's extension is read whole and refused as too long
+    ("seed004-metro-line:profile.journey.dwell_extension=2:3601", "3601 s at stop 2"),
+    ("seed004-metro-line:profile.journey.dwell_extension=2:30:run.duration=-1", "run.duration"),
+])
+def test_compare_scenarios_splits_a_variant_at_the_colons_before_each_name(tmp_path, text, words):
+    result = subprocess.run([*invocation("compare_scenarios"), text, "--out", tmp_path / "c"],
+                            capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1, result.stderr
+    assert words in result.stderr and not (tmp_path / "c").exists()

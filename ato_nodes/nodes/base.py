@@ -65,6 +65,7 @@ FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledg
 # 'finished', the recorder's 'recorded'): a node hears events of different nodes in no
 # fixed order, so another might not have heard it before the shutdown, and the fewer
 # records come at once at the end, the fewer a keep-last-10 `ros2 topic echo` drops.
+# During the run, a journey's re-plans by the profile that makes them ('replanned ...').
 HEARD_EVENTS = ("start",)
 ANNOUNCED_EVENTS = ("finished", "recorded", "replanned")
 # What rclpy.node.Node declares itself (start_type_description_service read-only already)
@@ -482,6 +483,15 @@ class SubscriptionWaitSet:
         """The next queued message of subscription `index`, or None."""
         taken = self.handles[index].take_message(msg_type, raw)
         return None if taken is None else taken[0]
+
+
+def take_queued(subscription) -> list:
+    """The messages queued on `subscription` now, taken as rclpy's executor takes them."""
+    taken = []
+    while (message := subscription.handle.take_message(subscription.msg_type,
+                                                        subscription.raw)) is not None:
+        taken.append(message[0])
+    return taken
 
 
 class LockstepInputs:

@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import json
 
+from rclpy.duration import Duration
 from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ato_nodes.core.run.stages import ProfileStage
-from ato_nodes.nodes.base import AtoNode, run_node
+from ato_nodes.nodes.base import FLUSH_TIMEOUT, AtoNode, run_node
 
 
 class ProfileNode(AtoNode):
@@ -32,24 +33,30 @@ class ProfileNode(AtoNode):
 
     def on_position(self, msg: Float64) -> None:
         self.inject_fault(self.stage.received)
-        for horizon in self.stage.on_position(msg.data):
+        horizons = self.stage.on_position(msg.data)
+        self.say_replans()  # before the step's messages: see say_replans
+        for horizon in horizons:
             self.horizon_msg.data = horizon
             self.horizon_pub.publish(self.horizon_msg)
             self.target_msg.data = horizon[0]
             self.target_pub.publish(self.target_msg)
         self.limit_msg.data = self.stage.speed_limit(msg.data)
         self.limit_pub.publish(self.limit_msg)
-        self.say_replans()
 
     def say_replans(self) -> None:
         """The plan's new re-plans (a journey's late departures): on the events topic (an
-        INFO record on /rosout) and, stamped with their step, for the recorder."""
+        INFO record on /rosout) and, stamped with their step, for the recorder, which has
+        them before this step's messages leave: the last of those may complete its bag,
+        and another topic's message may arrive after it (a re-plan at the run's last
+        step was lost so)."""
         made = getattr(self.stage.context.plan, "replans", ())
         for replan in made[self.replans_said:]:
             self.announce(f"replanned {replan.text()}")
             step = round(replan.time / self.values["run.period"])
             self.replans_pub.publish(String(data=json.dumps({"step": step,
                                                              **replan._asdict()})))
+        if len(made) > self.replans_said:
+            self.replans_pub.wait_for_all_acked(Duration(seconds=FLUSH_TIMEOUT))
         self.replans_said = len(made)
 
 

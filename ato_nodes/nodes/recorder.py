@@ -38,7 +38,7 @@ from ato_nodes.bagwrite import close_writer, open_writer, qos
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.schema import LOOP_NODES, recording_steps
 from ato_nodes.core.base.topics import Topic, step_topics
-from ato_nodes.nodes.base import QOS, AtoNode, LockstepInputs, run_node
+from ato_nodes.nodes.base import QOS, AtoNode, LockstepInputs, run_node, take_queued
 
 
 def offered_qos(topic: Topic) -> list[Qos]:
@@ -90,8 +90,10 @@ class RecorderNode(AtoNode):
                               wakes=None if topic.key == WAKING_TOPIC else self._ending)
         self.typestore = typestore
         self.event_connections: dict[str, object] = {}  # added with the first: most runs have none
+        self.step_stamped = []  # (subscription, its callback): taken once more at the end
         for key in STEP_STAMPED:
-            self.subscription(key, self._stamped_recorder(key), raw=True)
+            record = self._stamped_recorder(key)
+            self.step_stamped.append((self.subscription(key, record, raw=True), record))
         self.flush(0)  # the topics are on disk before any step: a kill leaves a bag to repair
         self.ready_when_matched()
 
@@ -177,6 +179,11 @@ class RecorderNode(AtoNode):
 
     def _check_complete(self) -> None:
         if self.writer is not None and min(self.counts.values()) >= self.expected:
+            # what happened at a step is on its way apart from the step's messages and may
+            # be queued still (a re-plan at the last step: the profile has it here first)
+            for subscription, record in self.step_stamped:
+                for message in take_queued(subscription):
+                    record(message)
             self.close()
             self.announce(f"recorded {self.expected}")
 

@@ -25,6 +25,16 @@ running sees the stop and then 0: it cannot leave within a horizon, since it lea
 least a dwell after it arrives (seconds; a horizon is LOOKAHEAD + controller.preview
 steps).
 
+A train that leaves a stop late catches up (profile.journey.catch_up): each section has
+faster curves beside its on-time one, and as the train leaves a stop (`leaving`, inside
+the state, so the node, simulate() and the compiled loop choose alike) its lateness, its
+release less the timetable's departure, picks the slowest that wins it back, else the
+fastest (minimum-time); under profile.journey.catch_up_after late it keeps its on-time
+curve. Each such re-plan is a Replan (JourneyPlan.replans): the profile node says it on
+the run's events topic ('replanned ...') and publishes it for the recorder; `replans`
+derives the same from a run's positions. profile.journey.dwell_extension holds the train
+longer at given stops (an injected delay).
+
 The tables (JourneyTable) are the sections' curves one after another, read by the same
 functions in Python and compiled code (core/run/fast_loop.py), to the same bits.
 """
@@ -49,6 +59,7 @@ from .timetable import Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
 _EXTENSION = r"\s*\d+\s*:\s*\d+(?:\.\d*)?\s*"
+LONGEST_EXTENSION = 3600.0  # s: a dwell extended longer is a service cancelled, not a delay
 
 JOURNEY_PARAMETERS = (
     param("profile.journey.timetable", "", "timetable file (msg_config/timetables/*.yaml) of "
@@ -213,7 +224,7 @@ class Replan(NamedTuple):
     running_time: float  # s: the chosen curve's, standstill to standstill
     on_time: float       # s: the section's on-time curve's
     scheduled: float     # s: the timetable's less the recovery (on_time unless unmet)
-    minimum_time: bool   # the fastest curve at the envelope share: not all won back
+    minimum_time: bool   # the fastest curve, and it does not win the lateness all back
 
     def text(self) -> str:
         said = (f"{self.origin} - {self.destination}: left {self.lateness:.1f} s late, "
@@ -245,9 +256,11 @@ class JourneyPlan(Plan):
 
     def _replan(self, t: float, lateness: float) -> Replan:
         section, level, times = self.state.section, self.state.level, self.journey.times
+        # minimum-time when the chosen curve (the fastest then) does not win it all back
         return Replan(t, self.stations[section], self.stations[section + 1], float(lateness),
                       float(times[section, level]), float(times[section, 0]),
-                      float(self.journey.scheduled[section]), level == self.journey.levels - 1)
+                      float(self.journey.scheduled[section]),
+                      bool(times[section, level] > self.journey.scheduled[section] - lateness))
 
     def speed(self, t: float, position: float = 0.0) -> float:
         return float(journey_speed(self.journey, self.state, t, position))
@@ -327,7 +340,8 @@ def fastest_curve(values, line, train) -> AtoCurve:
 
 def dwell_extensions(text: str, timetable: Timetable) -> np.ndarray:
     """profile.journey.dwell_extension (STOP:SECONDS, ...) as the s added to the hold at
-    each section's end; ScenarioError for a stop that is not between the journey's ends."""
+    each section's end; ScenarioError for a stop that is not between the journey's ends
+    or more than LONGEST_EXTENSION s at one."""
     extensions = np.zeros(len(timetable.sections))
     for item in filter(None, (part.strip() for part in text.split(","))):
         number, seconds = (int(item.split(":")[0]), float(item.split(":")[1]))
@@ -335,6 +349,10 @@ def dwell_extensions(text: str, timetable: Timetable) -> np.ndarray:
             raise ScenarioError(f"profile.journey.dwell_extension: stop {number} is not a stop "
                                 f"between the ends of {timetable.path} (2 to "
                                 f"{len(timetable.stops) - 1})")
+        if extensions[number - 2] + seconds > LONGEST_EXTENSION:
+            raise ScenarioError(f"profile.journey.dwell_extension: "
+                                f"{extensions[number - 2] + seconds:g} s at stop {number} is "
+                                f"more than {LONGEST_EXTENSION:g} s")
         extensions[number - 2] += seconds
     return extensions
 
