@@ -22,6 +22,7 @@ from ato_nodes.analysis import (LIMIT_COLOUR, MARK, RUN_COLOURS, Figure, Markup,
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.scoring.journey import NOT_JUDGED, PASS, REQUIRED, JourneyIndices
+from ato_nodes.core.targets.restriction import restricted_line
 from ato_nodes.core.targets.timetable import Timetable
 from ato_nodes.core.train.line import Line
 from ato_nodes.journeys import TIMETABLE, is_journey, run_journey, run_timetable
@@ -46,10 +47,7 @@ class JourneyReport:
     series: dict[str, np.ndarray]
     indices: JourneyIndices
     colour: str
-
-    @property
-    def line(self) -> Line:
-        return self.timetable.line  # the bag's line when the bag keeps the timetable
+    line: Line  # the bag's line when the bag keeps the timetable, under the run's restrictions
 
 
 def journey_reports(reports: list[RunReport]) -> tuple[list[JourneyReport], list[str]]:
@@ -68,11 +66,12 @@ def journey_reports(reports: list[RunReport]) -> tuple[list[JourneyReport], list
             continue
         try:
             indices = run_journey(report.run.series, parameters, timetable)
+            line = restricted_line(parameters, timetable.line)
         except ScenarioError as exc:
             notes.append(f"{report.label}: no per-station table: {exc}")
             continue
         journeys.append(JourneyReport(report.label, timetable, name, report.run.series,
-                                      indices, colour))
+                                      indices, colour, line))
     return journeys, notes
 
 
@@ -153,7 +152,8 @@ def html_sections(journeys: list[JourneyReport], notes: list[str]) -> list[str]:
 
 
 def limit_steps(line: Line) -> tuple[list[float], list[float]]:
-    """The line's speed limits as a step line: km, km/h."""
+    """The line's speed limits (a temporary restriction's included) as a step line: km,
+    km/h."""
     return ([x / 1000 for s in line.speed_limits for x in (s.start, s.end)],
             [s.value * MS_TO_KMH for s in line.speed_limits for _ in "ab"])
 

@@ -22,7 +22,8 @@ from ato_nodes.core.train.line import Section
 from ato_nodes.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journey,
                                 run_timetable, worst_stations)
 from ato_nodes.report import write_report
-from ato_nodes.report_journey import journey_figure, journey_reports, station_rows
+from ato_nodes.core.targets.restriction import NAME as RESTRICTION
+from ato_nodes.report_journey import journey_figure, journey_reports, limit_steps, station_rows
 from ato_nodes.analysis import judge
 
 DURATION = 300.0  # s: Market and Riverside reached, Central (arrival 422 s) not
@@ -89,8 +90,7 @@ def test_the_report_tables_each_station_and_section_of_the_timetable(journey, tm
 def test_the_plot_shows_the_line_its_stations_and_the_planned_and_driven_speed(journey):
     (report,), _ = journey_reports([judge(journey)])
     line = dataclasses.replace(report.line, neutral_sections=(Section(2000.0, 2100.0, 0.0),))
-    shaded = dataclasses.replace(report, timetable=dataclasses.replace(report.timetable,
-                                                                       line=line))
+    shaded = dataclasses.replace(report, line=line)
     figure = journey_figure(shaded)
     traces = {trace.name: trace for trace in figure.data}
     limits = traces["line speed limit"]
@@ -105,6 +105,17 @@ def test_the_plot_shows_the_line_its_stations_and_the_planned_and_driven_speed(j
     assert [s.x0 for s in shapes if s.type == "rect"] == [2.0]
     assert sorted(s.x0 for s in shapes if s.type == "line") == pytest.approx(
         [station.position / 1000 for station in line.stations])
+
+
+def test_the_plot_draws_a_temporary_speed_restriction_of_the_run(journey):
+    restricted = Run(journey.path, journey.series,
+                     {**journey.parameters, RESTRICTION: "1000:1400:8.33"}, {})
+    (report,), _ = journey_reports([judge(restricted)])
+    limits = journey_figure(report).data[0]
+    assert limits.name == "line speed limit"
+    assert np.interp(1.2, limits.x, limits.y) == pytest.approx(8.33 * MS_TO_KMH)
+    (unrestricted,), _ = journey_reports([judge(journey)])
+    assert np.interp(1.2, *limit_steps(unrestricted.line)) > 8.33 * MS_TO_KMH + 1.0
 
 
 def moved(run: Run, tmp_path: Path, keep: bool = True) -> Run:

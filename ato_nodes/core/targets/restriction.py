@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from ..base.errors import ScenarioError
 from ..base.spec import PROFILE_NODES, TextForm, param
-from ..train.line import Line, Section, speed_limit
+from ..train.line import Line, Section, speed_limit, with_speed_restrictions
 
 _NUMBER = r"\s*\d+(?:\.\d*)?\s*"
 _RESTRICTION = rf"{_NUMBER}:{_NUMBER}:{_NUMBER}"
@@ -55,6 +55,14 @@ def speed_restrictions(values, line: Line) -> tuple[Section, ...]:
                                 f"{start:g}-{end:g} m are at most {highest:g} m/s")
         restrictions.append(Section(start, end, speed))
     return tuple(restrictions)
+
+
+def restricted_line(values, line: Line) -> Line:
+    """`line` under the run's speed restrictions: what the journey plans on and its report
+    draws (a run's values from before the parameter existed have none)."""
+    if values.get(NAME, SPEED_RESTRICTION.default) == SPEED_RESTRICTION.default:
+        return line
+    return with_speed_restrictions(line, speed_restrictions(values, line))
 
 
 def _limit_changes(line: Line, start: float, end: float) -> list[float]:

@@ -51,10 +51,9 @@ from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
-from ..train.line import with_speed_restrictions
 from .profiles import (ATO_PARAMETERS, AtoCurve, PlanTable, ato_curve, cell_of, plan_table,
                        table_limit, table_speed)
-from .restriction import SPEED_RESTRICTION, speed_restrictions
+from .restriction import SPEED_RESTRICTION, restricted_line
 from .timetable import Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
@@ -90,7 +89,8 @@ JOURNEY_PARAMETERS = (
           PROFILE_NODES, 0.0, 600.0),
     param("profile.journey.dwell_extension", "", "delays injected: STOP:SECONDS[,STOP:SECONDS"
           "...], the train held SECONDS longer at the timetable's stop number STOP (1 is the "
-          "origin; a crowded platform, a door fault), s", PROFILE_NODES,
+          f"origin; a crowded platform, a door fault; at most {LONGEST_EXTENSION:g} s at a "
+          "stop), s", PROFILE_NODES,
           form=TextForm(rf"\s*|{_EXTENSION}(?:,{_EXTENSION})*",
                         "STOP:SECONDS[,STOP:SECONDS...] (stop numbers from 1, seconds >= 0)")),
 )
@@ -296,7 +296,7 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
     (profile.journey.speed_restriction); and the notices of the running times they
     cannot meet, in one line."""
     levels = 1 + values["profile.journey.catch_up"]
-    line = with_speed_restrictions(line, speed_restrictions(values, line))
+    line = restricted_line(values, line)
     tables, times, notices = [], [], []
     scheduled = [section.running_time - values["profile.journey.recovery"]
                  for section in timetable.sections]
