@@ -24,7 +24,7 @@ from ato_nodes.core.targets.restriction import NAME
 from ato_nodes.core.targets.served import replans, section_table
 from ato_nodes.core.targets.timetable import load_timetable
 from ato_nodes.core.train.line import Section, with_speed_restrictions
-from commands import ROOT, invocation
+from commands import ROOT, invocation, run_stack
 from test_fast_loop import stages
 
 SCENARIO = "seed004-metro-line"
@@ -162,10 +162,7 @@ def test_a_journey_without_one_keeps_its_bits_and_one_keeps_them_until_it(timeta
 def test_the_stack_records_the_restricted_limit_as_in_process(tmp_path):
     overrides = [RESTRICTION, "run.duration=440"]
     bag = tmp_path / "bag"
-    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out", str(bag),
-                           *(f"--set={item}" for item in overrides)],
-                          capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert done.returncode == 0, done.stdout + done.stderr
+    run_stack(SCENARIO, bag, overrides)
     run, values = read_run(bag), prepare(SCENARIO, overrides)
     series = simulate(values)
     for name in ("position", "speed", "target", "command", "speed_limit"):

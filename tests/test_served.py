@@ -20,7 +20,7 @@ from ato_nodes.core.targets.served import (STANDSTILL, JourneyPlan, JourneyState
                                            catch_up_level, departure, journey_speed, observed,
                                            replans)
 from ato_nodes.core.targets.timetable import load_timetable
-from commands import ROOT, invocation
+from commands import ROOT, invocation, run_stack
 
 SCENARIO = "seed004-metro-line"
 
@@ -196,10 +196,7 @@ def test_a_delayed_train_catches_up_compiled_as_in_python(timetable):
 def test_the_stack_says_and_records_the_replans_the_in_process_run_makes(tmp_path):
     overrides = ["profile.journey.dwell_extension=2:30", "run.duration=330"]
     bag = tmp_path / "bag"
-    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out", str(bag),
-                           *(f"--set={item}" for item in overrides)],
-                          capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert done.returncode == 0, done.stdout + done.stderr
+    run_stack(SCENARIO, bag, overrides)
     run, values = read_run(bag), prepare(SCENARIO, overrides)
     series = simulate(values)
     for name in ("position", "speed", "target", "command"):
@@ -219,10 +216,7 @@ def test_a_replan_at_the_last_step_of_a_run_is_in_its_bag(tmp_path):
     overrides = ["profile.journey.dwell_extension=2:30",
                  f"run.duration={(round(first.time / period) + 1) * period!r}"]  # its step last
     bag = tmp_path / "bag"
-    done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out", str(bag),
-                           *(f"--set={item}" for item in overrides)],
-                          capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert done.returncode == 0, done.stdout + done.stderr
+    run_stack(SCENARIO, bag, overrides)
     values = prepare(SCENARIO, overrides)
     made = replans(RunContext(values).plan, period, simulate(values)["position"])
     assert [replan.time for replan in made] == [first.time]  # made at the run's last step

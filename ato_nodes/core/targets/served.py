@@ -101,11 +101,11 @@ class JourneyTable(NamedTuple):
     (level 0) and faster ones in order; curve l of section i is grid[:, bounds[c]:
     bounds[c + 1]] with c = i * levels + l (positions from the section's start, speeds,
     the belt's limits), its running time times[i, l], the timetable's less the recovery
-    scheduled[i] (more than times[i, 0] where a speed restriction makes it unmet). The
-    section runs from stops[i] to
-    stops[i + 1] (m along the line); the train may leave its end at departures[i] (s, run
-    clock; inf at the last stop), or dwells[i] after it arrived there if later, and in
-    either case extensions[i] later (profile.journey.dwell_extension)."""
+    scheduled[i] (less than times[i, 0] where a speed restriction makes it unmet). The
+    section runs from stops[i] to stops[i + 1] (m along the line); the train may leave
+    its end at departures[i] (s, run clock; inf at the last stop), or dwells[i] after it
+    arrived there if later, and in either case extensions[i] later
+    (profile.journey.dwell_extension)."""
 
     grid: np.ndarray        # 3 x points
     bounds: np.ndarray      # sections * levels + 1 column indices
@@ -349,11 +349,11 @@ def dwell_extensions(text: str, timetable: Timetable) -> np.ndarray:
             raise ScenarioError(f"profile.journey.dwell_extension: stop {number} is not a stop "
                                 f"between the ends of {timetable.path} (2 to "
                                 f"{len(timetable.stops) - 1})")
-        if extensions[number - 2] + seconds > LONGEST_EXTENSION:
-            raise ScenarioError(f"profile.journey.dwell_extension: "
-                                f"{extensions[number - 2] + seconds:g} s at stop {number} is "
-                                f"more than {LONGEST_EXTENSION:g} s")
-        extensions[number - 2] += seconds
+        total = extensions[number - 2] + seconds
+        if total > LONGEST_EXTENSION:
+            raise ScenarioError(f"profile.journey.dwell_extension: {total:g} s at stop {number} "
+                                f"is more than {LONGEST_EXTENSION:g} s")
+        extensions[number - 2] = total
     return extensions
 
 
