@@ -17,6 +17,7 @@ from ato_nodes import cli
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.core.config.schema import steps
+from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.summary import bag_contents, write_summary
 
@@ -74,6 +75,9 @@ def run_stack() -> None:
               f"in {bag}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
+    if outcome.report.get("ended") == AT_LAST_STOP:
+        print(f"ended {AT_LAST_STOP} after {outcome.report['steps']} of at most "
+              f"{steps(values)} steps")
     print(f"real-time factor {outcome.report['real_time_factor']:.1f} "
           f"({outcome.report['steps_per_second']:.0f} steps/s, "
           f"loop {outcome.report['loop_wall_time']:.2f} s, "
