@@ -59,7 +59,8 @@ def run_stack() -> None:
                       timeout=args.timeout)
     except RuntimeError as exc:
         cli.fail(str(exc))
-    print(f"scenario {name}: {steps(values)} steps of {values['run.period']:g} s, "
+    at_most = "at most " if values["run.last_stop_hold"] > 0 else ""  # it may end at its stop
+    print(f"scenario {name}: {at_most}{steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
     pressed = []  # a Ctrl-C after the run (while the bag is scored): the summary first
     for number in (signal.SIGINT, signal.SIGTERM):
