@@ -91,12 +91,14 @@ class Run:
         """The steps the run was to make (None: a bag without the stack's parameters):
         run.duration's, or those up to the step at which a journey's train had stood
         run.last_stop_hold at its last stop (the run ends there, complete)."""
+        if not self.parameters:
+            return None
         try:
             if "position" not in self.series:
                 return steps(self.parameters)
             return planned_steps(self.parameters, self.series["position"],
                                  self.series["speed"])
-        except (KeyError, TypeError):
+        except (KeyError, TypeError):  # someone else's parameters
             return None
 
     @property

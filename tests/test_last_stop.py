@@ -10,7 +10,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from ato_nodes.bagio import read_run, resimulate
+from ato_nodes.bagio import Run, read_run, resimulate
 from ato_nodes.core.base import kernels
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
@@ -109,6 +109,20 @@ def test_a_train_that_does_not_reach_its_last_stop_ends_at_run_duration(tmp_path
     values = short_journey(tmp_path, duration=100.0)  # Market at 125.5 s
     for compiled in (True, False):
         assert len(simulate(values, compiled=compiled)["t"]) == steps(values) == 1000
+
+
+def test_a_bag_counts_its_planned_steps_from_its_states(tmp_path):
+    values = short_journey(tmp_path)
+    series = simulate(values)
+    ended = Run(tmp_path, series, values, {})
+    assert ended.planned_steps == ended.recorded_steps == len(series["t"]) < steps(values)
+    assert ended.ended_at_last_stop and ended.partial is None
+    cut = Run(tmp_path, {name: column[:500] for name, column in series.items()}, values, {})
+    assert cut.planned_steps == steps(values) and not cut.ended_at_last_stop
+    assert cut.partial == f"interrupted at step 500 of {steps(values)}"
+    anyones = Run(tmp_path, series, None, {})  # someone else's bag: nothing planned
+    assert anyones.planned_steps is None and not anyones.ended_at_last_stop
+    assert anyones.partial is None
 
 
 def test_the_tuner_takes_a_run_ended_at_its_last_stop_as_complete(tmp_path):
