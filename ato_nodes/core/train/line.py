@@ -74,6 +74,14 @@ class Line:
     def in_neutral_section(self, position: float) -> bool:
         return in_neutral_section(self.tables, position)
 
+    def in_neutral_sections(self, positions: np.ndarray) -> np.ndarray:
+        """in_neutral_section at each of `positions` (m), at once."""
+        positions = np.asarray(positions, dtype=float)
+        inside = np.zeros(positions.shape, dtype=bool)
+        for section in self.neutral_sections:
+            inside |= (section.start <= positions) & (positions < section.end)
+        return inside
+
     def additional_resistance(self, head: float, train_length: float) -> float:
         """Gradient + curve + tunnel specific resistance of the mass belt, N/kN."""
         return belt_resistance(self.tables, head, train_length)
