@@ -50,8 +50,8 @@ from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
                          on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
 from .limiter import CommandLimiter, LimiterSettings, limit_command
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
-from .train_model import (NominalModel, NominalState, known_resistance, nominal_advance,
-                          nominal_predict, nominal_train)
+from .train_model import (NominalModel, NominalState, known_resistance, neutral_ceiling,
+                          nominal_advance, nominal_predict, nominal_train)
 
 
 @jitable
@@ -357,6 +357,14 @@ LINEAR_ADRC_PARAMETERS = (
     param("ladrc.plan_band", 0.5 / 3.6, "linear ADRC with ladrc.plan_feedforward: how far the "
           "speed may be off the target before the command leaves the plan's side, m/s",
           "controller", 0.0, 100.0),
+    param("ladrc.neutral_cut", False, "linear ADRC: command no traction while the pantograph "
+          "(dead-reckoned by the nominal model) is inside a neutral section, nor while it "
+          "will be inside one within the nominal dead time and a period at the measured "
+          "speed (a command sent then acts only there), traction ramped down before that "
+          "at controller.max_rate so the cut is in place as the pantograph enters, "
+          "released once it has left; as a real ATO opens the main circuit breaker across "
+          "a phase break. The observer and the feedforward are told the cut command",
+          "controller"),
 )
 
 
@@ -371,6 +379,7 @@ class LinearADRCGains(NamedTuple):
     delay_aware: bool
     plan_feedforward: bool
     plan_band: float                # m/s
+    neutral_cut: bool
 
 
 class PlanForces(NamedTuple):
@@ -485,9 +494,15 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
             planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
             law += planned / g.b0 + known_resistance(model, target, there, scale)
         resistance = known_resistance(model, measured, state.model.position, scale)
+    ceiling = math.inf
+    if g.neutral_cut:
+        ceiling = neutral_ceiling(model, state.model, measured, limits.max_change)
+        law = min(law, ceiling)
     u = limit_command(law, target, measured, last, limits)
+    if ceiling == 0.0:  # the jerk limit yields where its ramp came too late (no ramp
+        u = min(u, 0.0)  # is planned from a start inside the reach)
     force, nominal = u, state.model
-    if g.feedforward or g.delay_aware:
+    if g.feedforward or g.delay_aware or g.neutral_cut:  # the model dead-reckons the position
         force, nominal = nominal_advance(model, state.model, u, measured)
     observer_input = (force if g.delay_aware else u) - resistance
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)

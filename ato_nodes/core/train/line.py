@@ -173,6 +173,17 @@ def in_neutral_section(tables: LineTables, position: float) -> bool:
     return False
 
 
+@jitable
+def neutral_distance(tables: LineTables, position: float) -> float:
+    """How far ahead of `position` the next neutral section starts, m: 0 inside one,
+    inf with none ahead (the sections are in order)."""
+    sections = tables.sections
+    for i in range(tables.limits_end, tables.neutral_end):
+        if position < sections[i][END]:
+            return max(sections[i][START] - position, 0.0)
+    return math.inf
+
+
 @jitable(inline=True)
 def belt_resistance(tables: LineTables, head: float, train_length: float) -> float:
     """Gradient + curve + tunnel specific resistance of the mass belt [head - L, head],
