@@ -1,12 +1,14 @@
 """No traction across a phase break: the linear ADRC's neutral cut (ladrc.neutral_cut,
-core/control/train_model.neutral_ceiling), the same bits compiled and in Python, and the
-index of the traction commanded and applied inside neutral sections
-(core/scoring/operation.py) against a count made here."""
+core/control/train_model.neutral_ceiling), the same bits compiled and in Python, the ato
+curve coasting on past a section (profile.ato.neutral_runout), and the index of the
+traction commanded and applied inside neutral sections (core/scoring/operation.py)
+against a count made here."""
 
 import numpy as np
 import pytest
 
 from ato_nodes.core.base import kernels
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.control.adrc import LinearADRCGains, linear_adrc_of
@@ -16,8 +18,9 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.scoring.journey import journey_indices
 from ato_nodes.core.scoring.operation import neutral_traction_time
+from ato_nodes.core.targets.profiles import ato_curve
 from ato_nodes.core.targets.timetable import Stop, Timetable
-from ato_nodes.core.train.line import neutral_distance, parse_line
+from ato_nodes.core.train.line import load_line, neutral_distance, parse_line
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
 
 PERIOD = 0.1
@@ -161,3 +164,39 @@ def test_a_line_without_neutral_sections_has_no_such_index(tmp_path):
     assert "neutral_traction_command_time" not in indices
     assert neutral_traction_time(t, t, np.ones(len(t), dtype=bool)) == pytest.approx(9.8)
 
+
+
+def hsr_curve(*overrides):
+    values = apply_overrides(load_scenario("hsr-neutral-ato"), list(overrides))
+    train = TrainParameters.from_values(values)
+    return ato_curve(values, load_line(values["line.file"]), train), train, values
+
+
+def test_the_curve_coasts_on_past_a_neutral_section_for_its_runout():
+    curve, train, values = hsr_curve()
+    runout = values["profile.ato.neutral_runout"]
+    assert runout > 0.0
+    plain, _, _ = hsr_curve("profile.ato.neutral_runout=0")
+    end = curve.line.neutral_sections[1].end + train.pantograph_offset  # the head there
+    x = curve.positions
+
+    def rates(speeds, low, high):
+        """The planned acceleration over [low, high) m, against what coasting gives."""
+        cells = np.flatnonzero((x[:-1] >= low) & (x[:-1] < high))
+        v = speeds[cells]
+        rate = (speeds[cells + 1] ** 2 - v ** 2) / (2 * np.diff(x)[cells])
+        coasting = -train.xi * np.array([train.resistance(s) + curve.line.additional_resistance(
+            p, train.length) for s, p in zip(v, x[cells], strict=True)])
+        return rate - coasting
+
+    assert np.all(rates(curve.speeds, end, end + runout) <= 1e-6)  # no traction planned
+    assert np.all(rates(plain.speeds, end + 5.0, end + runout) > 0.01)  # traction at once
+    assert np.all(rates(curve.speeds, end + runout + 5.0, end + runout + 50.0) > 0.01)
+    # both on time: the cruise a little higher for the longer coasting
+    assert curve.planned_run_time == pytest.approx(plain.planned_run_time, abs=0.05)
+    assert curve.cruise > plain.cruise
+
+
+def test_a_runout_without_an_envelope_share_is_refused():
+    with pytest.raises(ScenarioError, match="profile.ato.neutral_runout needs"):
+        hsr_curve("profile.envelope_share=0")

@@ -74,12 +74,13 @@ class Line:
     def in_neutral_section(self, position: float) -> bool:
         return in_neutral_section(self.tables, position)
 
-    def in_neutral_sections(self, positions: np.ndarray) -> np.ndarray:
-        """in_neutral_section at each of `positions` (m), at once."""
+    def in_neutral_sections(self, positions: np.ndarray, past: float = 0.0) -> np.ndarray:
+        """in_neutral_section at each of `positions` (m), at once; with `past` (m) also
+        less than that beyond a section's end."""
         positions = np.asarray(positions, dtype=float)
         inside = np.zeros(positions.shape, dtype=bool)
         for section in self.neutral_sections:
-            inside |= (section.start <= positions) & (positions < section.end)
+            inside |= (section.start <= positions) & (positions < section.end + past)
         return inside
 
     def additional_resistance(self, head: float, train_length: float) -> float:
