@@ -48,7 +48,7 @@ from ..train.line import Line
 from ..train.plant import TrainParameters
 from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
                          on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
-from .limiter import CommandLimiter, LimiterSettings, limit_command
+from .limiter import CommandLimiter, LimiterSettings, limit_command, limit_under
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 from .train_model import (NominalModel, NominalState, known_resistance, neutral_ceiling,
                           nominal_advance, nominal_predict, nominal_train)
@@ -473,8 +473,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     scale = on_board_scale(state.estimator)
     e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
         1.0 + h * settings.l1 + h * h * settings.l2)
-    z2 = state.z2 - h * settings.l2 * e
-    z1 = measured + e
+    z1, z2 = measured + e, state.z2 - h * settings.l2 * e
     ahead = len(horizon) - 1
     speed = z1
     if g.delay_aware and ahead:
@@ -494,13 +493,9 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
             planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
             law += planned / g.b0 + known_resistance(model, target, there, scale)
         resistance = known_resistance(model, measured, state.model.position, scale)
-    ceiling = math.inf
-    if g.neutral_cut:
-        ceiling = neutral_ceiling(model, state.model, measured, limits.max_change)
-        law = min(law, ceiling)
-    u = limit_command(law, target, measured, last, limits)
-    if ceiling == 0.0:  # the jerk limit yields where its ramp came too late (no ramp
-        u = min(u, 0.0)  # is planned from a start inside the reach)
+    ceiling = (neutral_ceiling(model, state.model, measured, limits.max_change)
+               if g.neutral_cut else math.inf)  # the observer is told the cut command
+    u = limit_under(law, ceiling, target, measured, last, limits)
     force, nominal = u, state.model
     if g.feedforward or g.delay_aware or g.neutral_cut:  # the model dead-reckons the position
         force, nominal = nominal_advance(model, state.model, u, measured)

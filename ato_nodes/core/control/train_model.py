@@ -101,9 +101,7 @@ def neutral_ceiling(model: NominalModel, state: NominalState, speed: float,
     (dead-reckoned, at `speed`) reaches a section within the dead time and a period;
     before that at most what the jerk limit (`max_change` per period; 0: none) can still
     take off by then, so that the cut is in place, without a jump, as the pantograph
-    enters. Released once the pantograph has left the section (its last cut command acts
-    the dead time later: no command could act inside a section and none is commanded
-    there)."""
+    enters. Released once the (dead-reckoned) pantograph has left the section."""
     if not model.neutral:
         return math.inf
     distance = neutral_distance(model.line, state.position - model.pantograph_offset)
