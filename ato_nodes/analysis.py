@@ -29,6 +29,7 @@ from ato_nodes.core.config.components import CONTROLLERS, PROFILES
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME
+from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.scoring.catalogue import FITNESS, GROWING_INDICES, STOP_INDICES, Requirement
 from ato_nodes.core.run.scoring import (observer_b0, run_line, score_series, stop_not_reached,
                                         total_disturbance)
@@ -524,7 +525,10 @@ def identity(run: Run) -> dict[str, str]:
                else "") + (f"; stations {stations}" if stations else ""))
     described["run"] = (f"{values.get('run.duration', math.nan):g} s in steps of "
                         f"{values.get('run.period', math.nan):g} s"
-                        + (f"; partial: {run.partial}" if run.partial else ""))
+                        + (f"; partial: {run.partial}" if run.partial else "")
+                        + (f"; ended {AT_LAST_STOP} at step {run.recorded_steps}, standing "
+                           f"{values['run.last_stop_hold']:g} s (run.last_stop_hold)"
+                           if run.ended_at_last_stop else ""))
     return described
 
 

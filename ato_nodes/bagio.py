@@ -14,8 +14,10 @@ the latest message at or before each stamp.
 A run's bag says whether it is whole: its parameters give the steps the run
 planned (core.schema.steps), its summary.json (when the launcher or the
 supervisor wrote one) the run's status; Run.partial compares them with the steps
-recorded. The parameters kept in a bag are checked against the schema when read:
-a bag is anyone's file.
+recorded (a journey ended at its last stop, run.last_stop_hold, planned to end there:
+core/run/last_stop.planned_steps counts its end again from the recorded states). The
+parameters kept in a bag are checked against the schema when read: a bag is anyone's
+file.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.schema import SPEC_BY_NAME, steps
+from ato_nodes.core.run.last_stop import planned_steps
 from ato_nodes.core.run.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
 from ato_nodes.core.base.topics import topic_map
 
@@ -85,10 +88,17 @@ class Run:
 
     @property
     def planned_steps(self) -> int | None:
-        """The steps the run was to make (None: a bag without the stack's parameters)."""
+        """The steps the run was to make (None: a bag without the stack's parameters):
+        run.duration's, or those up to the step at which a journey's train had stood
+        run.last_stop_hold at its last stop (the run ends there, complete)."""
+        if not self.parameters:
+            return None
         try:
-            return steps(self.parameters)
-        except (KeyError, TypeError):
+            if "position" not in self.series:
+                return steps(self.parameters)
+            return planned_steps(self.parameters, self.series["position"],
+                                 self.series["speed"])
+        except (KeyError, TypeError):  # someone else's parameters
             return None
 
     @property
@@ -99,6 +109,14 @@ class Run:
         if not len(t) or not period:
             return len(t)
         return round(t[-1] / period) + 1
+
+    @property
+    def ended_at_last_stop(self) -> bool:
+        """The run ended, complete, once its journey's train had stood run.last_stop_hold
+        at its last stop (before run.duration)."""
+        planned = self.planned_steps
+        return planned is not None and planned < steps(self.parameters) \
+            and self.recorded_steps >= planned
 
     @property
     def partial(self) -> str | None:

@@ -1,7 +1,8 @@
 """The journey part of a run's report (scripts/analyze.py): for each run of a timetable
 (ato_nodes.journeys), a table per station (stop error, arrival and departure lateness,
 dwell, verdict) and per section (running time, traction energy), the journey's totals
-and verdict (core/scoring/journey.py's), and speed against position over the line: its
+and verdict (core/scoring/journey.py's), the re-plans the bag recorded (a late departure
+and the curve it drove), and speed against position over the line: its
 stations marked, its speed limits, its neutral sections shaded, the planned (target)
 and driven speed. In report.md (a PNG figure) and report.html (Plotly) alike; SI inside,
 km/h and km only as shown.
@@ -23,6 +24,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.scoring.journey import NOT_JUDGED, PASS, REQUIRED, JourneyIndices
 from ato_nodes.core.targets.restriction import restricted_line
+from ato_nodes.core.targets.served import Replan
 from ato_nodes.core.targets.timetable import Timetable
 from ato_nodes.core.train.line import Line
 from ato_nodes.journeys import TIMETABLE, is_journey, run_journey, run_timetable
@@ -48,6 +50,7 @@ class JourneyReport:
     indices: JourneyIndices
     colour: str
     line: Line  # the bag's line when the bag keeps the timetable, under the run's restrictions
+    replans: list[str]  # the recorded re-plans as the profile said them, in step order
 
 
 def journey_reports(reports: list[RunReport]) -> tuple[list[JourneyReport], list[str]]:
@@ -71,8 +74,20 @@ def journey_reports(reports: list[RunReport]) -> tuple[list[JourneyReport], list
             notes.append(f"{report.label}: no per-station table: {exc}")
             continue
         journeys.append(JourneyReport(report.label, timetable, name, report.run.series,
-                                      indices, colour, line))
+                                      indices, colour, line, replan_lines(report.run.replans)))
     return journeys, notes
+
+
+def replan_lines(recorded: list[dict]) -> list[str]:
+    """Each re-plan a bag recorded (Replan's fields and its step), with its time on the
+    run's clock, in the words the profile said it on the events topic."""
+    return [f"t = {replan['time']:.1f} s: "
+            f"{Replan(**{name: replan[name] for name in Replan._fields}).text()}"
+            for replan in recorded]
+
+
+REPLANS = "Re-plans (a late departure and the curve it drove, as recorded)"
+NO_REPLANS = "No re-plan recorded: every departure on time, or a run the stack did not record."
 
 
 def _number(value: float, form: str) -> str:
@@ -134,6 +149,8 @@ def markdown_sections(journeys: list[JourneyReport], notes: list[str]) -> list[s
             cells + [Markup(": ".join(filter(None, (MARK[verdict], md_text(reason)))) or "-")]
             for cells, verdict, reason in station_rows(journey.indices)])
         lines += [""] + _markdown_rows(SECTION_HEADER, section_rows(journey))
+        lines += ["", f"{REPLANS}:", ""] + [f"- {md_text(replan)}" for replan in journey.replans] \
+            if journey.replans else ["", NO_REPLANS]
     return lines
 
 
@@ -151,6 +168,9 @@ def html_sections(journeys: list[JourneyReport], notes: list[str]) -> list[str]:
             for cells, verdict, reason in station_rows(journey.indices)]))
         parts.append(_table(SECTION_HEADER, [[(cell, "") for cell in row]
                                              for row in section_rows(journey)]))
+        parts.append(f"<p>{REPLANS}:</p><ul>" + "".join(
+            f"<li>{html.escape(replan)}</li>" for replan in journey.replans) + "</ul>"
+            if journey.replans else f"<p>{html.escape(NO_REPLANS)}</p>")
     return parts
 
 

@@ -47,7 +47,8 @@ from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.base.paths import config_dir
 from ato_nodes.core.config.scenario import (apply_overrides, check_used, load_scenario,
                                             resolve_scenario, ros_parameter_file)
-from ato_nodes.core.config.schema import FILE_PARAMETERS, SPEC_BY_NAME, steps
+from ato_nodes.core.config.schema import FILE_PARAMETERS, SPEC_BY_NAME
+from ato_nodes.core.run.last_stop import planned_steps
 from ato_nodes.core.scoring.catalogue import FITNESS, Requirement
 from ato_nodes.core.run.scoring import score_series
 
@@ -231,7 +232,11 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
                                   f"{series['t'][-1]:g} s")
     indices = score_series(series, run_values)
     elapsed = candidate.elapsed()
-    if len(series["t"]) < steps(run_values) or not indices["finite"]:
+    # ended before the step it was to end at (run.duration's, or a journey's at its last
+    # stop): it diverged
+    diverged = len(series["t"]) < planned_steps(run_values, series["position"],
+                                                series["speed"])
+    if diverged or not indices["finite"]:
         return Evaluation(index, overrides, PENALTY, "diverged", elapsed, indices)
     value, status, message = candidate.objective.score(indices)
     return Evaluation(index, overrides, value, status, elapsed, indices, message)

@@ -4,14 +4,15 @@
 
 `scenario` is a shipped scenario's name or a scenario file; every node reads that file
 (its `/**` and own sections) and completes it as `scripts/run_stack.py` does (train
-preset, relative paths), and gets the values the scenario derives (the load
-weighing's reading, core/config/scenario.DERIVED_PARAMETERS) on top, so both give the
-same run. `out` is the bag directory to create (default bags/<scenario>-launch). The
-run ends when the supervisor ends it: every node exits on its 'shutdown' and the launch
-ends with the last of them (a node still running STOP_GRACE s after the supervisor, or
-one that fails, shuts the launch down, as run_stack.py does). The ROS domain is the
-environment's (ROS_DOMAIN_ID). Without a ROS install, `python scripts/run_stack.py
---scenario NAME` is the same run.
+preset, relative paths), and gets the values the scenario derives (the load weighing's
+reading, where a journey's last stop begins for its end:
+core/config/scenario.DERIVED_PARAMETERS) on top, so both give the same run. `out` is the
+bag directory to create (default bags/<scenario>-launch). The run ends when the
+supervisor ends it: every node exits on its 'shutdown' and the launch ends with the last
+of them (a node still running STOP_GRACE s after the supervisor, or one that fails, shuts
+the launch down, as run_stack.py does). The ROS domain is the environment's
+(ROS_DOMAIN_ID). Without a ROS install, `python scripts/run_stack.py --scenario NAME` is
+the same run.
 """
 
 from pathlib import Path

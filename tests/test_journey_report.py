@@ -23,7 +23,10 @@ from ato_nodes.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journe
                                 run_timetable, worst_stations)
 from ato_nodes.report import write_report
 from ato_nodes.core.targets.restriction import NAME as RESTRICTION
-from ato_nodes.report_journey import journey_figure, journey_reports, limit_steps, station_rows
+from ato_nodes.report_journey import (NO_REPLANS, REPLANS, journey_figure, journey_reports,
+                                      limit_steps, station_rows)
+from ato_nodes.core.config.context import RunContext
+from ato_nodes.core.targets.served import replans
 from ato_nodes.analysis import judge
 
 DURATION = 300.0  # s: Market and Riverside reached, Central (arrival 422 s) not
@@ -85,6 +88,24 @@ def test_the_report_tables_each_station_and_section_of_the_timetable(journey, tm
     assert re.search(r"<td style='background:#fff3bf' title='the run ended at t = [0-9.]+ s, "
                      r"[0-9.]+ m short of the mark, before a stop'>not judged</td>",
                      html)
+
+
+def test_the_report_lists_the_replans_the_bag_recorded(journey, tmp_path):
+    """A train held 20 s longer at Market leaves it late: the one re-plan, recorded as the
+    profile node records it (its fields and step), is listed in report.md and report.html
+    in the profile's words with its time; a run without one says so."""
+    values = apply_overrides(journey.parameters, ["profile.journey.dwell_extension=2:20"])
+    series = simulate(values)
+    (made,) = replans(RunContext(values).plan, values["run.period"], series["position"])
+    delayed = Run(journey.path, series, values, {})
+    delayed.replans = [{"step": round(made.time / values["run.period"]), **made._asdict()}]
+    markdown, page = write_report([delayed], [], tmp_path / "delayed")
+    said = f"t = {made.time:.1f} s: {made.text()}"
+    assert made.origin == "Market (synthetic)" and made.lateness > 19.0
+    assert f"{REPLANS}:\n\n- {said}" in markdown.read_text()
+    assert f"<li>{said}</li>" in page.read_text()
+    markdown, page = write_report([journey], [], tmp_path / "on-time")
+    assert NO_REPLANS in markdown.read_text() and REPLANS not in markdown.read_text()
 
 
 def test_the_plot_shows_the_line_its_stations_and_the_planned_and_driven_speed(journey):

@@ -106,12 +106,13 @@ def arrival(run, mark):
 
 def test_the_late_arrival_is_caught_up_after_it_compiled_as_in_python(timetable):
     held = "profile.journey.dwell_extension=3:10"  # leaving Riverside late: a re-plan there
-    values = metro(RESTRICTION, held, "run.duration=680")
+    central, university = timetable.stops[3:5]
+    reached = f"run.duration={university.arrival + 75:g}"  # at University, kept late too
+    values = metro(RESTRICTION, held, reached)
     assert fast_loop.covers(*stages(values)) or not kernels.AVAILABLE
     compiled, python = simulate(values), simulate(values, compiled=False)
     for name in python:
         assert np.array_equal(compiled[name], python[name], equal_nan=True), name
-    central, university = timetable.stops[3:5]
     late = arrival(python, central.position) - central.arrival
     assert late > 30.0
     made = replans(RunContext(values).plan, values["run.period"], python["position"])
@@ -123,7 +124,7 @@ def test_the_late_arrival_is_caught_up_after_it_compiled_as_in_python(timetable)
     assert replan.lateness == pytest.approx(central.arrival + late + dwell - central.departure,
                                             abs=2 * values["run.period"])  # travel / step
     assert replan.running_time < replan.on_time - 1.0
-    kept = simulate(metro(RESTRICTION, held, "run.duration=680", "profile.journey.catch_up=0"))
+    kept = simulate(metro(RESTRICTION, held, reached, "profile.journey.catch_up=0"))
     late_kept, caught = (arrival(run, university.position) - university.arrival
                          for run in (kept, python))
     assert caught < late_kept - 1.0

@@ -17,6 +17,7 @@ from ato_nodes import cli
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.core.config.schema import steps
+from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.summary import bag_contents, write_summary
 
@@ -58,7 +59,8 @@ def run_stack() -> None:
                       timeout=args.timeout)
     except RuntimeError as exc:
         cli.fail(str(exc))
-    print(f"scenario {name}: {steps(values)} steps of {values['run.period']:g} s, "
+    at_most = "at most " if values["run.last_stop_hold"] > 0 else ""  # it may end at its stop
+    print(f"scenario {name}: {at_most}{steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
     pressed = []  # a Ctrl-C after the run (while the bag is scored): the summary first
     for number in (signal.SIGINT, signal.SIGTERM):
@@ -74,6 +76,9 @@ def run_stack() -> None:
               f"in {bag}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
+    if outcome.report.get("ended") == AT_LAST_STOP:
+        print(f"ended {AT_LAST_STOP} after {outcome.report['steps']} of at most "
+              f"{steps(values)} steps")
     print(f"real-time factor {outcome.report['real_time_factor']:.1f} "
           f"({outcome.report['steps_per_second']:.0f} steps/s, "
           f"loop {outcome.report['loop_wall_time']:.2f} s, "

@@ -5,7 +5,8 @@ the operation indices of a line (energy, jerk, switches, overspeed, stop, run ti
 
 BAG is a rosbag2 directory or a lone .mcap file. A partial bag (a run interrupted,
 timed out or diverged before its planned steps) is scored over the steps it holds and
-said so ("partial: interrupted at step 99 of 2000"; in --json, "partial"); a run that
+said so ("partial: interrupted at step 99 of 2000"; in --json, "partial"); a journey
+that ended at its last stop (run.last_stop_hold) is complete, and said so; a run that
 ended short of its stop, still moving, is said so too: its stopping and running-time
 errors judge nothing. A bag with no message is one line, exit 2.
 """
@@ -18,6 +19,7 @@ from ato_nodes import jsontext
 from ato_nodes import cli
 from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring.catalogue import format_indices
+from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.run.scoring import score_series, stop_not_reached
 
 
@@ -47,6 +49,9 @@ def main() -> None:
     else:
         if run.partial:
             print(f"partial: {run.partial}; the indices cover the steps recorded")
+        elif run.ended_at_last_stop:
+            print(f"complete: ended {AT_LAST_STOP} after {run.recorded_steps} steps "
+                  f"(run.last_stop_hold {run.parameters['run.last_stop_hold']:g} s)")
         print(format_indices(indices))
         short = stop_not_reached(run.series, run.parameters)
         if short:

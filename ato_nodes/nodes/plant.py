@@ -2,7 +2,9 @@
 
 Like a physics simulator it is the clock source: on 'start' it publishes step
 0, and every command it receives advances the train one period and
-publishes the next step, until run.duration is reached.
+publishes the next step, until run.duration is reached ('finished N'), the run
+diverges ('finished N diverged') or a journey's train has stood run.last_stop_hold at
+its last stop ('finished N at the last stop': a complete run, core/run/last_stop.py).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from geometry_msgs.msg import Twist
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64
 
+from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.run.stages import PlantStage
 from ato_nodes.core.config.schema import recording_steps, steps
 from ato_nodes.nodes.base import AtoNode, run_node
@@ -72,6 +75,9 @@ class PlantNode(AtoNode):
         self.step_index += 1
         if self.stage.diverged:
             self.announce(f"finished {self.step_index} diverged")
+            return
+        if self.stage.arrived:
+            self.announce(f"finished {self.step_index} {AT_LAST_STOP}")
             return
         if self.step_index >= self.total_steps:
             self.announce(f"finished {self.step_index}")

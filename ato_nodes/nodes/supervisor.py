@@ -2,7 +2,9 @@
 
 It waits until every node reports its edges matched, starts the plant's
 stepping, shows progress, and once the plant has finished and the recorder
-holds every step, writes the run report and tells every node to shut down.
+holds every step, writes the run report (the steps run and why the run ended: at
+run.duration, diverged, at a journey's last stop or pruned) and tells every node to
+shut down.
 With supervisor.fitness it also follows the target and the true speed, publishes
 the running fitness every step, and ends the run as pruned once it passes
 supervisor.prune_above (core.indices.RunningIndex: the numbers simulate()'s
@@ -45,6 +47,7 @@ class SupervisorNode(AtoNode):
         self.started = self.finished = None
         self.finished_steps = 0
         self.diverged = False
+        self.ending = ""  # why the plant finished: its 'finished N REASON'
         self.failed = False
         self.announced: dict[str, dict] = {}
         self.interactive = sys.stderr.isatty()
@@ -103,6 +106,7 @@ class SupervisorNode(AtoNode):
             self.finished = time.monotonic()
             count, _, reason = argument.partition(" ")
             self.finished_steps, self.diverged = int(count), reason == "diverged"
+            self.ending = reason or "at run.duration"
         elif word == "recorded":
             self.recorded, self.recorded_at = int(argument), time.monotonic()
             self.finish_when_followed()
@@ -189,6 +193,7 @@ class SupervisorNode(AtoNode):
         report = {
             "steps": done_steps,
             "diverged": self.diverged,
+            "ended": "pruned" if pruned else self.ending,
             "recorded_steps": recorded_steps,
             "sim_time": sim_time,
             "loop_wall_time": loop_wall,

@@ -58,6 +58,9 @@ class Plan(Protocol):
     limits_speed: bool = False
     # One line the profile node says at start-up (a planned time the plan cannot meet).
     notice: str | None = None
+    # Where a train standing has ended the plan's journey, m (a journey's last mark less
+    # its berth; None: a plan without stops). run.last_stop_hold ends the run there.
+    journey_end: float | None = None
 
     def speed(self, t: float, position: float = 0.0) -> float:
         """The target at time t (s) with the head at `position` (m), m/s."""

@@ -92,7 +92,9 @@ def _loaded(name_or_file: str) -> tuple[dict[str, Any], str]:
         raise ScenarioError(f"{path}: base must be a scenario name or file, not {base!r}")
     given = _given_values(path, document)
     if base is None:
-        return complete(given, [path.parent], str(path)), str(path)
+        values = complete(given, [path.parent], str(path))
+        check_not_derived(given, values, str(path))
+        return values, str(path)
     relative = path.parent / base
     base_values, _ = _loaded(str(relative) if relative.suffix in (".yaml", ".yml") else base)
     for name in FILE_PARAMETERS:
@@ -136,13 +138,13 @@ def complete(given: dict[str, Any], bases: list[Path], where: str = "") -> dict[
     plant.* values (plant.train), then the given values; relative file parameters
     made absolute, from the first of `bases` that holds them, else from msg_config/.
     A given parameter of a kind the run does not use is refused (`where` names the
-    source). The nodes complete what their parameter file gives them the same way."""
+    source). The nodes complete what their parameter file gives them the same way, and
+    take the derived parameters it gives (DERIVED_PARAMETERS: their launcher's)."""
     values = defaults()
     if given.get("plant.train"):
         values.update(train_preset(given["plant.train"]))
     values.update(given)
     check_used(given, values, where)
-    check_not_derived(given, values, where)
     for name in FILE_PARAMETERS:
         if given.get(name):
             values[name] = resolve_file(given[name], bases)
@@ -272,8 +274,8 @@ def check_launcher_free(values: dict[str, Any]) -> None:
 
 
 class Derivation(NamedTuple):
-    """How validate() derives a parameter: when the boolean parameter `switch` is true,
-    as `meaning` says (the error of a value given anyway quotes it)."""
+    """How validate() derives a parameter: when the parameter `switch` is on (true, or
+    above 0), as `meaning` says (the error of a value given anyway quotes it)."""
 
     switch: str
     meaning: str
@@ -281,10 +283,13 @@ class Derivation(NamedTuple):
 
 # Derived from the run's values by validate(), once, for every runner: the nodes that
 # declare them cannot derive them (a profile or controller node does not see the real
-# train's plant.mass_factor), so every launcher passes them (launch.Stack with all the
-# values, launch/stack.launch.py on top of the scenario file).
+# train's plant.mass_factor, the plant does not read the timetable), so every launcher
+# passes them (launch.Stack with all the values, launch/stack.launch.py on top of the
+# scenario file).
 DERIVED_PARAMETERS = {
     "train.mass_reading": Derivation("train.load_weighing", "the load weighing's reading"),
+    "run.last_stop_position": Derivation("run.last_stop_hold", "the timetable's last mark "
+                                         "less profile.journey.berth"),
 }
 
 
@@ -299,13 +304,28 @@ def weighed(values: dict[str, Any]) -> dict[str, Any]:
         values["train.load_weighing_seed"])}
 
 
+def at_last_stop(values: dict[str, Any], plan) -> dict[str, Any]:
+    """The values with run.last_stop_position where the run's journey (`plan`) ends
+    when run.last_stop_hold > 0; else as they are. ScenarioError (one line) for a hold
+    on a run whose plan has no last stop (not a journey)."""
+    if values["run.last_stop_hold"] <= 0.0:
+        return values
+    if plan.journey_end is None:
+        raise ScenarioError(f"run.last_stop_hold ends a journey's run at its last stop; "
+                            f"profile.kind {values['profile.kind']} has no stops (give 0, or "
+                            "profile.kind journey)")
+    return {**values, "run.last_stop_position": plan.journey_end}
+
+
 def check_not_derived(given, values: dict[str, Any], where: str = "") -> None:
     """Refuse a derived parameter given while the run derives it (one line)."""
     for name, derivation in DERIVED_PARAMETERS.items():
-        if values[derivation.switch] and name in given:
+        switch = values[derivation.switch]
+        if switch and name in given:
             prefix = f"{where}: " if where else ""
+            on = "true" if isinstance(switch, bool) else "above 0"
             raise ScenarioError(f"{prefix}{name} is {derivation.meaning} when "
-                                f"{derivation.switch} is true: give one of them")
+                                f"{derivation.switch} is {on}: give one of them")
 
 
 def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
@@ -328,7 +348,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
                             f"{values['controller.kind']} does not use the on-board estimator "
                             f"(those that do: {', '.join(estimating_kinds())})")
     try:
-        _ = RunContext(NodeValues("profile", values), line).plan
+        values = at_last_stop(values, RunContext(NodeValues("profile", values), line).plan)
         controller_values = NodeValues("controller", values)
         CONTROLLERS.chosen(controller_values).factory(
             controller_values, RunContext(controller_values, line),

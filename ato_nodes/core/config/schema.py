@@ -34,6 +34,15 @@ BANDS_FORM = TextForm(rf"\s*|{_BAND}(?:,{_BAND})*",
 BASE: tuple[ParamSpec, ...] = (
     param("run.period", 0.05, "control period and lockstep step, s", NODES, 1e-4, 10.0),
     param("run.duration", 2400.0, "simulated run length, s", NODES, 1e-3, 1e7),
+    param("run.last_stop_hold", 0.0, "a journey's run (profile.kind journey) ends once its "
+          "train has stood this long at the timetable's last stop (at or past "
+          "run.last_stop_position, at most 0.01 m/s either way: the scorer's standstill), "
+          "rounded to whole periods; run.duration is then the longest it may last, s (0 = "
+          "the run ends at run.duration)", "plant", 0.0, 3600.0),
+    param("run.last_stop_position", 0.0, "where a journey's last stop begins for "
+          "run.last_stop_hold: the timetable's last mark less profile.journey.berth, m; "
+          "derived from the timetable when run.last_stop_hold > 0 (the launchers pass it to "
+          "the plant)", "plant", -1e7, 1e7),
     param("run.real_time", False, "pace /clock at wall speed instead of as fast as possible",
           "plant"),
     param("run.record_lag", 1.0, "the plant runs at most this far (simulated time) ahead of "

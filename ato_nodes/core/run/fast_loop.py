@@ -61,6 +61,7 @@ from ..train.plant import (
     rk4_substep,
     sensor_reading,
 )
+from .last_stop import LastStop, held, standing
 from .python_steps import PYTHON_STEPS, PythonController, running
 from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns
 
@@ -122,6 +123,7 @@ class LoopInputs(NamedTuple):
     pantograph_offset: float   # m behind the head
     lagged: bool               # the force follows the command through the actuator lag
     max_speed: float           # m/s, past it the run has diverged
+    last_stop: LastStop        # where and how long a journey's train stands before the end
     line: LineTables           # arrays (empty: the open track)
     plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
     preview: int               # the horizon entry the controller tracks
@@ -174,7 +176,8 @@ class LoopState(NamedTuple):
     controller: Any            # the controller kind's state NamedTuple
     last: float                # the limiter's last command
     fitness: FitnessState
-    ended: bool                # diverged or pruned: no step follows
+    stood: int                 # samples the train has stood at its last stop (PlantStage's)
+    ended: bool                # diverged, pruned or arrived: no step follows
 
 
 FIRST_CHUNK = 64  # steps computed by a run's first call of the compiled loop
@@ -238,7 +241,8 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
         draws=draws, noise=float(plant.noise), quantum=float(plant.quantum),
         period=float(train.period), substeps=int(train.substeps), train=train.constants,
         pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
-        max_speed=float(plant.max_speed), line=line_arrays(train.line), plan=plan,
+        max_speed=float(plant.max_speed), last_stop=plant.last_stop,
+        line=line_arrays(train.line), plan=plan,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
@@ -259,7 +263,7 @@ def _first_state(profile, plant, controller, controller_state, running_index) ->
         controller=controller_state, last=float(controller.limiter.last),
         fitness=FitnessState(float(running_index.value), float(running_index.last_t),
                              float(running_index.last_w)),
-        ended=False)
+        stood=int(plant.stood), ended=False)
 
 
 def controller_start(settings, state, target: float, measured: float):
@@ -339,8 +343,9 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
     """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
     (or the step the run ends at); the state after. `targets` holds every step's
     horizon: given (time-indexed plans) or filled in LOOKAHEAD steps ahead."""
-    k, plant, profile, controller, last, fitness = \
-        loop.step, loop.plant, loop.profile, loop.controller, loop.last, loop.fitness
+    k, plant, profile, controller, last, fitness, stood = (loop.step, loop.plant, loop.profile,
+                                                           loop.controller, loop.last,
+                                                           loop.fitness, loop.stood)
     ended = False
     while k < stop and not ended:
         measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
@@ -358,6 +363,7 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
         for i in range(len(outputs)):
             extras[k, i] = outputs[i]
         speed = plant.speed
+        stood = standing(inputs.last_stop, stood, plant.position, speed)  # PlantStage.apply
         plant = _plant_step(inputs, plant, u)
         if not (abs(plant.speed) <= inputs.max_speed):  # PlantStage.diverged
             ended = True
@@ -365,9 +371,9 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
             fitness = FitnessState(*running_add(
                 inputs.fitness_kind, fitness.value, fitness.last_t, fitness.last_w,
                 k * inputs.period, horizon[0] - speed))
-            ended = fitness.value > inputs.fitness_limit
+            ended = fitness.value > inputs.fitness_limit or held(inputs.last_stop, stood)
         k += 1
-    return LoopState(k, plant, profile, controller, last, fitness, ended)
+    return LoopState(k, plant, profile, controller, last, fitness, stood, ended)
 
 
 @jitable

@@ -26,9 +26,10 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
-    ends early, as it does in the stack. Past `deadline` (time.monotonic()) it raises
-    TimeoutError (checked before every step, or chunk of compiled steps, each a small
-    part of a second). prune (running, limit): a tuner's pruning,
+    ends early, as it does in the stack, and so does a journey whose train has stood
+    run.last_stop_hold at its last stop (PlantStage.arrived). Past `deadline`
+    (time.monotonic()) it raises TimeoutError (checked before every step, or chunk of
+    compiled steps, each a small part of a second). prune (running, limit): a tuner's pruning,
     `running` takes every step's (t, target - true speed) and the run ends once its
     value passes `limit`. changes {step: {name: value}}: live controller parameters
     changed before that step, as a run's bag records them (bagio.Run.parameter_changes).
@@ -59,8 +60,8 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
                      out.line_resistance, profile.speed_limit(out.position), c.u))
         extras.append(c.extras)
         horizons.append(horizon)
-        if plant.diverged or (prune is not None
-                              and prune[0].add(k * period, horizon[0] - out.speed) > prune[1]):
+        if plant.diverged or (prune is not None and prune[0].add(
+                k * period, horizon[0] - out.speed) > prune[1]) or plant.arrived:
             break
     return _series(rows, extras, horizons, controller.output_names)
 

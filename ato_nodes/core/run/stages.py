@@ -37,6 +37,7 @@ from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
 from ..train.line import Line, load_line
 from ..train.plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
+from .last_stop import held, last_stop, standing
 
 LOOKAHEAD = 2  # steps the profile runs ahead of the plant
 
@@ -119,7 +120,8 @@ class PlantOutputs:
 
 
 class PlantStage:
-    """The train, its line and its speed sensor (noise and quantisation, seeded)."""
+    """The train, its line and its speed sensor (noise and quantisation, seeded); and
+    the end of a journey's run at its last stop (core/run/last_stop.py)."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
         nominal = TrainParameters.from_values(values)  # what the ATO knows; the real train:
@@ -139,12 +141,20 @@ class PlantStage:
         self.noise = values["plant.speed_noise"]
         self.quantum = values["plant.speed_quantum"]
         self.rng = np.random.default_rng(values["plant.noise_seed"])
+        self.last_stop = last_stop(values)
+        self.stood = 0  # samples the train has stood at its last stop, to the last applied
 
     @property
     def diverged(self) -> bool:
         """Speed not finite or beyond plant.max_speed: a run that can only get worse."""
         speed = self.train.state.speed
         return not (abs(speed) <= self.max_speed)  # also true for NaN
+
+    @property
+    def arrived(self) -> bool:
+        """The train has stood run.last_stop_hold at its journey's last stop: the run
+        ends with the step just applied."""
+        return held(self.last_stop, self.stood)
 
     def measure(self, speed: float) -> float:
         """What the speed sensor reports: speed plus noise, to its resolution."""
@@ -158,6 +168,8 @@ class PlantStage:
                             train.line_resistance())
 
     def apply(self, command: float) -> None:
+        state = self.train.state  # step k's, as its outputs gave it
+        self.stood = standing(self.last_stop, self.stood, state.position, state.speed)
         self.train.step(command)
 
 

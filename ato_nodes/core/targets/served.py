@@ -262,6 +262,11 @@ class JourneyPlan(Plan):
                       float(self.journey.scheduled[section]),
                       bool(times[section, level] > self.journey.scheduled[section] - lateness))
 
+    @property
+    def journey_end(self) -> float:
+        """Where a train standing has arrived at the last stop, m (as `observed` counts)."""
+        return float(self.journey.stops[-1] - self.journey.berth)
+
     def speed(self, t: float, position: float = 0.0) -> float:
         return float(journey_speed(self.journey, self.state, t, position))
 

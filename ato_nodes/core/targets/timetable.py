@@ -11,15 +11,18 @@ its stops in the line's order; a station between two stops is passed without sto
       - {station: Westgate (synthetic), departure: 0}
       - {station: Market (synthetic), arrival: 131, departure: 156}
       - {station: Depot Road (synthetic), arrival: 1000}
+    load: 1.3                     # optional: the mass its times are planned for (1 if not)
 
 Times are seconds on the journey's clock (any origin): the first stop has a departure
 only, the last an arrival only, every other stop both. A section's running time is the
 arrival at its end less the departure at its start, standstill to standstill; a stop's
 dwell is its departure less its arrival and is at least the station's dwell in the line
 file (what the station needs for its passengers). A section's minimum running time is
-the nominal train's ato curve (core/targets/profiles.py) at its full envelope share,
-from standstill to standstill as the on-time curve counts it; a timetable faster than
-that is refused. Every problem is one ScenarioError line naming the file and the line.
+the train's ato curve (core/targets/profiles.py) at its full envelope share, from
+standstill to standstill as the on-time curve counts it. A timetable is planned for the
+loaded train (`load`: its mass over the nominal, e.g. 1.3 crush-laden), so that a full
+train keeps it too; one faster than the minimum at that load is refused. Every problem
+is one ScenarioError line naming the file and the line.
 """
 
 from __future__ import annotations
@@ -40,7 +43,10 @@ from ..train.line import (Line, Section, Station, load_line, mapping_fields, nod
 from ..train.plant import TrainParameters
 from .profiles import ato_curve
 
-TOP_KEYS = {"line", "train", "stops"}
+TOP_KEYS = {"line", "train", "stops", "load"}
+REQUIRED_KEYS = TOP_KEYS - {"load"}
+NOMINAL_LOAD = 1.0   # a timetable without `load` is planned for the nominal train
+HEAVIEST_LOAD = 2.0  # the largest `load`, times the nominal train's mass
 STOP_KEYS = {"station", "arrival", "departure"}
 
 
@@ -77,6 +83,7 @@ class Timetable:
     line: Line
     train: str       # the train preset it is planned for
     stops: tuple[Stop, ...]
+    load: float = NOMINAL_LOAD  # the mass its running times are planned for, over the nominal
 
     @property
     def sections(self) -> tuple[JourneySection, ...]:
@@ -97,14 +104,18 @@ def load_timetable(path: str | Path) -> Timetable:
     yamlfile.check_structure(text, str(path))
     root = yaml.compose(text)
     fields = mapping_fields(path, root, TOP_KEYS,
-                            "a timetable file is a mapping (line, train, stops)")
-    missing = sorted(TOP_KEYS - set(fields))
+                            "a timetable file is a mapping (line, train, stops, load)")
+    missing = sorted(REQUIRED_KEYS - set(fields))
     if missing:
         raise ScenarioError(f"{path}: missing {missing[0]!r}")
     line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
     line = load_line(line_file)
     stops = _stops(path, fields["stops"], line)
-    return Timetable(str(path), line_file, line, _text(fields["train"]), stops)
+    load = node_number(path, fields["load"], "load") if "load" in fields else NOMINAL_LOAD
+    if not NOMINAL_LOAD <= load <= HEAVIEST_LOAD:
+        raise node_error(path, fields["load"], f"load must be from 1 (the nominal train) to "
+                         f"{HEAVIEST_LOAD:g} times the train's mass, not {load:g}")
+    return Timetable(str(path), line_file, line, _text(fields["train"]), stops, load)
 
 
 def _text(node: yaml.Node) -> str:
@@ -186,27 +197,33 @@ def section_line(line: Line, start: float, end: float) -> Line:
         planned_run_time=None)
 
 
-def minimum_running_time(line: Line, values: dict) -> float:
-    """The fastest the run's nominal train (plant.*) runs `line` to its stop mark: the
-    ato curve (profile.ato.*) at the train's full envelope share, from standstill to
-    standstill (the on-time curve's count), s."""
+def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -> float:
+    """The fastest the run's nominal train (plant.*), at `load` times its mass, runs
+    `line` to its stop mark: the ato curve (profile.ato.*) at the train's full envelope
+    share, from standstill to standstill (the on-time curve's count), s."""
     fastest = {**values, "profile.envelope_share": 1.0, "profile.ato.on_time": True}
-    return ato_curve(fastest, line, TrainParameters.from_values(values)).planned_run_time
+    nominal = TrainParameters.from_values(values)
+    train = dataclasses.replace(nominal, mass=load * nominal.mass)
+    return ato_curve(fastest, line, train).planned_run_time
 
 
 def check_minimum_times(timetable: Timetable, values: dict) -> tuple[float, ...]:
-    """Each section's minimum running time for the run's train (`values`: plant.* and
-    profile.ato.*), s; ScenarioError (the file and the stop's line) for a section the
-    timetable gives less."""
+    """Each section's minimum running time for the run's nominal train (`values`:
+    plant.* and profile.ato.*), s; ScenarioError (the file and the stop's line) for a
+    section the timetable gives less than that train's minimum at the timetable's
+    load."""
     minimums = []
     for section, stop in zip(timetable.sections, timetable.stops[1:], strict=True):
-        fastest = minimum_running_time(
-            section_line(timetable.line, section.start, section.end), values)
-        if section.running_time < fastest:
+        line = section_line(timetable.line, section.start, section.end)
+        fastest = minimum_running_time(line, values)
+        loaded = fastest if timetable.load == NOMINAL_LOAD else minimum_running_time(
+            line, values, timetable.load)
+        if section.running_time < loaded:
             raise ScenarioError(
                 f"{timetable.path} line {stop.source_line}: the running time "
                 f"{section.running_time:g} s from {section.origin} to {section.destination} "
-                f"is below its minimum {math.ceil(fastest * 10) / 10:g} s (train "
-                f"{values['plant.train'] or '(none)'}: its ato curve at the full envelope)")
+                f"is below its minimum {math.ceil(loaded * 10) / 10:g} s (train "
+                f"{values['plant.train'] or '(none)'} at {timetable.load:g} times its mass: "
+                "its ato curve at the full envelope)")
         minimums.append(fastest)
     return tuple(minimums)
