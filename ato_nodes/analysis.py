@@ -69,6 +69,8 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("abs_stopping_error", "abs(stopping error) m", "{:.3f}"),
     ("arrival_time", "arrival s", "{:.2f}"),
     ("running_time_error", "run-time error s", "{:+.2f}"),
+    ("neutral_traction_command_time", "neutral traction commanded s", "{:.1f}"),
+    ("neutral_traction_force_time", "neutral traction applied s", "{:.1f}"),
     ("stepped_time", "stepped approach s", "{:.1f}"),
 ]
 
@@ -76,7 +78,7 @@ INDEX_COLUMNS = [  # (key, heading, format)
 # What a tracking comparison shows (scripts/compare_scenarios.py, scripts/ablation.py).
 TRACKING_KEYS = ("max_abs_error_kmh", "max_abs_error_outside_steps_kmh", "p95_abs_error_kmh",
                  "itae", "stopping_error", "max_jerk", "switch_count", "overspeed_time",
-                 "net_energy_kwh")
+                 "neutral_traction_command_time", "net_energy_kwh")
 
 
 def markdown_table(results: dict[str, dict], keys: tuple[str, ...] = TRACKING_KEYS,

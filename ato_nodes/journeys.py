@@ -21,7 +21,7 @@ import yaml
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import (LINE_BASE64, common_steps, energy_terms, kept_file,
-                                        score_series)
+                                        pantograph_in_neutral, run_line, score_series)
 from ato_nodes.core.scoring.journey import STOPPED, JourneyIndices, journey_indices
 from ato_nodes.core.targets.timetable import Timetable, load_timetable
 
@@ -74,7 +74,10 @@ def run_journey(series: dict[str, np.ndarray], parameters: dict, timetable: Time
     """Per-station indices of a run of `timetable` (series cut to the steps all hold:
     an interrupted run's stations ahead are not reached). ScenarioError (one line)
     when the run lacks a series they need."""
-    return journey_indices(common_steps(series), timetable, **energy_terms(parameters))
+    series = common_steps(series)
+    return journey_indices(series, timetable, **energy_terms(parameters),
+                           neutral=pantograph_in_neutral(series, parameters,
+                                                         run_line(parameters)))
 
 
 # The worst station of a journey run, as studies count it (inf: a station missed or not

@@ -131,6 +131,9 @@ def summary(indices: JourneyIndices) -> str:
         parts.append(f"final arrival {indices.final_arrival_lateness:+.1f} s")
     if math.isfinite(running):  # every section run
         parts.append(f"running time {running:.1f} s")
+    if math.isfinite(indices.neutral_traction_command_time):
+        parts.append(f"traction commanded in neutral sections "
+                     f"{indices.neutral_traction_command_time:.1f} s")
     return "; ".join(parts + [f"traction {indices.traction_energy_kwh:.2f} kWh"])
 
 

@@ -189,7 +189,8 @@ class TestLinearADRC:
         period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
         adrc = linear_adrc_of(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b,
                                               feedforward=False, delay_aware=False,
-                                              plan_feedforward=False, plan_band=0.0), period,
+                                              plan_feedforward=False, plan_band=0.0,
+                                              neutral_cut=False), period,
                               CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()),
                               on_board_estimator(defaults(), period))
         v = 0.0

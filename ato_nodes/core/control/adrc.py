@@ -48,10 +48,10 @@ from ..train.line import Line
 from ..train.plant import TrainParameters
 from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
                          on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
-from .limiter import CommandLimiter, LimiterSettings, limit_command
+from .limiter import CommandLimiter, LimiterSettings, limit_command, limit_under
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
-from .train_model import (NominalModel, NominalState, known_resistance, nominal_advance,
-                          nominal_predict, nominal_train)
+from .train_model import (NominalModel, NominalState, known_resistance, neutral_ceiling,
+                          nominal_advance, nominal_predict, nominal_train)
 
 
 @jitable
@@ -357,6 +357,14 @@ LINEAR_ADRC_PARAMETERS = (
     param("ladrc.plan_band", 0.5 / 3.6, "linear ADRC with ladrc.plan_feedforward: how far the "
           "speed may be off the target before the command leaves the plan's side, m/s",
           "controller", 0.0, 100.0),
+    param("ladrc.neutral_cut", False, "linear ADRC: command no traction while the pantograph "
+          "(dead-reckoned by the nominal model) is inside a neutral section, nor while it "
+          "will be inside one within the nominal dead time and a period at the measured "
+          "speed (a command sent then acts only there), traction ramped down before that "
+          "at controller.max_rate so the cut is in place as the pantograph enters, "
+          "released once it has left; as a real ATO opens the main circuit breaker across "
+          "a phase break. The observer and the feedforward are told the cut command",
+          "controller"),
 )
 
 
@@ -371,6 +379,7 @@ class LinearADRCGains(NamedTuple):
     delay_aware: bool
     plan_feedforward: bool
     plan_band: float                # m/s
+    neutral_cut: bool
 
 
 class PlanForces(NamedTuple):
@@ -464,8 +473,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     scale = on_board_scale(state.estimator)
     e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
         1.0 + h * settings.l1 + h * h * settings.l2)
-    z2 = state.z2 - h * settings.l2 * e
-    z1 = measured + e
+    z1, z2 = measured + e, state.z2 - h * settings.l2 * e
     ahead = len(horizon) - 1
     speed = z1
     if g.delay_aware and ahead:
@@ -485,9 +493,11 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
             planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
             law += planned / g.b0 + known_resistance(model, target, there, scale)
         resistance = known_resistance(model, measured, state.model.position, scale)
-    u = limit_command(law, target, measured, last, limits)
+    ceiling = (neutral_ceiling(model, state.model, measured, limits.max_change)
+               if g.neutral_cut else math.inf)  # the observer is told the cut command
+    u = limit_under(law, ceiling, target, measured, last, limits)
     force, nominal = u, state.model
-    if g.feedforward or g.delay_aware:
+    if g.feedforward or g.delay_aware or g.neutral_cut:  # the model dead-reckons the position
         force, nominal = nominal_advance(model, state.model, u, measured)
     observer_input = (force if g.delay_aware else u) - resistance
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)

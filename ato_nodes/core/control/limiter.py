@@ -69,6 +69,17 @@ def limit_command(u: float, target: float, speed: float, last: float,
     return clamp(u, s.u_min, s.u_max)
 
 
+@jitable
+def limit_under(u: float, ceiling: float, target: float, speed: float, last: float,
+                settings: LimiterSettings) -> float:
+    """limit_command of `u` asked at most `ceiling` (N/kN; inf: no bound, `u`'s bits). A
+    ceiling of 0 (no traction: a neutral section) holds even where the jerk limit would
+    keep some: its ramp came too late (a run started near the section, a speed that
+    grew)."""
+    limited = limit_command(ceiling if u > ceiling else u, target, speed, last, settings)
+    return 0.0 if ceiling == 0.0 and limited > 0.0 else limited
+
+
 class CommandLimiter:
     """What stands between a control law and the train, shared by every controller;
     the observer is fed its output, the command actually applied.

@@ -28,7 +28,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.kernels import jitable
-from ..train.line import Line, LineTables, belt_resistance, in_neutral_section, line_arrays
+from ..train.line import (Line, LineTables, belt_resistance, in_neutral_section, line_arrays,
+                          neutral_distance)
 from ..train.plant import TrainConstants, TrainParameters, basic_resistance, force_limits
 from .limiter import clamp
 
@@ -89,6 +90,29 @@ def nominal_act(model: NominalModel, lag_state: float, command: float, speed: fl
     if not powered and mean > 0.0:
         mean = 0.0
     return command + (lag_state - command) * model.decay, mean
+
+
+@jitable
+def neutral_ceiling(model: NominalModel, state: NominalState, speed: float,
+                    max_change: float) -> float:
+    """The most traction a command sent now may ask, N/kN (inf: no bound), so that none
+    is commanded while the pantograph is inside a neutral section, nor acts there: a
+    command acts after the dead time, for a period, so it asks none once the pantograph
+    (dead-reckoned, at `speed`) reaches a section within the dead time and a period;
+    before that at most what the jerk limit (`max_change` per period; 0: none) can still
+    take off by then, so that the cut is in place, without a jump, as the pantograph
+    enters. Released once the (dead-reckoned) pantograph has left the section."""
+    if not model.neutral:
+        return math.inf
+    distance = neutral_distance(model.line, state.position - model.pantograph_offset)
+    if distance == 0.0:
+        return 0.0
+    if speed <= 0.0:  # standing short of a section: it comes no nearer
+        return math.inf
+    periods = distance / (speed * model.period) - (len(state.pending) + 1)
+    if periods <= 0.0:
+        return 0.0
+    return max_change * periods if max_change > 0.0 else math.inf
 
 
 @jitable

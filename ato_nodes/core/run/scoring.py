@@ -146,7 +146,8 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
     indices = operation_indices(
         series, **energy_terms(parameters),
         stop_position=line.stop_position if to_station else None,
-        planned_run_time=line.planned_run_time if to_station else None)
+        planned_run_time=line.planned_run_time if to_station else None,
+        neutral=pantograph_in_neutral(series, parameters, line))
     if parameters.get("profile.approach_step", 0.0) > 0.0:
         steps = stepped_approach(series, parameters, line)
         error = np.abs(series["target"] - series["speed"])[~steps]
@@ -154,6 +155,16 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
             if error.size else 0.0
         indices["stepped_time"] = float(np.count_nonzero(steps) * parameters["run.period"])
     return indices
+
+
+def pantograph_in_neutral(series: dict[str, np.ndarray], parameters: dict, line: Line | None
+                          ) -> np.ndarray | None:
+    """The samples with the pantograph (plant.pantograph_offset behind the head, as the
+    plant cuts traction) inside a neutral section; None on a line without any."""
+    if line is None or not line.neutral_sections:
+        return None
+    return line.in_neutral_sections(np.asarray(series["position"], dtype=float)
+                                    - parameters.get("plant.pantograph_offset", 0.0))
 
 
 def stepped_approach(series: dict[str, np.ndarray], parameters: dict, line: Line | None

@@ -22,15 +22,15 @@ INDEX_NAMES = (
     "overshoot_percent", "traction_energy_kwh", "regenerated_energy_kwh", "net_energy_kwh",
     "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time",
     "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "arrival_time",
-    "running_time_error",
+    "running_time_error", "neutral_traction_command_time", "neutral_traction_force_time",
     "max_abs_error_outside_steps_kmh", "stepped_time")
 # Those that only grow along a run (integrals of non-negative terms, maxima, counts):
 # a partial run that breaks a requirement on one of them has broken it for good.
 GROWING_INDICES = (
     "itae", "iae", "ise", "max_abs_error", "max_abs_error_kmh", "j_seed004",
     "traction_energy_kwh", "regenerated_energy_kwh", "max_jerk", "max_jerk_sampled",
-    "switch_count", "overspeed_time", "max_overspeed_kmh", "max_abs_error_outside_steps_kmh",
-    "stepped_time")
+    "switch_count", "overspeed_time", "max_overspeed_kmh", "neutral_traction_command_time",
+    "neutral_traction_force_time", "max_abs_error_outside_steps_kmh", "stepped_time")
 # Those that judge the run's stop: they say nothing of a run that ended short of it.
 STOP_INDICES = ("stopping_error", "abs_stopping_error", "arrival_time", "running_time_error")
 # A tuning's fitness (tune.py --fitness) -> the index it minimises.

@@ -35,7 +35,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from ..base.errors import ScenarioError
-from .operation import STANDSTILL, traction_energy_kwh
+from .operation import STANDSTILL, neutral_traction_time, traction_energy_kwh
 
 
 # What is read of a timetable (core/targets/timetable.py's Stop, JourneySection and
@@ -107,6 +107,8 @@ class JourneyIndices:
     stations: tuple[StationIndices, ...]
     sections: tuple[SectionIndices, ...]
     traction_energy_kwh: float  # the whole run's
+    neutral_traction_command_time: float  # s, the whole run's (operation.py; NaN: not told
+                                          # where the neutral sections are)
 
     @property
     def worst_stop(self) -> StationIndices | None:
@@ -144,10 +146,11 @@ class _Stop(NamedTuple):
 def journey_indices(series: dict[str, np.ndarray], timetable: Timetable, mass: float,
                     gravity: float = 9.8, efficiency: float = 0.9,
                     window: float = STOP_WINDOW,
-                    requirements: StationRequirements = REQUIRED
-                    ) -> JourneyIndices:
+                    requirements: StationRequirements = REQUIRED,
+                    neutral: np.ndarray | None = None) -> JourneyIndices:
     """Per-station and per-section indices of a run of `timetable` (series of equal
-    length: REQUIRED_SERIES; mass in t, as operation_indices takes it)."""
+    length: REQUIRED_SERIES; mass in t and `neutral`, the samples with the pantograph
+    inside a neutral section, as operation_indices takes them)."""
     _check(series, timetable, window)
     t, position, speed, target, force = (np.asarray(series[name], dtype=float)
                                          for name in REQUIRED_SERIES)
@@ -162,8 +165,12 @@ def journey_indices(series: dict[str, np.ndarray], timetable: Timetable, mass: f
     sections = tuple(
         _section(planned, begin, end, (t, speed, target, force), (mass, gravity, efficiency))
         for planned, begin, end in zip(timetable.sections, found, found[1:], strict=False))
+    commanded = math.nan
+    if neutral is not None and "command" in series:
+        commanded = neutral_traction_time(t, series["command"], neutral)
     return JourneyIndices(stations, sections,
-                          traction_energy_kwh(t, speed, force, mass, gravity, efficiency))
+                          traction_energy_kwh(t, speed, force, mass, gravity, efficiency),
+                          commanded)
 
 
 def _check(series: dict[str, np.ndarray], timetable: Timetable, window: float) -> None:

@@ -25,6 +25,11 @@ kN is force * mass * gravity / 1000 with the mass in t.
 - arrival_time (s): t of the first sample of the final standstill (speed <= 0.01
   m/s); NaN if the train is still moving at the end or never moved.
 - running_time_error (s, + late): arrival_time - planned_run_time, when planned.
+- neutral_traction_command_time, neutral_traction_force_time (s): time the command,
+  and the force applied, is traction (> 0) with the pantograph inside a neutral section
+  (a real ATO commands none across a phase break: it opens the main circuit breaker),
+  each sample counting until the next, as overspeed_time does; only when told at which
+  samples the pantograph is inside one (a line with neutral sections).
 """
 
 from __future__ import annotations
@@ -77,11 +82,20 @@ def traction_energy_kwh(t: np.ndarray, speed: np.ndarray, force: np.ndarray, mas
     return _integral(np.asarray(t, dtype=float), drawn) / efficiency / KJ_PER_KWH
 
 
+def neutral_traction_time(t: np.ndarray, signal: np.ndarray, neutral: np.ndarray) -> float:
+    """Time `signal` (a command or force, N/kN) is traction with the pantograph inside a
+    neutral section (`neutral`, per sample), s: each such sample counts until the next."""
+    traction = (np.asarray(signal, dtype=float) > 0.0) & np.asarray(neutral, dtype=bool)
+    return float(np.sum(np.diff(np.asarray(t, dtype=float))[traction[:-1]]))
+
+
 def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float = 9.8,
                       efficiency: float = 0.9, stop_position: float | None = None,
                       planned_run_time: float | None = None,
-                      switch_threshold: float = SWITCH_THRESHOLD) -> dict[str, float]:
-    """Every operation index of a run, as a flat dict (see the module docstring)."""
+                      switch_threshold: float = SWITCH_THRESHOLD,
+                      neutral: np.ndarray | None = None) -> dict[str, float]:
+    """Every operation index of a run, as a flat dict (see the module docstring);
+    `neutral` the samples with the pantograph inside a neutral section."""
     t, position, speed, acceleration, force = (
         np.asarray(series[name], dtype=float)
         for name in ("t", "position", "speed", "acceleration", "force"))
@@ -114,6 +128,11 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
         result["abs_stopping_error"] = abs(result["stopping_error"])
     if planned_run_time is not None:
         result["running_time_error"] = arrival - planned_run_time
+    if neutral is not None:
+        if "command" in series:
+            result["neutral_traction_command_time"] = neutral_traction_time(
+                t, series["command"], neutral)
+        result["neutral_traction_force_time"] = neutral_traction_time(t, force, neutral)
     return result
 
 
@@ -132,6 +151,8 @@ def format_operation(indices: dict) -> list[str]:
         ("stopping_error", "stopping error", "{:+.3f} m"),
         ("arrival_time", "arrival time", "{:.2f} s"),
         ("running_time_error", "running-time err", "{:+.2f} s"),
+        ("neutral_traction_command_time", "neutral traction", "{:.1f} s commanded"),
+        ("neutral_traction_force_time", "neutral traction", "{:.1f} s applied"),
     ]
     return [f"{label:<17}{fmt.format(indices[key])}"
             for key, label, fmt in formats if key in indices]

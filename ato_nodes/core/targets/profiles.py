@@ -357,13 +357,15 @@ class AtoCurve(Plan):
       basic and the line's resistance, so the controller keeps the rest for what the
       plan does not know (a steep up grade lowers the target instead of leaving it
       unreachable; a speed the share cannot hold is not planned; in a neutral section
-      the plan coasts). The
-      passes then step cell by cell; the curve for a cruise speed c is the curve
-      without one, capped at c (both passes are monotone in their start), except
-      where the share cannot hold c (a neutral section, a grade too steep for the
-      weighed train at c): there the curve falls from c as the forward pass does, until
-      back on the cap; the rounded curve is held to the coasting in neutral sections
-      too (its centred mean would start the coasting inside the section).
+      the plan coasts, and on for `neutral_runout` m after the pantograph has left it:
+      traction commanded only once it has left, ladrc.neutral_cut, comes back through
+      the actuator's dead time and lag). The passes then step cell by cell; the curve
+      for a cruise speed c is the curve without one, capped at c (both passes are
+      monotone in their start), except where the share cannot hold c (a neutral
+      section, a grade too steep for the weighed train at c): there the curve falls
+      from c as the forward pass does, until back on the cap; the rounded curve is held
+      to the coasting in neutral sections too (its centred mean would start the
+      coasting inside the section).
     * `jerk` > 0: the acceleration changes at most at this jerk, a traction turning
       straight into braking included: the curve in time averaged over T =
       max(acceleration, deceleration) / jerk, centred where it falls (the braking
@@ -394,8 +396,10 @@ class AtoCurve(Plan):
                  start_speed: float = 0.3, train_length: float = 0.0, resolution: float = 0.5,
                  power_speed: float = math.inf, stop_jerk: float = 0.0,
                  train: TrainParameters | None = None, envelope_share: float = 0.0,
-                 jerk: float = 0.0, departure: float | None = None):
+                 jerk: float = 0.0, departure: float | None = None,
+                 neutral_runout: float = 0.0):
         self.line = line
+        self.neutral_runout = neutral_runout
         stop = line.stop_position
         self.positions = np.arange(0.0, stop + resolution / 2, resolution)
         self.positions[-1] = stop
@@ -523,7 +527,7 @@ class AtoCurve(Plan):
         (forward then backward pass)."""
         x = self.positions
         line_resistance = np.array([self.line.additional_resistance(p, train_length) for p in x])
-        on = np.array([not self.line.in_neutral_section(p - train.pantograph_offset) for p in x])
+        on = ~self.line.in_neutral_sections(x - train.pantograph_offset, self.neutral_runout)
         self.cells = Cells(on, line_resistance,
                            np.flatnonzero(~on & np.concatenate(([True], on[:-1]))), train, share)
         squared = self.caps ** 2
@@ -683,13 +687,17 @@ LATE_NOTICE = 0.05  # s an on-time curve may miss the planned time by without a 
 def ato_curve(values: dict, line, train: TrainParameters) -> AtoCurve:
     """The ATO curve a run's profile.ato.* parameters give on `line` for `train` (the
     run context's: the train the ATO knows)."""
+    if values["profile.ato.neutral_runout"] > 0.0 and not values["profile.envelope_share"]:
+        raise ScenarioError("profile.ato.neutral_runout needs profile.envelope_share > 0 (the "
+                            "curve without a share does not plan neutral sections)")
     return _ato_curve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
                       values["profile.ato.margin"], values["profile.ato.start_speed"],
                       values["plant.length"], values["profile.ato.power_speed"] or math.inf,
                       values["profile.ato.stop_jerk"],
                       train if values["profile.envelope_share"] else None,
                       values["profile.envelope_share"], values["profile.jerk"],
-                      departure_time(values, train) if values["profile.ato.on_time"] else None)
+                      departure_time(values, train) if values["profile.ato.on_time"] else None,
+                      values["profile.ato.neutral_runout"])
 
 
 def departure_time(values: dict, train: TrainParameters) -> float:
@@ -705,12 +713,14 @@ def departure_time(values: dict, train: TrainParameters) -> float:
 # a journey asks for two curves per section (on time, fastest): the metro line's twelve
 @functools.lru_cache(maxsize=16)
 def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
-               power_speed, stop_jerk, train, envelope_share, jerk, departure) -> AtoCurve:
+               power_speed, stop_jerk, train, envelope_share, jerk, departure,
+               neutral_runout) -> AtoCurve:
     """One curve per distinct line and parameters (the profile and the scorer both need
     it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
                     power_speed=power_speed, stop_jerk=stop_jerk, train=train,
-                    envelope_share=envelope_share, jerk=jerk, departure=departure)
+                    envelope_share=envelope_share, jerk=jerk, departure=departure,
+                    neutral_runout=neutral_runout)
 
 
 STEP_PARAMETERS = (
@@ -741,6 +751,11 @@ ATO_PARAMETERS = (
           "start before start_speed; the eased stop's last metres), as the line's planned "
           "time counts it, and say at start-up when even the fastest curve misses that time "
           "(false = the curve's own time, the papers' setting)", PROFILE_NODES),
+    param("profile.ato.neutral_runout", 0.0, "ATO curve with profile.envelope_share: coast on "
+          "until the pantograph is this far past a neutral section, m: traction commanded "
+          "only once it has left (ladrc.neutral_cut) acts after the actuator's dead time and "
+          "lag and the jerk limit's ramp, some (dead time + lag) x speed metres on (0 = "
+          "traction planned from the section's end)", PROFILE_NODES, 0.0, 1000.0),
 )
 
 

@@ -74,6 +74,15 @@ class Line:
     def in_neutral_section(self, position: float) -> bool:
         return in_neutral_section(self.tables, position)
 
+    def in_neutral_sections(self, positions: np.ndarray, past: float = 0.0) -> np.ndarray:
+        """in_neutral_section at each of `positions` (m), at once; with `past` (m) also
+        less than that beyond a section's end."""
+        positions = np.asarray(positions, dtype=float)
+        inside = np.zeros(positions.shape, dtype=bool)
+        for section in self.neutral_sections:
+            inside |= (section.start <= positions) & (positions < section.end + past)
+        return inside
+
     def additional_resistance(self, head: float, train_length: float) -> float:
         """Gradient + curve + tunnel specific resistance of the mass belt, N/kN."""
         return belt_resistance(self.tables, head, train_length)
@@ -163,6 +172,17 @@ def in_neutral_section(tables: LineTables, position: float) -> bool:
         if sections[i][START] <= position < sections[i][END]:
             return True
     return False
+
+
+@jitable
+def neutral_distance(tables: LineTables, position: float) -> float:
+    """How far ahead of `position` the next neutral section starts, m: 0 inside one,
+    inf with none ahead (the sections are in order)."""
+    sections = tables.sections
+    for i in range(tables.limits_end, tables.neutral_end):
+        if position < sections[i][END]:
+            return max(sections[i][START] - position, 0.0)
+    return math.inf
 
 
 @jitable(inline=True)
