@@ -190,7 +190,7 @@ class TestLinearADRC:
         adrc = linear_adrc_of(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b,
                                               feedforward=False, delay_aware=False,
                                               plan_feedforward=False, plan_band=0.0,
-                                              neutral_cut=False), period,
+                                              neutral_cut=False, standstill=False), period,
                               CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()),
                               on_board_estimator(defaults(), period))
         v = 0.0
@@ -199,3 +199,32 @@ class TestLinearADRC:
             v += period * (b * out.u + disturbance)
         assert v == pytest.approx(10.0, abs=1e-3)
         assert out.extras[1] == pytest.approx(disturbance, abs=1e-3)
+
+
+def held_then_released(standstill: bool):
+    """A train held standing by the holding brake for 120 s (a braking force does not
+    move it), then a 0.1 m/s target: the observer's disturbance at the end of the hold
+    and the steps until the command is traction again."""
+    period, b = 0.1, 0.0098 / 1.11
+    adrc = linear_adrc_of(LinearADRCGains(omega_o=5.0, omega_c=1.0, b0=b, feedforward=False,
+                                          delay_aware=False, plan_feedforward=False,
+                                          plan_band=0.0, neutral_cut=False,
+                                          standstill=standstill), period,
+                          CommandLimiter(-60.0, 60.0, period, 60.0, holding_brake=30.0),
+                          TrainParameters.from_values(defaults()),
+                          on_board_estimator(defaults(), period))
+    for _ in range(1200):
+        adrc.step(0.0, 0.0, [0.0])
+    held = adrc.state.z2
+    steps = 1
+    while adrc.step(0.1, 0.0, [0.1]).u <= 0.0:
+        steps += 1
+    return held, steps
+
+
+def test_a_held_train_does_not_wind_up_the_observer_with_standstill():
+    wound, slow = held_then_released(standstill=False)
+    held, fast = held_then_released(standstill=True)
+    assert wound > 0.2      # the holding brake read as a push forward
+    assert abs(held) < 1e-9  # what it knew before the stop: nothing
+    assert fast < slow

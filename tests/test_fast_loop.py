@@ -31,6 +31,8 @@ VARIANTS = [
     ("seed004-metro-ato", ["estimator.enabled=true", "plant.mass_factor=1.3",
                            "plant.resistance_factor=1.2"]),
     ("seed001-crh380al-pid", ["estimator.enabled=true", "plant.resistance_factor=0.8"]),
+    # a journey's dwell and departure with the standstill-aware observer
+    ("seed004-metro-line", ["ladrc.standstill=true"]),
 ]
 
 

@@ -50,7 +50,7 @@ def drive(cut: bool, speed: float = 50.0, head: float = 700.0, steps: int = 160,
     train = crh5()
     gains = LinearADRCGains(omega_o=5.0, omega_c=1.0, b0=train.xi, feedforward=False,
                             delay_aware=False, plan_feedforward=False, plan_band=0.0,
-                            neutral_cut=cut)
+                            neutral_cut=cut, standstill=False)
     limiter = CommandLimiter(-67.9, 57.6, PERIOD, MAX_RATE)
     limiter.last = last
     adrc = linear_adrc_of(gains, PERIOD, limiter, train, on_board_estimator(defaults(), PERIOD),

@@ -69,7 +69,7 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
 def test_the_linear_adrc_without_its_additions_is_the_papers_law():
     gains = LinearADRCGains(omega_o=8.0, omega_c=1.5, b0=0.009, feedforward=False,
                             delay_aware=False, plan_feedforward=False, plan_band=0.0,
-                            neutral_cut=False)
+                            neutral_cut=False, standstill=False)
     adrc = linear_adrc_of(gains, PERIOD, CommandLimiter(-1e6, 1e6), metro(),
                           on_board_estimator(defaults(), PERIOD))
     z1 = z2 = u_prev = 0.0

@@ -48,7 +48,7 @@ from ..train.line import Line
 from ..train.plant import TrainParameters
 from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
                          on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
-from .limiter import CommandLimiter, LimiterSettings, limit_command, limit_under
+from .limiter import STOPPED, CommandLimiter, LimiterSettings, limit_command, limit_under
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 from .train_model import (NominalModel, NominalState, known_resistance, neutral_ceiling,
                           nominal_advance, nominal_predict, nominal_train)
@@ -365,6 +365,11 @@ LINEAR_ADRC_PARAMETERS = (
           "released once it has left; as a real ATO opens the main circuit breaker across "
           "a phase break. The observer and the feedforward are told the cut command",
           "controller"),
+    param("ladrc.standstill", False, "linear ADRC: while the train stands (measured speed "
+          "below 0.1 m/s) under an input that would slow it down, the brakes react and "
+          "nothing is left to estimate: the observer holds its disturbance estimate, "
+          "which otherwise winds up over a dwell against the holding brake and keeps the "
+          "train braked for seconds after its departure", "controller"),
 )
 
 
@@ -380,6 +385,7 @@ class LinearADRCGains(NamedTuple):
     plan_feedforward: bool
     plan_band: float                # m/s
     neutral_cut: bool
+    standstill: bool
 
 
 class PlanForces(NamedTuple):
@@ -467,13 +473,18 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     is the force the nominal actuator applies and v the speed predicted N steps ahead
     (the commands inside the dead time and lag act first), so the law's error is
     the one its command can still change; the known basic resistance is scaled by the
-    on-board estimate (1 off). The ESO is integrated by backward Euler in closed form,
-    stable for any step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
+    on-board estimate (1 off); with `standstill` the ESO holds z2 while the train stands
+    under an input that would slow it (the brakes' reaction is no disturbance). The ESO
+    is integrated by backward Euler in closed form, stable for any step. Outputs z1, z2
+    and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
     scale = on_board_scale(state.estimator)
-    e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
-        1.0 + h * settings.l1 + h * h * settings.l2)
-    z1, z2 = measured + e, state.z2 - h * settings.l2 * e
+    if g.standstill and measured < STOPPED and state.z2 + g.b0 * state.observer_input < 0.0:
+        z1, z2 = measured, state.z2  # standing, the brakes react: nothing to estimate
+    else:
+        e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
+            1.0 + h * settings.l1 + h * h * settings.l2)
+        z1, z2 = measured + e, state.z2 - h * settings.l2 * e
     ahead = len(horizon) - 1
     speed = z1
     if g.delay_aware and ahead:
