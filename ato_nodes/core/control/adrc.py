@@ -452,6 +452,19 @@ class LinearADRCState(NamedTuple):
 
 
 @jitable
+def linear_eso(settings: LinearADRCSettings, state: LinearADRCState,
+               measured: float) -> tuple[float, float]:
+    """The ESO's z1, z2 after a period (backward Euler in closed form); with standstill
+    z2 held while the train stands under an input that would slow it."""
+    g, h = settings.gains, settings.period
+    if g.standstill and measured < STOPPED and state.z2 + g.b0 * state.observer_input < 0.0:
+        return measured, state.z2  # standing, the brakes react: nothing to estimate
+    e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
+        1.0 + h * settings.l1 + h * h * settings.l2)
+    return measured + e, state.z2 - h * settings.l2 * e
+
+
+@jitable
 def linear_adrc_start(settings: LinearADRCSettings, state: LinearADRCState, target: float,
                       measured: float) -> LinearADRCState:
     return LinearADRCState(measured, state.z2, state.observer_input, state.u_applied,
@@ -479,12 +492,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
     scale = on_board_scale(state.estimator)
-    if g.standstill and measured < STOPPED and state.z2 + g.b0 * state.observer_input < 0.0:
-        z1, z2 = measured, state.z2  # standing, the brakes react: nothing to estimate
-    else:
-        e = (state.z1 - measured + h * (state.z2 + g.b0 * state.observer_input)) / (
-            1.0 + h * settings.l1 + h * h * settings.l2)
-        z1, z2 = measured + e, state.z2 - h * settings.l2 * e
+    z1, z2 = linear_eso(settings, state, measured)
     ahead = len(horizon) - 1
     speed = z1
     if g.delay_aware and ahead:
