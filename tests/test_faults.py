@@ -375,3 +375,34 @@ def test_a_run_that_times_out_names_what_the_loop_waited_for(tmp_path):
     assert result.returncode == 1 and "did not finish within 8 s" in result.stderr
     # the plant published step 99, the controller (hung) never answered it
     assert "the loop stalled at step 99, waiting for controller (" in result.stderr
+
+
+STALLED_TEARDOWN = """
+import time
+from ato_nodes.nodes import base
+
+class StalledSupervisor(base.AtoNode):
+    role = "supervisor"
+
+    def __init__(self):
+        super().__init__()
+        # the run's end, as the 'shutdown' event brings it, once the node spins
+        self.create_timer(0.01, self.shut_down, clock=self._wall_clock)
+
+    def close(self):
+        while True:  # stands for a middleware call that never returns
+            time.sleep(0.1)
+
+base.TEARDOWN_LIMIT = 1.0
+base.run_node(StalledSupervisor)
+"""
+
+
+def test_a_node_whose_teardown_stalls_exits_with_its_stack_on_stderr(ros_domain):
+    process = subprocess.run([sys.executable, "-c", STALLED_TEARDOWN], cwd=ROOT,
+                             env=node_environment(ros_domain.domain_id),
+                             capture_output=True, text=True, timeout=60)
+    assert process.returncode == 1
+    stack = process.stderr.split("Timeout (0:00:01)!")[1]
+    assert "in close\n" in stack and "in run_node\n" in stack
+    assert "Exception" not in process.stderr

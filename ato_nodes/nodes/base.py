@@ -3,6 +3,7 @@ the readiness gate and the run-event protocol, and a clean life cycle."""
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
 import importlib.metadata
 import json
@@ -60,6 +61,11 @@ HOUSEKEEPING_PERIOD = 0.02
 RUNNING_HOUSEKEEPING_PERIOD = 0.1
 HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
+# s a node's teardown (its last records flushed, the bag closed, the middleware shut down)
+# may take before the process gives up on it: every Python thread's stack on stderr, then
+# exit status 1 (faulthandler's watchdog runs without the interpreter lock, which a call
+# stalled in the middleware holds), rather than a process that never exits
+TEARDOWN_LIMIT = 10.0
 # Run events logged (INFO, /rosout): each node logs the start it hears and its own
 # shutdown; the end of the run once, by the node that announces it (the plant's
 # 'finished', the recorder's 'recorded'): a node hears events of different nodes in no
@@ -355,6 +361,7 @@ class AtoNode(Node):
         if self._shut_down:
             return
         self._shut_down = True
+        faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
         self.log.info("run event: shutdown")
         self.log.flush()
         self.context.try_shutdown()
@@ -606,9 +613,17 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
         if rclpy.ok():
             raise
     finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-            status = status or node.exit_status
-        rclpy.try_shutdown()
+        status = _tear_down(node, status)
     sys.exit(status)
+
+
+def _tear_down(node: AtoNode | None, status: int) -> int:
+    """Release what the node holds (the recorder's bag first), then the middleware, within
+    TEARDOWN_LIMIT; the process's exit status."""
+    faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
+    if node is not None:
+        node.close()
+        node.destroy_node()
+        status = status or node.exit_status
+    rclpy.try_shutdown()
+    return status
