@@ -184,13 +184,15 @@ class TestNLSEF:
         assert adrc.state.u_applied == 5.0
 
 
+def paper_gains(**gains) -> LinearADRCGains:
+    """The linear ADRC's schema defaults (every addition off) with `gains`."""
+    return settings(LinearADRCGains, "ladrc", defaults())._replace(**gains)
+
+
 class TestLinearADRC:
     def test_tracks_a_first_order_plant_with_constant_disturbance(self):
         period, b, disturbance = 0.05, 0.0098 / 1.11, -0.2
-        adrc = linear_adrc_of(LinearADRCGains(omega_o=20.0, omega_c=2.0, b0=b,
-                                              feedforward=False, delay_aware=False,
-                                              plan_feedforward=False, plan_band=0.0,
-                                              neutral_cut=False, standstill=False), period,
+        adrc = linear_adrc_of(paper_gains(omega_o=20.0, omega_c=2.0, b0=b), period,
                               CommandLimiter(-1e6, 1e6), TrainParameters.from_values(defaults()),
                               on_board_estimator(defaults(), period))
         v = 0.0
@@ -206,10 +208,8 @@ def held_then_released(standstill: bool):
     move it), then a 0.1 m/s target: the observer's disturbance at the end of the hold
     and the steps until the command is traction again."""
     period, b = 0.1, 0.0098 / 1.11
-    adrc = linear_adrc_of(LinearADRCGains(omega_o=5.0, omega_c=1.0, b0=b, feedforward=False,
-                                          delay_aware=False, plan_feedforward=False,
-                                          plan_band=0.0, neutral_cut=False,
-                                          standstill=standstill), period,
+    adrc = linear_adrc_of(paper_gains(omega_o=5.0, omega_c=1.0, b0=b, standstill=standstill),
+                          period,
                           CommandLimiter(-60.0, 60.0, period, 60.0, holding_brake=30.0),
                           TrainParameters.from_values(defaults()),
                           on_board_estimator(defaults(), period))

@@ -11,6 +11,7 @@ from ato_nodes.core.base import kernels
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.base.spec import settings
 from ato_nodes.core.control.adrc import LinearADRCGains, linear_adrc_of
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.control.limiter import CommandLimiter
@@ -48,9 +49,8 @@ def drive(cut: bool, speed: float = 50.0, head: float = 700.0, steps: int = 160,
     from `head` on LINE, its last command `last`: (pantograph positions, commands, one
     per step; the train; the controller)."""
     train = crh5()
-    gains = LinearADRCGains(omega_o=5.0, omega_c=1.0, b0=train.xi, feedforward=False,
-                            delay_aware=False, plan_feedforward=False, plan_band=0.0,
-                            neutral_cut=cut, standstill=False)
+    gains = settings(LinearADRCGains, "ladrc", defaults())._replace(
+        omega_o=5.0, omega_c=1.0, b0=train.xi, neutral_cut=cut)
     limiter = CommandLimiter(-67.9, 57.6, PERIOD, MAX_RATE)
     limiter.last = last
     adrc = linear_adrc_of(gains, PERIOD, limiter, train, on_board_estimator(defaults(), PERIOD),

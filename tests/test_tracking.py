@@ -22,6 +22,7 @@ from ato_nodes.core.targets.profiles import AtoCurve, FeasiblePlan, Seed000Profi
 from ato_nodes.core.targets.timetable import section_line
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.base.spec import settings
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.control.train_model import nominal_advance, nominal_predict, nominal_train
 from commands import invocation
@@ -67,9 +68,8 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
 
 
 def test_the_linear_adrc_without_its_additions_is_the_papers_law():
-    gains = LinearADRCGains(omega_o=8.0, omega_c=1.5, b0=0.009, feedforward=False,
-                            delay_aware=False, plan_feedforward=False, plan_band=0.0,
-                            neutral_cut=False, standstill=False)
+    gains = settings(LinearADRCGains, "ladrc", defaults())._replace(omega_o=8.0, omega_c=1.5,
+                                                                    b0=0.009)
     adrc = linear_adrc_of(gains, PERIOD, CommandLimiter(-1e6, 1e6), metro(),
                           on_board_estimator(defaults(), PERIOD))
     z1 = z2 = u_prev = 0.0
