@@ -7,7 +7,7 @@ import pytest
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.control.adrc import (HanADRCGains, LinearADRCGains, eso_update, fal,
                                          fal_gain, fhan, han_adrc, linear_adrc_of, nlsef,
-                                         td_update)
+                                         target_past_preview, td_update)
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.config.schema import defaults
@@ -228,3 +228,18 @@ def test_a_held_train_does_not_wind_up_the_observer_with_standstill():
     assert wound > 0.2      # the holding brake read as a push forward
     assert abs(held) < 1e-9  # what it knew before the stop: nothing
     assert fast < slow
+
+
+FALLING = [1.0, 0.8, 0.6]  # a preview of a stop's curve at 0.1 s: 0.16 m, the last step 0.07
+
+
+def test_a_train_not_past_the_preview_tracks_the_plans_target():
+    assert target_past_preview(FALLING, 0.1, 0.16) == 0.6
+    assert target_past_preview(FALLING, 0.1, 0.05) == 0.6
+
+
+def test_a_train_past_the_preview_tracks_the_curve_extended_down_there():
+    assert target_past_preview(FALLING, 0.1, 0.18) == pytest.approx(0.6 - 0.2 / 0.07 * 0.02)
+    assert target_past_preview(FALLING, 0.1, 1.0) == 0.0        # not below standstill
+    assert target_past_preview([0.6, 0.8, 1.0], 0.1, 0.5) == 1.0  # never up
+    assert target_past_preview([0.2, 0.0, 0.0], 0.1, 0.5) == 0.0  # the plan stopped

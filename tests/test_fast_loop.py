@@ -33,6 +33,9 @@ VARIANTS = [
     ("seed001-crh380al-pid", ["estimator.enabled=true", "plant.resistance_factor=0.8"]),
     # a journey's dwell and departure with the standstill-aware observer
     ("seed004-metro-line", ["ladrc.standstill=true"]),
+    # two stops of a heavy train with a fast actuator, tracking where it will be
+    ("seed004-metro-line", ["ladrc.predicted_target=true", "plant.lag_factor=0.75",
+                            "plant.mass_factor=1.21"]),
 ]
 
 

@@ -43,7 +43,7 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
     (model, state), (blind, blind_state) = (nominal_train(train, PERIOD),
                                             nominal_train(replace(train, dead_time=0.0), PERIOD))
     commands = [40.0] * 30 + [-30.0] * 30 + [80.0] * 40
-    speeds, worst, worst_blind = [], 0.0, 0.0
+    speeds, worst, worst_blind, worst_travel = [], 0.0, 0.0, 0.0
     for k, u in enumerate(commands):
         speeds.append(plant.state.speed)
         if k >= 60:  # from step 60 the command is held at 80: the prediction's assumption
@@ -58,12 +58,15 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
                 future.lag_state, future.delayed = plant.lag_state, plant.delayed.copy()
                 for _ in range(ahead):
                     future.step(u)
-                worst = max(worst, abs(predicted - future.state.speed))
-                worst_blind = max(worst_blind, abs(blind_prediction - future.state.speed))
+                worst = max(worst, abs(predicted.speed - future.state.speed))
+                worst_blind = max(worst_blind, abs(blind_prediction.speed - future.state.speed))
+                worst_travel = max(worst_travel, abs(
+                    predicted.travelled - (future.state.position - plant.state.position)))
         state = nominal_advance(model, state, u, speeds[-1])[1]
         blind_state = nominal_advance(blind, blind_state, u, speeds[-1])[1]
         plant.step(u)
     assert worst < 0.01  # Euler over 1 s against RK4: millimetres per second
+    assert worst_travel < 0.005  # and the distance to the millimetre
     assert worst_blind > 5 * worst  # ignoring the dead time is visibly wrong
 
 
@@ -217,6 +220,34 @@ def test_a_feasible_time_plan_falls_behind_where_the_plan_asks_too_much():
 def test_shaping_a_position_indexed_plan_that_is_not_the_ato_curve_is_refused():
     with pytest.raises(ScenarioError, match="profile.jerk apply to time-indexed"):
         apply_overrides(load_scenario("seed002-hsr"), ["profile.jerk=0.5"])  # before a start
+
+
+def stop_errors(values) -> list[float]:
+    """The signed stop errors (m, + past the mark) at the stations the run stopped at."""
+    from ato_nodes.journeys import run_journey, run_timetable
+    journey = run_journey(simulate(values), values, run_timetable(values))
+    return [station.stop_error for station in journey.stations[1:]
+            if station.stop_error == station.stop_error]
+
+
+def test_a_train_ahead_of_its_stopping_curve_brakes_for_where_it_will_be():
+    # a heavy train with a fast actuator (the nominal model's lag x0.75) rolls past the
+    # first two marks of the metro line; tracking the curve where it is predicted to be,
+    # it stops nearer them
+    values = apply_overrides(load_scenario("seed004-metro-line"), [
+        "run.duration=300", "plant.lag_factor=0.75", "plant.mass_factor=1.21",
+        "ladrc.standstill=true"])
+    past = stop_errors(values)
+    nearer = stop_errors(apply_overrides(values, ["ladrc.predicted_target=true"]))
+    assert len(past) == len(nearer) == 2 and min(past) > 0.04
+    assert all(abs(new) < 0.5 * old for new, old in zip(nearer, past, strict=True))
+
+
+def test_the_predicted_target_needs_a_position_indexed_plan_and_the_prediction():
+    for overrides in (["ladrc.delay_aware=false"], ["profile.kind=step"]):
+        with pytest.raises(ScenarioError, match="ladrc.predicted_target needs"):
+            apply_overrides(load_scenario("seed004-metro-ato"),
+                            ["ladrc.predicted_target=true", *overrides])
 
 
 def test_the_holding_brake_takes_a_target_below_the_holding_target():

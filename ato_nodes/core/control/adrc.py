@@ -370,6 +370,13 @@ LINEAR_ADRC_PARAMETERS = (
           "nothing is left to estimate: the observer holds its disturbance estimate, "
           "which otherwise winds up over a dwell against the holding brake and keeps the "
           "train braked for seconds after its departure", "controller"),
+    param("ladrc.predicted_target", False, "linear ADRC with ladrc.delay_aware and a "
+          "position-indexed plan: a train predicted to be past where the plan will be "
+          "controller.preview steps ahead tracks the plan's speed there (the preview "
+          "extended on its last slope down), not the plan's r_k+N: ahead of its curve, it "
+          "brakes for the curve it will meet. Matters where the curve is steep in "
+          "distance: the last metres of a stop",
+          "controller"),
 )
 
 
@@ -386,6 +393,7 @@ class LinearADRCGains(NamedTuple):
     plan_band: float                # m/s
     neutral_cut: bool
     standstill: bool
+    predicted_target: bool
 
 
 class PlanForces(NamedTuple):
@@ -465,10 +473,45 @@ def linear_eso(settings: LinearADRCSettings, state: LinearADRCState,
 
 
 @jitable
+def target_past_preview(horizon, period: float, distance: float) -> float:
+    """The tracked target r_k+N (the last entry of `horizon`, the speeds of the coming
+    steps along the planned trajectory) for a train predicted to cover `distance` m till
+    then: where that is past the preview's end (the train ahead of its plan), the plan
+    extended there on the preview's last slope down (not below 0; never up: no speed the
+    preview does not show)."""
+    last = len(horizon) - 1
+    covered = 0.0  # the trapezoid's, as the preview's trajectory is integrated
+    for i in range(last):
+        covered += 0.5 * period * (horizon[i] + horizon[i + 1])
+    final = 0.5 * period * (horizon[last - 1] + horizon[last])
+    if distance <= covered or final <= 0.0:
+        return horizon[last]
+    slope = (horizon[last] - horizon[last - 1]) / final  # per metre
+    return min(max(horizon[last] + slope * (distance - covered), 0.0), horizon[last])
+
+
+@jitable
 def linear_adrc_start(settings: LinearADRCSettings, state: LinearADRCState, target: float,
                       measured: float) -> LinearADRCState:
     return LinearADRCState(measured, state.z2, state.observer_input, state.u_applied,
                            state.model, state.estimator)
+
+
+@jitable
+def law_speed_and_target(settings: LinearADRCSettings, state: LinearADRCState, z1: float,
+                         z2: float, target: float, horizon, scale: float
+                         ) -> tuple[float, float]:
+    """The speed the law acts on and the target it tracks: the observer's speed and r_k+N,
+    with delay_aware the speed predicted N = len(horizon) - 1 steps ahead, and with
+    predicted_target the plan where the train is then predicted to be."""
+    g, ahead = settings.gains, len(horizon) - 1
+    if not (g.delay_aware and ahead):
+        return z1, target
+    predicted = nominal_predict(settings.model, state.model, z1, z2, g.b0, ahead,
+                                state.u_applied, g.feedforward, scale)
+    if g.predicted_target:
+        target = target_past_preview(horizon, settings.period, predicted.travelled)
+    return predicted.speed, target
 
 
 @jitable
@@ -487,17 +530,15 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     (the commands inside the dead time and lag act first), so the law's error is
     the one its command can still change; the known basic resistance is scaled by the
     on-board estimate (1 off); with `standstill` the ESO holds z2 while the train stands
-    under an input that would slow it (the brakes' reaction is no disturbance). The ESO
-    is integrated by backward Euler in closed form, stable for any step. Outputs z1, z2
-    and the estimates (ESTIMATE_OUTPUTS)."""
+    under an input that would slow it (the brakes' reaction is no disturbance); with
+    `predicted_target` r is the plan where the train is predicted to be (a train ahead
+    of its plan). The ESO is integrated by backward Euler in closed form, stable for any
+    step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
     scale = on_board_scale(state.estimator)
     z1, z2 = linear_eso(settings, state, measured)
     ahead = len(horizon) - 1
-    speed = z1
-    if g.delay_aware and ahead:
-        speed = nominal_predict(model, state.model, z1, z2, g.b0, ahead, state.u_applied,
-                                g.feedforward, scale)
+    speed, target = law_speed_and_target(settings, state, z1, z2, target, horizon, scale)
     law = (g.omega_c * (target - speed) - z2) / g.b0
     resistance = 0.0  # known to the observer over the coming period
     if g.feedforward:
@@ -559,6 +600,9 @@ def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
                                 f"with forces (profile.kind strategy), not "
                                 f"{values['profile.kind']}")
         plan = plan_forces(context.plan)
+    if gains.predicted_target and not (gains.delay_aware and context.plan.position_indexed):
+        raise ScenarioError("ladrc.predicted_target needs ladrc.delay_aware and a "
+                            f"position-indexed plan, not profile.kind {values['profile.kind']}")
     nominal = nominal_train(context.train, context.period, values["plant.initial_position"],
                             context.line)  # the estimator's model shares its line tables
     return _linear_adrc(gains, limiter, nominal, on_board_estimator(

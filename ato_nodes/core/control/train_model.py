@@ -141,23 +141,30 @@ def known_resistance(model: NominalModel, speed: float, position: float,
     return resistance
 
 
+class Prediction(NamedTuple):
+    speed: float      # m/s, `steps` periods from now
+    travelled: float  # m, on the way there
+
+
 @jitable
 def nominal_predict(model: NominalModel, state: NominalState, speed: float,
                     unexplained: float, gain: float, steps: int, held: float,
-                    resisted: bool, basic_scale: float) -> float:
-    """The speed `steps` periods from now, from `speed` now: the commands inside the
-    dead time act in turn, then `held`; acceleration gain (force - known resistance) +
-    `unexplained` (m/s^2, an observer's estimate of the rest; without `resisted` it
-    holds the resistance too, and the model's is left out; `basic_scale` as for
-    known_resistance)."""
+                    resisted: bool, basic_scale: float) -> Prediction:
+    """The speed `steps` periods from now, from `speed` now, and the distance covered
+    till then: the commands inside the dead time act in turn, then `held`; acceleration
+    gain (force - known resistance) + `unexplained` (m/s^2, an observer's estimate of the
+    rest; without `resisted` it holds the resistance too, and the model's is left out;
+    `basic_scale` as for known_resistance)."""
     h, lag_state, position = model.period, state.lag_state, state.position
     pending = state.pending
+    travelled = 0.0  # the trapezoid's, as a preview's trajectory is integrated
     for i in range(steps):
         command = pending[(state.oldest + i) % len(pending)] if i < len(pending) else held
         lag_state, mean = nominal_act(model, lag_state, command, speed, position)
         if resisted:
             mean -= known_resistance(model, speed, position, basic_scale)
         acceleration = gain * mean + unexplained
-        position += h * speed
+        position += h * speed  # where the gradient is read: metres do not matter
+        travelled += h * (speed + 0.5 * h * acceleration)
         speed += h * acceleration
-    return speed
+    return Prediction(speed, travelled)
