@@ -11,8 +11,7 @@ from ato_nodes.core.base import kernels
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
-from ato_nodes.core.base.spec import settings
-from ato_nodes.core.control.adrc import LinearADRCGains, linear_adrc_of
+from ato_nodes.core.control.adrc import linear_adrc_of
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.run.loop import simulate
@@ -23,6 +22,7 @@ from ato_nodes.core.targets.profiles import ato_curve
 from ato_nodes.core.targets.timetable import Stop, Timetable
 from ato_nodes.core.train.line import load_line, neutral_distance, parse_line
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
+from test_adrc import paper_gains
 
 PERIOD = 0.1
 NEUTRAL = (1000.0, 1300.0)  # m, the test line's neutral section
@@ -49,8 +49,7 @@ def drive(cut: bool, speed: float = 50.0, head: float = 700.0, steps: int = 160,
     from `head` on LINE, its last command `last`: (pantograph positions, commands, one
     per step; the train; the controller)."""
     train = crh5()
-    gains = settings(LinearADRCGains, "ladrc", defaults())._replace(
-        omega_o=5.0, omega_c=1.0, b0=train.xi, neutral_cut=cut)
+    gains = paper_gains(omega_o=5.0, omega_c=1.0, b0=train.xi, neutral_cut=cut)
     limiter = CommandLimiter(-67.9, 57.6, PERIOD, MAX_RATE)
     limiter.last = last
     adrc = linear_adrc_of(gains, PERIOD, limiter, train, on_board_estimator(defaults(), PERIOD),

@@ -3,6 +3,7 @@ ADRC's feedforward and delay-aware observer, envelope-feasible and jerk-rounded 
 curves, the holding target (ROS-free)."""
 
 import json
+import math
 import subprocess
 from dataclasses import replace
 from pathlib import Path
@@ -11,21 +12,22 @@ import numpy as np
 import pytest
 
 from ato_nodes.analysis import markdown_table
-from ato_nodes.core.control.adrc import LinearADRCGains, linear_adrc_of
+from ato_nodes.core.control.adrc import linear_adrc_of
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.train.line import Station, load_line
 from ato_nodes.core.run.loop import simulate
+from ato_nodes.journeys import run_journey, run_timetable
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
 from ato_nodes.core.targets.profiles import AtoCurve, FeasiblePlan, Seed000Profile
 from ato_nodes.core.targets.timetable import section_line
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
-from ato_nodes.core.base.spec import settings
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.control.train_model import nominal_advance, nominal_predict, nominal_train
 from commands import invocation
+from test_adrc import paper_gains
 
 PERIOD = 0.1
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,8 +73,7 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
 
 
 def test_the_linear_adrc_without_its_additions_is_the_papers_law():
-    gains = settings(LinearADRCGains, "ladrc", defaults())._replace(omega_o=8.0, omega_c=1.5,
-                                                                    b0=0.009)
+    gains = paper_gains(omega_o=8.0, omega_c=1.5, b0=0.009)
     adrc = linear_adrc_of(gains, PERIOD, CommandLimiter(-1e6, 1e6), metro(),
                           on_board_estimator(defaults(), PERIOD))
     z1 = z2 = u_prev = 0.0
@@ -224,10 +225,9 @@ def test_shaping_a_position_indexed_plan_that_is_not_the_ato_curve_is_refused():
 
 def stop_errors(values) -> list[float]:
     """The signed stop errors (m, + past the mark) at the stations the run stopped at."""
-    from ato_nodes.journeys import run_journey, run_timetable
     journey = run_journey(simulate(values), values, run_timetable(values))
     return [station.stop_error for station in journey.stations[1:]
-            if station.stop_error == station.stop_error]
+            if not math.isnan(station.stop_error)]
 
 
 def test_a_train_ahead_of_its_stopping_curve_brakes_for_where_it_will_be():
