@@ -29,7 +29,7 @@ from ato_nodes.core.control.estimation import (PARAMETERS, estimate_series, esti
                                                load_weighing)
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.train.line import load_line
+from ato_nodes.core.train.line import line_of
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.studies import Variant, prepare_variants
 
@@ -69,7 +69,7 @@ def estimated(values: dict, reading: float, error: float) -> dict[str, np.ndarra
     series = simulate(values)
     estimator = {spec.name: spec.default for spec in PARAMETERS}
     estimator["train.load_weighing_error"] = error
-    line = load_line(values["line.file"]) if values["line.file"] else None
+    line = line_of(values)
     settings, state = estimator_of(estimator, TrainParameters.from_values(values),
                                    values["run.period"], reading, line,
                                    values["plant.initial_position"])

@@ -10,7 +10,7 @@ from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepa
 from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.control.estimation import load_weighing
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.run.scoring import score_series
+from ato_nodes.core.run.scoring import run_line, score_series
 from ato_nodes.core.run.stages import ControllerStage, PlantStage
 from ato_nodes.core.train.line import load_line
 
@@ -161,3 +161,28 @@ def test_bad_load_weighing_parameters_are_one_line(overrides, words):
     with pytest.raises(ScenarioError, match=words) as raised:
         maglev(*overrides)
     assert "\n" not in str(raised.value)
+
+
+def test_a_run_timetabled_to_another_time_plans_to_it_and_is_judged_against_it():
+    # metro-interstation.yaml plans 165 s; a timetable with 10 s more for the same line
+    values = prepare("seed004-metro-ato", ["line.planned_run_time=175"])
+    curve = plan(values)
+    assert curve.notice is None and curve.planned_run_time == pytest.approx(175.0, abs=2.0)
+    assert plan(prepare("seed004-metro-ato")).planned_run_time < 170.0
+    indices = score_series(simulate(values), values)
+    assert abs(indices["running_time_error"]) <= 2.0
+    assert indices["arrival_time"] - indices["running_time_error"] == pytest.approx(175.0)
+
+
+def test_a_bag_is_judged_against_the_time_it_was_run_to_and_one_without_it_the_files():
+    values = prepare("seed004-metro-ato", ["line.planned_run_time=175"])
+    assert run_line(values).planned_run_time == 175.0
+    before = {name: value for name, value in values.items() if name != "line.planned_run_time"}
+    assert run_line(before).planned_run_time == 165.0  # a bag recorded before the parameter
+    assert run_line(prepare("seed004-metro-ato")).planned_run_time == 165.0
+
+
+def test_a_negative_planned_time_is_refused_in_one_line():
+    with pytest.raises(ScenarioError, match="line.planned_run_time") as refused:
+        prepare("seed004-metro-ato", ["line.planned_run_time=-5"])
+    assert "\n" not in str(refused.value)

@@ -17,7 +17,7 @@ import math
 
 from ..base.errors import ScenarioError
 from ..targets.profiles import feasible_plan
-from ..train.line import Line, load_line
+from ..train.line import Line, line_of
 from ..train.plant import TrainParameters
 from .components import PROFILES
 from .schema import steps
@@ -42,9 +42,7 @@ class RunContext:
         self.period = values["run.period"]
         self.steps = steps(values)
         self.train = ato_train(values)
-        if line is None and values["line.file"]:
-            line = load_line(values["line.file"])
-        self.line = line
+        self.line = line_of(values) if line is None else line
 
     @functools.cached_property
     def plan(self):

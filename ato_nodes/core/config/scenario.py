@@ -21,7 +21,7 @@ from ..base.paths import config_dir, resolve_file
 from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
-from ..train.line import load_line
+from ..train.line import line_of
 from .components import CONTROLLERS
 from .context import RunContext
 from .faults import parse_fault
@@ -342,7 +342,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
         Requirement.parse_list(values["report.require"], "report.require")
     except ScenarioError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
-    line = load_line(values["line.file"]) if values["line.file"] else None
+    line = line_of(values)
     if values["estimator.enabled"] and not CONTROLLERS.chosen(values).estimates:
         raise ScenarioError(f"{where}: estimator.enabled: controller.kind "
                             f"{values['controller.kind']} does not use the on-board estimator "

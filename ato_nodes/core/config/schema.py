@@ -54,6 +54,10 @@ BASE: tuple[ParamSpec, ...] = (
     param("line.file", "", "line file (msg_config/lines/*.yaml): gradients, curves, tunnels, "
           "limits, neutral sections, stations; relative to the scenario file, else to "
           "msg_config/; empty = open track", LOOP_NODES),
+    param("line.planned_run_time", 0.0, "the running time the run is planned to and judged "
+          "against, standstill to standstill, in place of the line file's planned_run_time: a "
+          "service timetabled for another train (0 = the line file's), s", LOOP_NODES,
+          0.0, 1e6),
     param("profile.approach_step", 0.0, "seed 003's stepped approach: when the target is more "
           "than this above the speed, approach it in stairs of this size, m/s (0 = off)",
           PROFILE_NODES, 0.0, 100.0),

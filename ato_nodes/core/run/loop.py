@@ -15,7 +15,7 @@ from ..config.scenario import apply_overrides, load_scenario, scenario_names
 from ..control import lssvm
 from ..config.schema import SPEC_BY_NAME, NodeValues, steps
 from ..scoring.indices import RunningIndex
-from ..train.line import load_line
+from ..train.line import line_of
 from . import fast_loop
 from .stages import SERIES, ControllerStage, PlantStage, ProfileStage
 
@@ -36,7 +36,7 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     The runs core/run/fast_loop.py covers run compiled (when numba is installed), to the
     same bits; compiled=False runs the Python loop, the reference, whatever the run."""
     period = values["run.period"]
-    line = load_line(values["line.file"]) if values["line.file"] else None
+    line = line_of(values)
     profile = ProfileStage(NodeValues("profile", values), line)
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)

@@ -35,7 +35,7 @@ from ..config.components import CONTROLLERS
 from ..config.context import RunContext
 from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
-from ..train.line import Line, load_line
+from ..train.line import Line, line_of
 from ..train.plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
 from .last_stop import held, last_stop, standing
 
@@ -131,8 +131,8 @@ class PlantStage:
             actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
             **{name: factor * getattr(nominal, name) for name in ("davis_a", "davis_b",
                                                                    "davis_c")})
-        if line is None and values["line.file"]:
-            line = load_line(values["line.file"])
+        if line is None:
+            line = line_of(values)
         self.train = PointMassTrain(
             self.params, values["run.period"], values["plant.substeps"],
             TrainState(position=values["plant.initial_position"],

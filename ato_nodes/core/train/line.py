@@ -239,6 +239,23 @@ def load_line(path: str | Path) -> Line:
     return parse_line(yamlfile.read_text(path, "line file"), Path(path))
 
 
+def line_of(values) -> Line | None:
+    """The line of a run's values: line.file's (None: the open track), planned to the
+    run's line.planned_run_time where that is given."""
+    return planned_to(load_line(values["line.file"]) if values["line.file"] else None,
+                      values)
+
+
+def planned_to(line: Line | None, values) -> Line | None:
+    """`line` with the run's line.planned_run_time (> 0) in place of its file's
+    planned_run_time: a service timetabled for another train than the file's (values
+    without the parameter, a bag recorded before it existed, keep the file's)."""
+    planned = values.get("line.planned_run_time")
+    if line is None or not planned:
+        return line
+    return dataclasses.replace(line, planned_run_time=float(planned))
+
+
 @functools.lru_cache(maxsize=32)
 def parse_line(text: str, path: str | Path = "<line>") -> Line:
     """A line from the text of a line file; `path` names it in error messages.
