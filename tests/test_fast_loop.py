@@ -36,6 +36,9 @@ VARIANTS = [
     # two stops of a heavy train with a fast actuator, tracking where it will be
     ("seed004-metro-line", ["ladrc.predicted_target=true", "plant.lag_factor=0.75",
                             "plant.mass_factor=1.21"]),
+    # a strategy's stages led into past a neutral section by a resisted, heavy train
+    ("seed002-hsr-ato", ["ladrc.plan_lead=15", "plant.mass_factor=1.2",
+                         "plant.resistance_factor=1.2"]),
 ]
 
 

@@ -6,7 +6,8 @@ import hashlib
 import numpy as np
 import pytest
 
-from ato_nodes.core.control.adrc import on_plan_side, plan_forces, planned_force
+from ato_nodes.core.control.adrc import (PlanForces, next_force, on_plan_side, plan_forces,
+                                         planned_force)
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.scoring.operation import SWITCH_THRESHOLD, _switch_count
 from ato_nodes.core.targets import strategy
@@ -233,6 +234,16 @@ def test_the_linear_adrc_reads_the_plans_force_by_stage_and_brakes_on_past_the_s
     assert planned_force(forces, -5.0) == pytest.approx(result.forces[0], abs=1e-5)
 
 
+@pytest.mark.parametrize("position, reach, expected", [
+    (50.0, 30.0, 0.0), (50.0, 60.0, 20.0),     # the traction stage at 100 m once in reach
+    (150.0, 200.0, 20.0),                      # held: no other force within reach
+    (150.0, 300.0, -30.0), (250.0, 0.0, 20.0), # past the equal-force stage to the brake
+    (450.0, 100.0, -30.0)])                    # the last stage holds on
+def test_the_next_force_is_the_first_other_one_within_reach(position, reach, expected):
+    plan = PlanForces(np.array([0.0, 100.0, 200.0, 400.0]), np.array([0.0, 20.0, 20.0, -30.0]))
+    assert next_force(plan, position, reach) == expected
+
+
 @pytest.mark.parametrize("u, planned, speed, expected", [
     (-3.0, 20.0, 10.0, 0.0), (25.0, 20.0, 10.0, 25.0),    # driving: no braking
     (4.0, -30.0, 10.0, 0.0), (-35.0, -30.0, 10.0, -35.0),  # braking: no traction
@@ -240,7 +251,18 @@ def test_the_linear_adrc_reads_the_plans_force_by_stage_and_brakes_on_past_the_s
     (4.0, 0.0, 9.8, 4.0), (-4.0, 0.0, 10.2, -4.0),         # unless beyond the band
     (-3.0, 20.0, 10.2, -3.0), (4.0, -30.0, 9.8, 4.0)])
 def test_the_command_stays_on_the_plans_side_within_the_band(u, planned, speed, expected):
-    assert on_plan_side(u, planned, speed, 10.0, 0.1) == expected
+    assert on_plan_side(u, planned, planned, speed, 10.0, 0.1) == expected
+
+
+@pytest.mark.parametrize("u, planned, coming, speed, expected", [
+    (4.0, 0.0, 20.0, 9.92, 4.0), (4.0, 0.0, 20.0, 9.97, 0.0),   # coasting, traction coming:
+    (4.0, 0.0, 20.0, 10.05, 0.0), (-4.0, 0.0, 20.0, 9.92, 0.0),  # traction only if half a
+    (4.0, 0.0, 0.0, 9.92, 0.0), (4.0, 0.0, -30.0, 9.92, 0.0),    # band behind, no brake
+    (-4.0, 0.0, -30.0, 10.05, 0.0),                              # no lead into braking
+    (4.0, -30.0, 20.0, 9.92, 0.0)])                              # nor out of a braking stage
+def test_a_coasting_command_leads_into_a_coming_traction_stage_only_when_behind(
+        u, planned, coming, speed, expected):
+    assert on_plan_side(u, planned, coming, speed, 10.0, 0.1) == expected
 
 
 def test_the_plans_force_keeps_the_tracked_strategys_coasting_and_modes(tmp_path):

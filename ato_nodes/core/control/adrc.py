@@ -44,7 +44,7 @@ from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Output
 from ..base.spec import param, settings
-from ..train.line import Line
+from ..train.line import Line, neutral_distance
 from ..train.plant import TrainParameters
 from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
                          on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
@@ -357,6 +357,11 @@ LINEAR_ADRC_PARAMETERS = (
     param("ladrc.plan_band", 0.5 / 3.6, "linear ADRC with ladrc.plan_feedforward: how far the "
           "speed may be off the target before the command leaves the plan's side, m/s",
           "controller", 0.0, 100.0),
+    param("ladrc.plan_lead", 0.0, "linear ADRC with ladrc.plan_feedforward: how early the "
+          "command may take the side of the plan's next traction stage, s at the measured "
+          "speed: a coasting train more than half ladrc.plan_band behind its target starts "
+          "ramping before the stage does, so the ramp and lag do not open a gap (0: at the "
+          "stage's start)", "controller", 0.0, 60.0),
     param("ladrc.neutral_cut", False, "linear ADRC: command no traction while the pantograph "
           "(dead-reckoned by the nominal model) is inside a neutral section, nor while it "
           "will be inside one within the nominal dead time and a period at the measured "
@@ -391,6 +396,7 @@ class LinearADRCGains(NamedTuple):
     delay_aware: bool
     plan_feedforward: bool
     plan_band: float                # m/s
+    plan_lead: float                # s
     neutral_cut: bool
     standstill: bool
     predicted_target: bool
@@ -415,9 +421,8 @@ def plan_forces(plan=None) -> PlanForces:
 
 
 @jitable
-def planned_force(plan: PlanForces, position: float) -> float:
-    """The force the plan holds with the head at `position` (its first stage's before
-    the first position), N/kN."""
+def stage_index(plan: PlanForces, position: float) -> int:
+    """The stage that holds `position` (the first before the first position)."""
     positions = plan.positions
     low, high = 0, len(positions)
     while high - low > 1:  # positions[low] <= position < positions[high], or low = 0
@@ -426,17 +431,60 @@ def planned_force(plan: PlanForces, position: float) -> float:
             low = middle
         else:
             high = middle
-    return plan.forces[low]
+    return low
 
 
 @jitable
-def on_plan_side(u: float, planned: float, speed: float, target: float, band: float) -> float:
+def planned_force(plan: PlanForces, position: float) -> float:
+    """The force the plan holds with the head at `position` (its first stage's before
+    the first position), N/kN."""
+    return plan.forces[stage_index(plan, position)]
+
+
+@jitable
+def next_force(plan: PlanForces, position: float, reach: float) -> float:
+    """The first force other than the one the plan holds at `position` that it holds
+    within `reach` m past it, N/kN; that one where it holds no other."""
+    stage = stage_index(plan, position)
+    held = plan.forces[stage]
+    for i in range(stage + 1, len(plan.positions)):
+        if plan.positions[i] > position + reach:
+            break
+        if plan.forces[i] != held:
+            return plan.forces[i]
+    return held
+
+
+@jitable
+def on_plan_side(u: float, planned: float, coming: float, speed: float, target: float,
+                 band: float) -> float:
     """`u` kept on the side of the `planned` force (traction, coasting: none, braking)
     unless `speed` is more than `band` off `target`, then also on the side that closes
-    the gap."""
+    the gap; coasting, also traction where the `coming` force is traction and `speed` is
+    more than half `band` below `target` (a lead: the ramp starts before the stage does)."""
     low = -math.inf if planned < 0.0 or speed > target + band else 0.0
-    high = math.inf if planned > 0.0 or speed < target - band else 0.0
+    # half the band, not any deficit: at a speed a hair under the target the lead would
+    # switch coasting to traction and back on every blip of the law
+    high = (math.inf if planned > 0.0 or speed < target - band
+            or (planned == 0.0 and coming > 0.0 and speed < target - 0.5 * band) else 0.0)
     return low if u < low else high if u > high else u
+
+
+@jitable
+def coming_force(settings: LinearADRCSettings, nominal: NominalState, there: float,
+                 speed: float) -> float:
+    """The force of the plan's next stage past `there` (the tracked target's position)
+    if it starts within ladrc.plan_lead seconds at `speed`, N/kN, else the force at
+    `there`; and that one once a neutral section starts within the time a command takes
+    to act and fade (dead time, a period, five lag constants): a lead's traction has
+    faded before the pantograph enters."""
+    model = settings.model
+    if model.neutral:
+        fade = (len(nominal.pending) + 1) * model.period + 5.0 * model.train.actuator_lag
+        if neutral_distance(model.line, nominal.position - model.pantograph_offset) < (
+                fade * speed):
+            return planned_force(settings.plan, there)
+    return next_force(settings.plan, there, settings.gains.plan_lead * speed)
 
 
 class LinearADRCSettings(NamedTuple):
@@ -548,7 +596,8 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
         there = state.model.position + h * travelled  # where the tracked target is planned
         if g.plan_feedforward:
             force = planned_force(settings.plan, there)
-            law = on_plan_side(law + force, force, speed, target, g.plan_band)
+            coming = coming_force(settings, state.model, there, measured)
+            law = on_plan_side(law + force, force, coming, speed, target, g.plan_band)
         else:
             planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
             law += planned / g.b0 + known_resistance(model, target, there, scale)
