@@ -17,7 +17,7 @@ from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.scoring.journey import journey_indices
-from ato_nodes.core.scoring.operation import neutral_traction_time, operation_indices
+from ato_nodes.core.scoring.operation import neutral_traction_time
 from ato_nodes.core.targets.profiles import ato_curve
 from ato_nodes.core.targets.timetable import Stop, Timetable
 from ato_nodes.core.train.line import load_line, neutral_distance, parse_line
@@ -162,18 +162,6 @@ def test_a_line_without_neutral_sections_has_no_such_index(tmp_path):
     indices = score_series(series, {"line.file": str(path), "plant.mass": 443.0})
     assert "neutral_traction_command_time" not in indices
     assert neutral_traction_time(t, t, np.ones(len(t), dtype=bool)) == pytest.approx(9.8)
-
-
-def test_the_applied_force_counts_as_traction_in_a_neutral_section_above_coasting():
-    t = np.arange(0.0, 1.0, PERIOD)
-    inside = np.ones(len(t), dtype=bool)
-    tail, traction = np.full(len(t), 0.01), np.full(len(t), 1.0)  # N/kN
-    for force, expected in ((tail, 0.0), (traction, t[-1])):
-        series = {"t": t, "position": t, "speed": t, "acceleration": t, "force": force,
-                  "command": force}
-        indices = operation_indices(series, 443.0, neutral=inside)
-        assert indices["neutral_traction_force_time"] == pytest.approx(expected)
-        assert indices["neutral_traction_command_time"] == pytest.approx(t[-1])
 
 
 

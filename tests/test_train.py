@@ -100,15 +100,17 @@ def test_a_neutral_section_cuts_traction_exactly_while_the_pantograph_is_inside(
     track = line(f"neutral_sections:\n  - {{start: {start}, end: {end}}}")
     params = metro(actuator_lag=0.0, dead_time=0.0, pantograph_offset=offset)
     train = PointMassTrain(params, period, 1, TrainState(speed=15.0), track)
-    cut, inside, previous = 0.0, 0.0, train.state.position
+    cut, inside = 0.0, 0.0
     while train.state.position < end + offset + 100.0:
-        previous = train.state.position
-        state = train.step(5.0)
-        pantograph = previous - offset
+        was_inside = start <= train.state.position - offset < end
+        speed = train.state.speed
+        state = train.step(20.0)
+        pantograph = state.position - offset
+        assert (state.speed < speed) == was_inside  # the step's traction: where it starts
         cut += period if state.force == 0.0 else 0.0
-        assert (state.force == 0.0) == (start <= pantograph < end)
+        assert (state.force == 0.0) == (start <= pantograph < end)  # the force: where it ends
         inside += period if start <= pantograph < end else 0.0
-    speed = 15.0  # roughly; the time inside is (end - start) / v within a step
+    speed = 15.0  # at the start, and it gains: the time inside is (end - start) / v
     assert cut == pytest.approx(inside) and cut > 0.8 * (end - start) / (speed * 1.5)
 
 

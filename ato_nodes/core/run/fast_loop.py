@@ -423,11 +423,12 @@ def _plant_step(inputs: LoopInputs, plant: PlantState, command: float) -> PlantS
         command, delayed[oldest] = delayed[oldest], command
         oldest = (oldest + 1) % len(delayed)
     sub = inputs.period / inputs.substeps
-    x, v, lag, powered = plant.position, plant.speed, plant.lag, True
+    x, v, lag = plant.position, plant.speed, plant.lag
     for i in range(inputs.substeps):
         powered = not in_neutral_section(line, x - inputs.pantograph_offset)
         x, v, lag = rk4_substep(plant.time + i * sub, x, v, lag, sub, command, powered, train,
                                 line)
+    powered = not in_neutral_section(line, x - inputs.pantograph_offset)  # as the plant's
     steps = plant.steps + 1
     force = achievable(lag if inputs.lagged else command, v, train.limited, train.envelope)
     if not powered and force > 0.0:

@@ -25,14 +25,11 @@ kN is force * mass * gravity / 1000 with the mass in t.
 - arrival_time (s): t of the first sample of the final standstill (speed <= 0.01
   m/s); NaN if the train is still moving at the end or never moved.
 - running_time_error (s, + late): arrival_time - planned_run_time, when planned.
-- neutral_traction_command_time, neutral_traction_force_time (s): time the command is
-  traction (> 0), and the force applied is (> SWITCH_THRESHOLD, as a drive mode), with
-  the pantograph inside a neutral section (a real ATO commands none across a phase
-  break: it opens the main circuit breaker), each sample counting until the next, as
-  overspeed_time does; only when told at which samples the pantograph is inside one (a
-  line with neutral sections). The force's threshold leaves out the last of an
-  actuator's lag tail sampled at the entry (a few thousandths of a N/kN), which is
-  coasting by every other index here.
+- neutral_traction_command_time, neutral_traction_force_time (s): time the command,
+  and the force applied, is traction (> 0) with the pantograph inside a neutral section
+  (a real ATO commands none across a phase break: it opens the main circuit breaker),
+  each sample counting until the next, as overspeed_time does; only when told at which
+  samples the pantograph is inside one (a line with neutral sections).
 """
 
 from __future__ import annotations
@@ -85,12 +82,10 @@ def traction_energy_kwh(t: np.ndarray, speed: np.ndarray, force: np.ndarray, mas
     return _integral(np.asarray(t, dtype=float), drawn) / efficiency / KJ_PER_KWH
 
 
-def neutral_traction_time(t: np.ndarray, signal: np.ndarray, neutral: np.ndarray,
-                          threshold: float = 0.0) -> float:
-    """Time `signal` (a command or force, N/kN) is traction (above `threshold`) with the
-    pantograph inside a neutral section (`neutral`, per sample), s: each such sample
-    counts until the next."""
-    traction = (np.asarray(signal, dtype=float) > threshold) & np.asarray(neutral, dtype=bool)
+def neutral_traction_time(t: np.ndarray, signal: np.ndarray, neutral: np.ndarray) -> float:
+    """Time `signal` (a command or force, N/kN) is traction with the pantograph inside a
+    neutral section (`neutral`, per sample), s: each such sample counts until the next."""
+    traction = (np.asarray(signal, dtype=float) > 0.0) & np.asarray(neutral, dtype=bool)
     return float(np.sum(np.diff(np.asarray(t, dtype=float))[traction[:-1]]))
 
 
@@ -137,8 +132,7 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
         if "command" in series:
             result["neutral_traction_command_time"] = neutral_traction_time(
                 t, series["command"], neutral)
-        result["neutral_traction_force_time"] = neutral_traction_time(
-            t, force, neutral, switch_threshold)
+        result["neutral_traction_force_time"] = neutral_traction_time(t, force, neutral)
     return result
 
 

@@ -16,7 +16,8 @@ none of them (the paper-faithful variant) F = u.
 On a line (core.line), the mass belt's gradient, curve and tunnel
 resistance is added to w0 at the belt's position, and traction is cut
 (command and applied force -> min(., 0)) during every sub-step that starts
-with the pantograph inside a neutral section; it returns through the lag.
+with the pantograph inside a neutral section, and at a step's end there (the
+recorded force and acceleration); it returns through the lag.
 `hold_at_standstill` floors the speed at 0: a stopped train is held by its
 brakes (acceleration 0) instead of rolling back.
 
@@ -257,7 +258,7 @@ class PointMassTrain:
         # Commands waiting out the dead time; the oldest acts next.
         self.delayed = deque([0.0] * round(params.dead_time / period))
         self.acting = 0.0  # the command that acted over the last period (after the delay)
-        self.powered = True  # whether the last sub-step had traction power
+        self.powered = True  # whether the pantograph is outside every neutral section
         self.lag_state = self.state.force  # the lag's output before the envelope
         self.constants = params.constants()
         self.tables = line.tables if line is not None else OPEN_TRACK
@@ -281,11 +282,13 @@ class PointMassTrain:
         h = self.period / self.substeps
         start = s.time
         x, v, f = s.position, s.speed, self.lag_state
-        powered = True
         for i in range(self.substeps):
             powered = not in_neutral_section(tables, x - self.p.pantograph_offset)
             x, v, f = rk4_substep(start + i * h, x, v, f, h, command, powered, constants,
                                   tables)
+        # the force and acceleration at the step's end are those where the pantograph is
+        # then: a train that has just entered a section has lost its traction already
+        powered = not in_neutral_section(tables, x - self.p.pantograph_offset)
         self.acting, self.lag_state, self.powered = command, f, powered
         self.steps += 1
         s.time, s.position, s.speed = self.steps * self.period, x, v
