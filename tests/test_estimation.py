@@ -36,7 +36,10 @@ CURVE = ("profile.ato.acceleration=0.6", "profile.ato.deceleration=0.6",
 def metro_run(*overrides):
     """seed004-metro-ato's values and series (on CURVE) with the real train of
     `overrides`."""
-    values = prepare("seed004-metro-ato", [*CURVE, *overrides])
+    # the run's own weighing unclipped, as written on: the crush-laden train read 1.305
+    # (clipped to 1.3, its plan differs and the estimate is 1.1 % off at SETTLED, 0.06 %
+    # at the stop)
+    values = prepare("seed004-metro-ato", [*CURVE, "train.load_weighing_max=0", *overrides])
     return values, simulate(values)
 
 

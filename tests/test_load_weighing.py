@@ -37,6 +37,18 @@ def test_the_reading_is_the_seeded_load_weighing_of_the_real_train():
     assert abs(errors.mean()) < 0.006 and 0.025 < errors.std() < 0.035
 
 
+def test_a_reading_above_the_crush_load_is_clipped_to_it():
+    seed = next(seed for seed in range(100) if load_weighing(1.28, 0.03, seed) > 1.3)
+    read = maglev("plant.mass_factor=1.28", f"train.load_weighing_seed={seed}",
+                  "train.load_weighing_max=0")["train.mass_reading"]
+    assert read == load_weighing(1.28, 0.03, seed) > 1.3
+    clipped = maglev("plant.mass_factor=1.28", f"train.load_weighing_seed={seed}",
+                     "train.load_weighing_max=1.3")
+    assert clipped["train.mass_reading"] == 1.3
+    below = maglev("plant.mass_factor=1.1", "train.load_weighing_max=1.3")
+    assert below["train.mass_reading"] == load_weighing(1.1, 0.03, 0)
+
+
 def test_the_reading_follows_an_override_of_the_real_train_and_is_off_by_default():
     base = maglev()
     heavy = apply_overrides(base, {"plant.mass_factor": 1.25})  # as robustness.py does

@@ -295,13 +295,14 @@ DERIVED_PARAMETERS = {
 
 def weighed(values: dict[str, Any]) -> dict[str, Any]:
     """The values with train.mass_reading the load weighing's reading of the real train
-    (plant.mass_factor, its error drawn from train.load_weighing_seed) when
-    train.load_weighing; else as they are."""
+    (plant.mass_factor, its error drawn from train.load_weighing_seed, at most
+    train.load_weighing_max) when train.load_weighing; else as they are."""
     if not values["train.load_weighing"]:
         return values
-    return {**values, "train.mass_reading": load_weighing(
-        values["plant.mass_factor"], values["train.load_weighing_error"],
-        values["train.load_weighing_seed"])}
+    reading = load_weighing(values["plant.mass_factor"], values["train.load_weighing_error"],
+                            values["train.load_weighing_seed"])
+    ceiling = values["train.load_weighing_max"]
+    return {**values, "train.mass_reading": min(reading, ceiling) if ceiling else reading}
 
 
 def at_last_stop(values: dict[str, Any], plan) -> dict[str, Any]:

@@ -118,6 +118,10 @@ BASE: tuple[ParamSpec, ...] = (
           0.0, 0.5),
     param("train.load_weighing_seed", 0, "seed of the load weighing's error draw", "plant",
           0, 2**31 - 1),
+    param("train.load_weighing_max", 0.0, "the highest reading the load weighing gives, over "
+          "the nominal plant.mass: the train's crush load, the top of the range the load "
+          "cells are calibrated over (as for load-compensated brakes); a heavier reading, a "
+          "heavy train read high, is clipped to it (0 = no ceiling)", "plant", 0.0, 10.0),
     param("train.mass_reading", 1.0, "the mass the ATO knows, over the nominal plant.mass: the "
           "plan's envelope share and the controllers' nominal model are the nominal train's at "
           "this mass, if heavier (the command limits are the nominal's); set from the load "
