@@ -13,6 +13,7 @@ from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.schema import steps
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
+from test_berth import CREEPING
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
@@ -36,6 +37,8 @@ VARIANTS = [
     # two stops of a heavy train with a fast actuator, tracking where it will be
     ("seed004-metro-line", ["ladrc.predicted_target=true", "plant.lag_factor=0.75",
                             "plant.mass_factor=1.21"]),
+    # a train stopped short standing in its berth (tests/test_berth.py)
+    ("seed004-metro-ato", [*CREEPING, "profile.berth=0.1"]),
     # a strategy's stages led into past a neutral section by a resisted, heavy train
     ("seed002-hsr-ato", ["ladrc.plan_lead=15", "plant.mass_factor=1.2",
                          "plant.resistance_factor=1.2"]),

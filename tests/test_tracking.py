@@ -244,7 +244,7 @@ def test_a_train_ahead_of_its_stopping_curve_brakes_for_where_it_will_be():
 
 
 def test_the_predicted_target_needs_a_position_indexed_plan_and_the_prediction():
-    for overrides in (["ladrc.delay_aware=false"], ["profile.kind=step"]):
+    for overrides in (["ladrc.delay_aware=false"], ["profile.kind=step", "profile.berth=0"]):
         with pytest.raises(ScenarioError, match="ladrc.predicted_target needs"):
             apply_overrides(load_scenario("seed004-metro-ato"),
                             ["ladrc.predicted_target=true", *overrides])

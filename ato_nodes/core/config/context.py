@@ -45,6 +45,20 @@ class RunContext:
         self.line = line_of(values) if line is None else line
 
     @functools.cached_property
+    def berth_mark(self) -> float:
+        """The stop mark a train standing within profile.berth of has arrived at, m (NaN:
+        no berth); ScenarioError (one line) for a berth on a plan with no such stop."""
+        if not self.values["profile.berth"]:
+            return math.nan
+        plan, line = self.plan, self.line
+        if (not plan.position_indexed or hasattr(plan, "observe") or line is None
+                or line.stop_position <= 0.0):
+            raise ScenarioError(f"profile.berth applies to a position-indexed plan to a line's "
+                                f"stop, not to profile.kind {self.values['profile.kind']} "
+                                f"(a journey berths by profile.journey.berth)")
+        return line.stop_position
+
+    @functools.cached_property
     def plan(self):
         """The planned target: speed(t, position) in m/s, and position_indexed; made
         drivable by the nominal train when profile.envelope_share or profile.jerk asks."""

@@ -349,7 +349,9 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
                             f"{values['controller.kind']} does not use the on-board estimator "
                             f"(those that do: {', '.join(estimating_kinds())})")
     try:
-        values = at_last_stop(values, RunContext(NodeValues("profile", values), line).plan)
+        profile = RunContext(NodeValues("profile", values), line)
+        _ = profile.berth_mark  # a berth where there is no stop to berth at is refused now
+        values = at_last_stop(values, profile.plan)
         controller_values = NodeValues("controller", values)
         CONTROLLERS.chosen(controller_values).factory(
             controller_values, RunContext(controller_values, line),

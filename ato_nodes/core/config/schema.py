@@ -61,6 +61,11 @@ BASE: tuple[ParamSpec, ...] = (
     param("profile.approach_step", 0.0, "seed 003's stepped approach: when the target is more "
           "than this above the speed, approach it in stairs of this size, m/s (0 = off)",
           PROFILE_NODES, 0.0, 100.0),
+    param("profile.berth", 0.0, "a train standing still less than this from the line's stop "
+          "mark has arrived: its target is zero from then on, so the holding brake holds it "
+          "(else a train stopped a few centimetres short creeps to the mark at the eased "
+          "stop's last speeds, for seconds), m (0 = off); a position-indexed plan to a stop, "
+          "not a journey (profile.journey.berth)", PROFILE_NODES, 0.0, 10.0),
     param("profile.envelope_share", 0.0, "plan traction and braking forces of at most this "
           "share of the nominal train's envelope, against its resistance (and the line's, "
           "for the ato curve), keeping the rest for the controller; the target falls behind "

@@ -63,7 +63,7 @@ from ..train.plant import (
 )
 from .last_stop import LastStop, held, standing
 from .python_steps import PYTHON_STEPS, PythonController, running
-from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns
+from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns, has_arrived
 
 # The compiled steps of every controller kind by the type of its state; the kinds
 # without them share PYTHON_STEPS (their own Python step, called from compiled code).
@@ -128,6 +128,8 @@ class LoopInputs(NamedTuple):
     plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
     preview: int               # the horizon entry the controller tracks
     approach_step: float       # m/s, seed 003's stepped approach (0: off)
+    berth: float               # m, profile.berth (0: off)
+    berth_mark: float          # m, the stop it berths at (NaN: none)
     settings: Any              # the controller kind's settings NamedTuple
     limits: LimiterSettings
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
@@ -156,6 +158,7 @@ class ProfileState(NamedTuple):
     last_position: float       # m
     stair: float               # m/s, the stepped approach's stair (NaN: none)
     journey: JourneyState      # a journey's section and arrival (served.observed)
+    arrived: bool              # standing in its berth once (profile.berth): for good
 
 
 class FitnessState(NamedTuple):
@@ -244,6 +247,7 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
         max_speed=float(plant.max_speed), last_stop=plant.last_stop,
         line=line_arrays(train.line), plan=plan,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
+        berth=float(profile.berth), berth_mark=float(profile.berth_mark),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
 
@@ -259,7 +263,8 @@ def _first_state(profile, plant, controller, controller_state, running_index) ->
             delayed=np.array(train.delayed, dtype=float), oldest=0),
         profile=ProfileState(last_position=float(profile.last_position), stair=math.nan,
                              journey=JourneyState(*getattr(profile.context.plan, "state",
-                                                           START))),
+                                                           START)),
+                             arrived=bool(profile.arrived)),
         controller=controller_state, last=float(controller.limiter.last),
         fitness=FitnessState(float(running_index.value), float(running_index.last_t),
                              float(running_index.last_w)),
@@ -386,14 +391,19 @@ def _publish_horizons(inputs: LoopInputs, journey: JourneyTable | None, profile:
     stair, state = profile.stair, profile.journey
     if journey is not None:
         state = observed(journey, state, k * inputs.period, position, speed)
+    arrived = profile.arrived or has_arrived(k, travel, position, inputs.berth_mark,
+                                             inputs.berth)
     first = 0 if k == 0 else k + LOOKAHEAD
     for step in range(first, k + LOOKAHEAD + 1):
         if step < len(targets):
-            _plan_horizon(inputs, journey, state, step,
-                          position + LOOKAHEAD * travel if k else position, targets[step])
+            if arrived:
+                targets[step, :] = 0.0
+            else:
+                _plan_horizon(inputs, journey, state, step,
+                              position + LOOKAHEAD * travel if k else position, targets[step])
             targets[step, 0], stair = _approach(inputs.approach_step, stair,
                                                 targets[step, 0], speed)
-    return ProfileState(position, stair, state)
+    return ProfileState(position, stair, state, arrived)
 
 
 @jitable(inline=True)

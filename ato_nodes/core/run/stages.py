@@ -31,6 +31,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..base.errors import ScenarioError
+from ..base.kernels import jitable
 from ..config.components import CONTROLLERS
 from ..config.context import RunContext
 from ..config.schema import NodeValues, steps
@@ -50,6 +51,13 @@ SeriesColumns = NamedTuple("SeriesColumns", [(name, int) for name in SERIES])
 COLUMNS = SeriesColumns(*range(len(SERIES)))
 
 
+@jitable
+def has_arrived(k: int, travel: float, position: float, mark: float, berth: float) -> bool:
+    """Whether the train, `travel` m over the step before step `k`, stands still within
+    `berth` of the stop `mark` (NaN: none): profile.berth."""
+    return k > 0 and travel == 0.0 and abs(mark - position) < berth
+
+
 class ProfileStage:
     """Target horizons (LOOKAHEAD steps ahead) and the speed limit from each step's
     position."""
@@ -63,6 +71,9 @@ class ProfileStage:
         self.received = 0
         self.last_position = 0.0
         self.approach_step = values["profile.approach_step"]
+        self.berth = values["profile.berth"]
+        self.berth_mark = self.context.berth_mark  # refused now where it cannot apply
+        self.arrived = False  # standing in its berth once: for good, whatever creeps after
         self.stair: float | None = None
 
     def on_position(self, position: float) -> list[list[float]]:
@@ -81,10 +92,13 @@ class ProfileStage:
         observe = getattr(self.context.plan, "observe", None)
         if observe is not None:  # a journey: its section and when the train stood at its end
             observe(k * self.period, position, speed)
+        self.arrived = arrived = self.arrived or has_arrived(k, travel, position,
+                                                             self.berth_mark, self.berth)
         horizons = []
         for step, predicted in wanted:
             if step < self.total_steps:
-                horizon = self.context.horizon(step, predicted, self.preview)
+                horizon = ([0.0] * (self.preview + 1) if arrived
+                           else self.context.horizon(step, predicted, self.preview))
                 horizon[0] = self.approach(horizon[0], speed)
                 horizons.append(horizon)
         return horizons
