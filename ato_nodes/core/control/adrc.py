@@ -472,19 +472,21 @@ def on_plan_side(u: float, planned: float, coming: float, speed: float, target: 
 
 @jitable
 def coming_force(settings: LinearADRCSettings, nominal: NominalState, there: float,
-                 speed: float) -> float:
+                 speed: float, held: float) -> float:
     """The force of the plan's next stage past `there` (the tracked target's position)
-    if it starts within ladrc.plan_lead seconds at `speed`, N/kN, else the force at
-    `there`; and that one once a neutral section starts within the time a command takes
-    to act and fade (dead time, a period, five lag constants): a lead's traction has
-    faded before the pantograph enters."""
-    model = settings.model
+    if it starts within ladrc.plan_lead seconds at `speed`, N/kN, else `held`, the force
+    at `there`; and that one without a lead, or once a neutral section starts within the
+    time a command takes to act and fade (dead time, a period, five lag constants): a
+    lead's traction has faded before the pantograph enters."""
+    lead, model = settings.gains.plan_lead, settings.model
+    if lead == 0.0:
+        return held
     if model.neutral:
         fade = (len(nominal.pending) + 1) * model.period + 5.0 * model.train.actuator_lag
         if neutral_distance(model.line, nominal.position - model.pantograph_offset) < (
                 fade * speed):
-            return planned_force(settings.plan, there)
-    return next_force(settings.plan, there, settings.gains.plan_lead * speed)
+            return held
+    return next_force(settings.plan, there, lead * speed)
 
 
 class LinearADRCSettings(NamedTuple):
@@ -596,7 +598,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
         there = state.model.position + h * travelled  # where the tracked target is planned
         if g.plan_feedforward:
             force = planned_force(settings.plan, there)
-            coming = coming_force(settings, state.model, there, measured)
+            coming = coming_force(settings, state.model, there, measured, force)
             law = on_plan_side(law + force, force, coming, speed, target, g.plan_band)
         else:
             planned = (horizon[ahead] - horizon[ahead - 1]) / h if ahead else 0.0
