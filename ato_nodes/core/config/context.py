@@ -16,7 +16,7 @@ import functools
 import math
 
 from ..base.errors import ScenarioError
-from ..targets.profiles import feasible_plan
+from ..targets.profiles import NO_RAMP, DepartureRamp, departing, departure_ramp, feasible_plan
 from ..train.line import Line, line_of
 from ..train.plant import TrainParameters
 from .components import PROFILES
@@ -59,6 +59,25 @@ class RunContext:
         return line.stop_position
 
     @functools.cached_property
+    def departure(self) -> DepartureRamp:
+        """The ramp a position-indexed plan's target leaves the run's start with
+        (profile.departure_jerk; a journey ramps each departure itself); ScenarioError (one
+        line) for a plan that does not start from standstill at a departure point."""
+        values, plan = self.values, self.plan
+        if not values["profile.departure_jerk"] or hasattr(plan, "journey"):
+            return NO_RAMP
+        if not plan.position_indexed:
+            raise ScenarioError(f"profile.departure_jerk applies to a position-indexed plan "
+                                f"from standstill (the ato curve, the strategy, a journey), "
+                                f"not to profile.kind {values['profile.kind']}")
+        return departure_ramp(values, self.train, plan.speed(0.0, 0.0))
+
+    def target(self, t: float, position: float) -> float:
+        """The plan's target at time t with the head at `position`, m/s, under the
+        departure ramp."""
+        return departing(self.departure, t, self.plan.speed(t, position))
+
+    @functools.cached_property
     def plan(self):
         """The planned target: speed(t, position) in m/s, and position_indexed; made
         drivable by the nominal train when profile.envelope_share or profile.jerk asks."""
@@ -84,16 +103,13 @@ class RunContext:
         """The plan's targets of steps step .. step + count, from `position` at step:
         exact for time-indexed plans; for position-indexed plans along the planned
         trajectory ds/dt = v(s) from `position` (Heun's method, one step per period)."""
-        plan, h = self.plan, self.period
-        speeds = [plan.speed(step * h, position)]
-        if not count:  # the papers' setting, every step of every run: kept cheap
-            return speeds
-        if not plan.position_indexed:
-            speeds.extend(plan.speed((step + i) * h, position) for i in range(1, count + 1))
-            return speeds
+        plan, h, target = self.plan, self.period, self.target
+        if not plan.position_indexed:  # the papers' setting, every step of every run
+            return [plan.speed((step + i) * h, position) for i in range(count + 1)]
+        speeds = [target(step * h, position)]
         for i in range(1, count + 1):
             t, v = (step + i) * h, speeds[-1]
-            ahead = plan.speed(t, position + h * v)
+            ahead = target(t, position + h * v)
             position += 0.5 * h * (v + ahead)
-            speeds.append(plan.speed(t, position))
+            speeds.append(target(t, position))
         return speeds

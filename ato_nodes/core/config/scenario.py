@@ -350,7 +350,8 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
                             f"(those that do: {', '.join(estimating_kinds())})")
     try:
         profile = RunContext(NodeValues("profile", values), line)
-        _ = profile.berth_mark  # a berth where there is no stop to berth at is refused now
+        # a berth or a departure ramp where the plan has no such stop or start: refused now
+        _ = profile.berth_mark, profile.departure
         values = at_last_stop(values, profile.plan)
         controller_values = NodeValues("controller", values)
         CONTROLLERS.chosen(controller_values).factory(

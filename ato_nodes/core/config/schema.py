@@ -75,6 +75,12 @@ BASE: tuple[ParamSpec, ...] = (
     param("profile.jerk", 0.0, "round the target's acceleration changes to at most this "
           "jerk, m/s^3 (0 = the plan's corners, the papers' setting); time-indexed profiles "
           "and the ato curve", PROFILE_NODES, 0.0, 10.0),
+    param("profile.departure_jerk", 0.0, "a position-indexed plan leaves standstill as the "
+          "nominal train can follow: its target stays 0 for the train's dead time and "
+          "actuator lag after each departure, then rises to the plan's start speed at most at "
+          "this jerk, m/s^3, its acceleration zero at both ends (0 = the start speed at once, "
+          "a target the standing train cannot follow; the papers' setting); the ato curve, "
+          "the strategy and journeys", PROFILE_NODES, 0.0, 10.0),
     param("plant.train", "", "train preset (msg_config/trains/NAME.yaml) whose plant.* values "
        "the scenario starts from; the scenario's own plant.* values override it", PLANT_NODES),
     param("plant.gamma", 0.11, "rotating-mass coefficient", PLANT_NODES, 0.0, 1.0),

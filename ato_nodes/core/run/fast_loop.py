@@ -48,7 +48,8 @@ from ..config.components import CONTROLLERS
 from ..config.schema import NodeValues
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
-from ..targets.profiles import PlanTable, plan_table, table_limit, table_speed
+from ..targets.profiles import (DepartureRamp, PlanTable, departing, plan_table, table_limit,
+                                table_speed)
 from ..targets.served import (START, JourneyState, JourneyTable, journey_limit,
                               journey_speed, observed)
 from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
@@ -126,6 +127,7 @@ class LoopInputs(NamedTuple):
     last_stop: LastStop        # where and how long a journey's train stands before the end
     line: LineTables           # arrays (empty: the open track)
     plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
+    departure: DepartureRamp   # how that plan's target leaves the start (RunContext.departure)
     preview: int               # the horizon entry the controller tracks
     approach_step: float       # m/s, seed 003's stepped approach (0: off)
     berth: float               # m, profile.berth (0: off)
@@ -245,7 +247,7 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
         period=float(train.period), substeps=int(train.substeps), train=train.constants,
         pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
         max_speed=float(plant.max_speed), last_stop=plant.last_stop,
-        line=line_arrays(train.line), plan=plan,
+        line=line_arrays(train.line), plan=plan, departure=profile.context.departure,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
         berth=float(profile.berth), berth_mark=float(profile.berth_mark),
         settings=settings, limits=controller.limiter.settings,
@@ -318,7 +320,7 @@ def _target(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyStat
     """A position-indexed plan's target: a journey's in its state, else the table's."""
     if journey is not None:  # pruned while compiling a run that is not a journey
         return journey_speed(journey, state, t, position)
-    return table_speed(inputs.plan, position)
+    return departing(inputs.departure, t, table_speed(inputs.plan, position))
 
 
 @jitable

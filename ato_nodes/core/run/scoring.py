@@ -173,8 +173,8 @@ def stepped_approach(series: dict[str, np.ndarray], parameters: dict, line: Line
     """Steps where seed 003's stepped approach held the target below the plan (the run
     context's, rebuilt from the run's parameters and line): the stairs sit at least a
     step below it, the extrapolated targets within centimetres per second of it."""
-    plan = RunContext({**defaults(), **parameters}, line).plan
-    planned = np.array([plan.speed(t, s)
+    context = RunContext({**defaults(), **parameters}, line)
+    planned = np.array([context.target(t, s)
                         for t, s in zip(series["t"], series["position"], strict=True)])
     return series["target"] < planned - 0.2 * parameters["profile.approach_step"]
 

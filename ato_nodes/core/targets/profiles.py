@@ -703,11 +703,51 @@ def ato_curve(values: dict, line, train: TrainParameters) -> AtoCurve:
 def departure_time(values: dict, train: TrainParameters) -> float:
     """What a departure takes before the ato curve's start_speed, s: the train's dead time,
     its actuator lag (a first-order lag delays a ramp by its time constant) and the rise
-    from standstill to start_speed at profile.jerk (else at the planned acceleration)."""
+    from standstill to start_speed: the departure ramp's (profile.departure_jerk), else at
+    profile.jerk (else at the planned acceleration)."""
     start, jerk = values["profile.ato.start_speed"], values["profile.jerk"]
+    ramp = departure_ramp(values, train, start)
+    if ramp.rise > 0.0:
+        return ramp.delay + ramp.rise
     rise = (math.sqrt(2.0 * start / jerk) if jerk > 0.0
             else start / values["profile.ato.acceleration"])
     return train.dead_time + train.actuator_lag + rise
+
+
+class DepartureRamp(NamedTuple):
+    """How a position-indexed target leaves standstill (profile.departure_jerk): 0 for
+    `delay` s after the departure (the nominal train's dead time and actuator lag: what a
+    command takes to move it), then up to `speed` (the plan's start speed, m/s) over
+    `rise` s as a smoothstep, whose jerk peaks at profile.departure_jerk and whose
+    acceleration is zero where it meets the curve's own rounded start. rise 0: no ramp."""
+
+    delay: float  # s
+    rise: float   # s
+    speed: float  # m/s
+
+
+NO_RAMP = DepartureRamp(0.0, 0.0, 0.0)
+
+
+def departure_ramp(values: dict, train: TrainParameters, start_speed: float) -> DepartureRamp:
+    """The ramp to `start_speed` of a train that departs with `train`'s dead time and lag."""
+    jerk = values["profile.departure_jerk"]
+    if jerk <= 0.0 or start_speed <= 0.0:
+        return NO_RAMP
+    # a smoothstep v0 (3 u^2 - 2 u^3) over T has its largest jerk, 6 v0 / T^2, at u = 0 and 1
+    return DepartureRamp(train.dead_time + train.actuator_lag,
+                         math.sqrt(6.0 * start_speed / jerk), start_speed)
+
+
+@jitable
+def departing(ramp: DepartureRamp, since: float, target: float) -> float:
+    """`target` (m/s) `since` s after the departure, held under the departure ramp."""
+    if ramp.rise <= 0.0 or since >= ramp.delay + ramp.rise:
+        return target
+    share = (since - ramp.delay) / ramp.rise
+    if share <= 0.0:
+        return 0.0
+    return min(target, ramp.speed * share * share * (3.0 - 2.0 * share))
 
 
 # a journey asks for two curves per section (on time, fastest): the metro line's twelve

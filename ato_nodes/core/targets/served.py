@@ -51,7 +51,8 @@ from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
-from .profiles import (ATO_PARAMETERS, AtoCurve, PlanTable, ato_curve, cell_of, plan_table,
+from .profiles import (ATO_PARAMETERS, AtoCurve, DepartureRamp, PlanTable, ato_curve, cell_of,
+                       departing, departure_ramp, plan_table,
                        table_limit, table_speed)
 from .restriction import SPEED_RESTRICTION, restricted_line
 from .timetable import Timetable, load_timetable, section_line
@@ -118,6 +119,7 @@ class JourneyTable(NamedTuple):
     extensions: np.ndarray  # sections, s
     berth: float            # m (profile.journey.berth)
     catch_up_after: float   # s (profile.journey.catch_up_after)
+    departure: DepartureRamp  # how the target leaves each stop (profile.departure_jerk)
 
 
 class JourneyState(NamedTuple):
@@ -126,9 +128,10 @@ class JourneyState(NamedTuple):
     section: int    # the section served: the train is on it or stands at its end
     arrival: float  # s: when the train was found standing at the section's end (NaN: not yet)
     level: int      # the section's curve it drives (0: on time; chosen as it left)
+    left: float     # s: when it was released onto the section (its departure ramp's start)
 
 
-START = JourneyState(0, math.nan, 0)  # the first section, from the first departure at t = 0
+START = JourneyState(0, math.nan, 0, 0.0)  # the first section, from the first departure at t = 0
 
 
 @jitable
@@ -172,7 +175,8 @@ def leaving(journey: JourneyTable, state: JourneyState) -> JourneyState:
     """The state of a train as it leaves the end of its section: the next section, on the
     curve its lateness picks (re-planned from the time it is released)."""
     return JourneyState(state.section + 1, math.nan,
-                        catch_up_level(journey, state.section + 1, lateness(journey, state)))
+                        catch_up_level(journey, state.section + 1, lateness(journey, state)),
+                        departure(journey, state))
 
 
 @jitable
@@ -184,7 +188,8 @@ def journey_speed(journey: JourneyTable, state: JourneyState, t: float, position
             return 0.0
         state = leaving(journey, state)
     table = section_table(journey, state.section, state.level)
-    return table_speed(table, position - journey.stops[state.section])
+    return departing(journey.departure, t - state.left,
+                     table_speed(table, position - journey.stops[state.section]))
 
 
 @jitable
@@ -199,7 +204,7 @@ def observed(journey: JourneyTable, state: JourneyState, t: float, position: flo
         state = leaving(journey, state)
     end = journey.stops[state.section + 1]
     if abs(speed) < STANDSTILL and position >= end - journey.berth:
-        return JourneyState(state.section, t, state.level)
+        return JourneyState(state.section, t, state.level, state.left)
     return state
 
 
@@ -328,7 +333,8 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
         dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
         extensions=dwell_extensions(values["profile.journey.dwell_extension"], timetable),
         berth=float(values["profile.journey.berth"]),
-        catch_up_after=float(values["profile.journey.catch_up_after"])), \
+        catch_up_after=float(values["profile.journey.catch_up_after"]),
+        departure=departure_ramp(values, train, values["profile.ato.start_speed"])), \
         " | ".join(notices) or None
 
 
