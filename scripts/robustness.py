@@ -28,7 +28,8 @@ import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
-from ato_nodes.studies import Variant, in_pool, prepare_variants, write_outputs
+from ato_nodes.studies import (MAX_SAMPLES, MAX_SEED, MAX_WORKERS, Variant, in_pool,
+                               prepare_variants, within, write_outputs)
 
 INDICES = (  # key, heading, worst is the largest of
     ("max_abs_error_kmh", "max abs(e) km/h"),
@@ -103,8 +104,12 @@ def counts(results: list[dict]) -> dict[str, int]:
 
 def main() -> None:
     args = parse_args()
-    if args.samples < 1 or args.workers < 1:
-        _cli.fail("--samples and --workers must be positive")
+    try:
+        within(args.samples, "--samples", 1, MAX_SAMPLES)
+        within(args.workers, "--workers", 1, MAX_WORKERS)
+        within(args.seed, "--seed", 0, MAX_SEED)
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
     ranges = {"plant.mass_factor": span(args.mass, "mass"),
               "plant.resistance_factor": span(args.resistance, "resistance"),
               "plant.lag_factor": span(args.lag, "lag")}
@@ -128,11 +133,11 @@ def main() -> None:
             summary[key] = {"median": float(np.median(column)), "worst": float(max(column))}
             print(f"{heading:24s} median {summary[key]['median']:.4g}  worst "
                   f"{summary[key]['worst']:.4g}")
-    within = counts(results)
-    print("; ".join(f"{text}: {count} of {len(results)}" for text, count in within.items()))
+    kept = counts(results)
+    print("; ".join(f"{text}: {count} of {len(results)}" for text, count in kept.items()))
     write_outputs(args.out, "robustness", report={
         "scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
-        "summary": summary, "within": within, "samples": results})
+        "summary": summary, "within": kept, "samples": results})
     plot(results, args.out / "robustness.png", args.scenario)
     print(f"{args.samples} samples; outputs: {args.out}/robustness.json, robustness.png")
 
