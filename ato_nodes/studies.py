@@ -50,14 +50,19 @@ class Variant:
 def prepare_variants(variants: Mapping[str, Variant], common: Sequence[str] = ()
                      ) -> dict[str, dict[str, Any]]:
     """label -> the variant's complete, checked values. `common` (--set texts, each
-    name once) applies to every variant. Raises ScenarioError (one line)."""
+    name once) applies to every variant. Raises ScenarioError (one line, naming the
+    variant when its own overrides are refused)."""
     bases: dict[str, dict[str, Any]] = {}  # scenario -> its values with `common`
     prepared = {}
     for label, variant in variants.items():
         if variant.scenario not in bases:
             bases[variant.scenario] = prepare(variant.scenario, list(common))
         base = bases[variant.scenario]
-        prepared[label] = apply_overrides(base, variant.overrides) if variant.overrides else base
+        try:
+            prepared[label] = (apply_overrides(base, variant.overrides) if variant.overrides
+                               else base)
+        except ScenarioError as exc:
+            raise ScenarioError(f"{label}: {exc}") from None
     return prepared
 
 

@@ -110,13 +110,14 @@ def main() -> None:
         within(args.seed, "--seed", 0, MAX_SEED)
     except ScenarioError as exc:
         _cli.fail(str(exc))
-    ranges = {"plant.mass_factor": span(args.mass, "mass"),
-              "plant.resistance_factor": span(args.resistance, "resistance"),
-              "plant.lag_factor": span(args.lag, "lag")}
+    options = {"plant.mass_factor": "mass", "plant.resistance_factor": "resistance",
+               "plant.lag_factor": "lag"}
+    ranges = {name: span(getattr(args, option), option) for name, option in options.items()}
     draws = draw_trains(ranges, args.samples, args.seed)
     try:  # both ends of each range inside the schema's range, then every sample
-        prepare_variants({f"{name}={bound}": Variant(args.scenario, [f"{name}={bound}"])
-                          for name, bounds in ranges.items() for bound in bounds}, args.set)
+        prepare_variants({f"--{options[name]} {getattr(args, options[name])}, {end}":
+                          Variant(args.scenario, {name: bound}) for name, bounds in ranges.items()
+                          for end, bound in zip(("LOW", "HIGH"), bounds, strict=True)}, args.set)
         runs = prepare_variants({f"sample {number}": Variant(args.scenario, draw)
                                  for number, draw in enumerate(draws)}, args.set)
     except ScenarioError as exc:
