@@ -28,11 +28,13 @@ from pathlib import Path
 import _cli
 import numpy as np
 
+from ato_nodes.core.base import yamlfile
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
 
 SHA256 = re.compile(r"[0-9a-f]{64}")
+SAVED_SET_BYTES = 16 << 20  # every shipped scenario's digests take some 40 kB
 
 
 def digests(series: dict[str, np.ndarray]) -> dict[str, str]:
@@ -52,11 +54,11 @@ def stack_series(values: dict, bag: Path) -> dict[str, np.ndarray]:
 def saved_set(path: Path) -> dict[str, dict[str, str]]:
     """--compare's file: a non-empty mapping of scenario -> non-empty mapping of series ->
     sha256 (hex), as --out writes it; ScenarioError (one line) for anything else."""
+    text = yamlfile.read_text(path, "--compare", SAVED_SET_BYTES)  # bounded: not /dev/zero
     try:
-        document = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise ScenarioError(f"--compare {path}: {getattr(exc, 'strerror', None) or exc}"
-                            ) from None
+        document = json.loads(text)
+    except ValueError as exc:
+        raise ScenarioError(f"--compare {path}: not JSON: {exc}") from None
     expected = "a saved set is a mapping of scenario -> series -> sha256, as --out writes it"
     if not isinstance(document, dict) or not document:
         raise ScenarioError(f"--compare {path}: {expected}, not {_kind(document)}")
@@ -81,20 +83,19 @@ def _kind(value) -> str:
 
 
 def check_writable(path: Path) -> None:
-    """--out before any run: a regular file (left as it is) or a new one that its
-    directory lets us create (made and removed again); else one line, exit 2."""
+    """--out before any run: a regular file (left as it is) or none yet, in a directory
+    that lets us create a file (made and removed again); else one line, exit 2."""
     if path.is_dir():
         _cli.fail(f"--out {path} is a directory; give the file to write")
     if path.exists() and not path.is_file():
         _cli.fail(f"--out {path} is not a regular file; give the file to write")
     if not path.parent.is_dir():
         _cli.fail(f"--out {path}: {path.parent} is not a directory")
-    try:
-        if path.exists():
-            os.close(os.open(path, os.O_WRONLY))
-        else:
-            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
-            path.unlink()
+    try:  # as write_digests() writes: a new file beside it, replacing it
+        descriptor, probe = tempfile.mkstemp(dir=path.resolve().parent,
+                                             prefix=f".{path.name}.")
+        os.close(descriptor)
+        os.unlink(probe)
     except OSError as exc:
         _cli.fail(f"--out {path}: cannot be written: {exc.strerror or exc}")
 

@@ -58,7 +58,11 @@ def test_a_saved_set_that_is_not_one_is_refused_before_any_run(tmp_path, saved, 
 def test_a_saved_set_that_is_not_json_is_one_line(tmp_path):
     compare = tmp_path / "saved.json"
     compare.write_text("{")
-    one_line_exit_2(fingerprint("--compare", compare), str(compare))
+    one_line_exit_2(fingerprint("--compare", compare), str(compare), "not JSON")
+
+
+def test_a_saved_set_is_read_bounded():
+    one_line_exit_2(fingerprint("--compare", "/dev/zero"), "not a regular file")
 
 
 def test_a_series_changed_or_gone_is_not_identical(tmp_path):
