@@ -18,9 +18,24 @@ from pathlib import Path
 from typing import Any
 
 from ato_nodes import jsontext
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
+
+
+# A study's counts, checked before anything is drawn, prepared or started (within()).
+MAX_WORKERS = 64      # processes of a pool: more than the machine's cores only share them
+MAX_SAMPLES = 10_000  # runs drawn at once: every one is prepared before the first starts
+MAX_SEED = 2**31 - 1  # a study's seed, as the schema's (plant.noise_seed and the others)
+
+
+def within(value: int, option: str, low: int, high: int) -> None:
+    """ScenarioError (one line, stating the bound) unless low <= value <= high; a value
+    too long to read is said by its number of digits."""
+    if not low <= value <= high:
+        text = str(value) if abs(value) < 10**15 else f"a number of {len(str(abs(value)))} digits"
+        raise ScenarioError(f"{option} must be {low} to {high:,}, not {text}")
 
 
 @dataclass(frozen=True)
@@ -35,14 +50,19 @@ class Variant:
 def prepare_variants(variants: Mapping[str, Variant], common: Sequence[str] = ()
                      ) -> dict[str, dict[str, Any]]:
     """label -> the variant's complete, checked values. `common` (--set texts, each
-    name once) applies to every variant. Raises ScenarioError (one line)."""
+    name once) applies to every variant. Raises ScenarioError (one line, naming the
+    variant when its own overrides are refused)."""
     bases: dict[str, dict[str, Any]] = {}  # scenario -> its values with `common`
     prepared = {}
     for label, variant in variants.items():
         if variant.scenario not in bases:
             bases[variant.scenario] = prepare(variant.scenario, list(common))
         base = bases[variant.scenario]
-        prepared[label] = apply_overrides(base, variant.overrides) if variant.overrides else base
+        try:
+            prepared[label] = (apply_overrides(base, variant.overrides) if variant.overrides
+                               else base)
+        except ScenarioError as exc:
+            raise ScenarioError(f"{label}: {exc}") from None
     return prepared
 
 

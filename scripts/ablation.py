@@ -30,7 +30,8 @@ import _cli
 from ato_nodes.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_given_once
-from ato_nodes.studies import Variant, numeric, prepare_variants, run_study, write_outputs
+from ato_nodes.studies import (MAX_WORKERS, Variant, numeric, prepare_variants, run_study, within,
+                               write_outputs)
 
 ADDITIONS = (
     ("feedforward", ["ladrc.feedforward=false"]),
@@ -78,12 +79,11 @@ def main() -> None:
         if item.split("=", 1)[0] in undone:
             _cli.fail(f"--untuned {item}: another addition undoes {item.split('=', 1)[0]}")
     try:
+        within(args.workers, "--workers", 1, MAX_WORKERS)
         check_given_once(args.untuned)
         runs = prepare_variants(variants(args.scenario, additions, args.reference), args.set)
     except ScenarioError as exc:
         _cli.fail(str(exc))
-    if args.workers < 1:
-        _cli.fail("--workers must be positive")
     _cli.new_directory(args.out)
     results = {label: numeric(outcome.indices)
                for label, outcome in run_study(runs, workers=args.workers).items()}

@@ -28,7 +28,8 @@ import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
-from ato_nodes.studies import Variant, in_pool, prepare_variants, write_outputs
+from ato_nodes.studies import (MAX_SAMPLES, MAX_SEED, MAX_WORKERS, Variant, in_pool,
+                               prepare_variants, within, write_outputs)
 
 INDICES = (  # key, heading, worst is the largest of
     ("max_abs_error_kmh", "max abs(e) km/h"),
@@ -103,15 +104,20 @@ def counts(results: list[dict]) -> dict[str, int]:
 
 def main() -> None:
     args = parse_args()
-    if args.samples < 1 or args.workers < 1:
-        _cli.fail("--samples and --workers must be positive")
-    ranges = {"plant.mass_factor": span(args.mass, "mass"),
-              "plant.resistance_factor": span(args.resistance, "resistance"),
-              "plant.lag_factor": span(args.lag, "lag")}
+    try:
+        within(args.samples, "--samples", 1, MAX_SAMPLES)
+        within(args.workers, "--workers", 1, MAX_WORKERS)
+        within(args.seed, "--seed", 0, MAX_SEED)
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    options = {"plant.mass_factor": "mass", "plant.resistance_factor": "resistance",
+               "plant.lag_factor": "lag"}
+    ranges = {name: span(getattr(args, option), option) for name, option in options.items()}
     draws = draw_trains(ranges, args.samples, args.seed)
     try:  # both ends of each range inside the schema's range, then every sample
-        prepare_variants({f"{name}={bound}": Variant(args.scenario, [f"{name}={bound}"])
-                          for name, bounds in ranges.items() for bound in bounds}, args.set)
+        prepare_variants({f"--{options[name]} {getattr(args, options[name])}, {end}":
+                          Variant(args.scenario, {name: bound}) for name, bounds in ranges.items()
+                          for end, bound in zip(("LOW", "HIGH"), bounds, strict=True)}, args.set)
         runs = prepare_variants({f"sample {number}": Variant(args.scenario, draw)
                                  for number, draw in enumerate(draws)}, args.set)
     except ScenarioError as exc:
@@ -128,11 +134,11 @@ def main() -> None:
             summary[key] = {"median": float(np.median(column)), "worst": float(max(column))}
             print(f"{heading:24s} median {summary[key]['median']:.4g}  worst "
                   f"{summary[key]['worst']:.4g}")
-    within = counts(results)
-    print("; ".join(f"{text}: {count} of {len(results)}" for text, count in within.items()))
+    kept = counts(results)
+    print("; ".join(f"{text}: {count} of {len(results)}" for text, count in kept.items()))
     write_outputs(args.out, "robustness", report={
         "scenario": args.scenario, "set": args.set, "ranges": ranges, "seed": args.seed,
-        "summary": summary, "within": within, "samples": results})
+        "summary": summary, "within": kept, "samples": results})
     plot(results, args.out / "robustness.png", args.scenario)
     print(f"{args.samples} samples; outputs: {args.out}/robustness.json, robustness.png")
 

@@ -275,10 +275,12 @@ def check_launcher_free(values: dict[str, Any]) -> None:
 
 class Derivation(NamedTuple):
     """How validate() derives a parameter: when the parameter `switch` is on (true, or
-    above 0), as `meaning` says (the error of a value given anyway quotes it)."""
+    above 0), as `meaning` says (the error of a value given anyway quotes it), from the
+    values of `sources` (named when the value derived is out of its schema's range)."""
 
     switch: str
     meaning: str
+    sources: tuple[str, ...]
 
 
 # Derived from the run's values by validate(), once, for every runner: the nodes that
@@ -287,22 +289,40 @@ class Derivation(NamedTuple):
 # passes them (launch.Stack with all the values, launch/stack.launch.py on top of the
 # scenario file).
 DERIVED_PARAMETERS = {
-    "train.mass_reading": Derivation("train.load_weighing", "the load weighing's reading"),
+    "train.mass_reading": Derivation("train.load_weighing", "the load weighing's reading",
+                                     ("plant.mass_factor", "train.load_weighing_error",
+                                      "train.load_weighing_seed", "train.load_weighing_max")),
     "run.last_stop_position": Derivation("run.last_stop_hold", "the timetable's last mark "
-                                         "less profile.journey.berth"),
+                                         "less profile.journey.berth",
+                                         ("profile.journey.timetable", "profile.journey.berth")),
 }
+
+
+def derived(values: dict[str, Any], name: str, value: Any) -> dict[str, Any]:
+    """The values with the derived parameter `name` (DERIVED_PARAMETERS) set to `value`,
+    checked against its schema as a given value is (the nodes check what they are
+    passed): ScenarioError (one line naming the values it was derived from)."""
+    try:
+        SPEC_BY_NAME[name].check(value)
+    except ScenarioError as exc:
+        derivation = DERIVED_PARAMETERS[name]
+        sources = ", ".join(f"{source}={values[source]:g}" if isinstance(values[source], float)
+                            else f"{source}={values[source]}" for source in derivation.sources)
+        raise ScenarioError(f"{exc}: {derivation.meaning}, from {sources}") from None
+    return {**values, name: value}
 
 
 def weighed(values: dict[str, Any]) -> dict[str, Any]:
     """The values with train.mass_reading the load weighing's reading of the real train
     (plant.mass_factor, its error drawn from train.load_weighing_seed, at most
-    train.load_weighing_max) when train.load_weighing; else as they are."""
+    train.load_weighing_max) when train.load_weighing; else as they are. ScenarioError
+    (one line) for a reading out of train.mass_reading's range."""
     if not values["train.load_weighing"]:
         return values
     reading = load_weighing(values["plant.mass_factor"], values["train.load_weighing_error"],
                             values["train.load_weighing_seed"])
     ceiling = values["train.load_weighing_max"]
-    return {**values, "train.mass_reading": min(reading, ceiling) if ceiling else reading}
+    return derived(values, "train.mass_reading", min(reading, ceiling) if ceiling else reading)
 
 
 def at_last_stop(values: dict[str, Any], plan) -> dict[str, Any]:
@@ -315,7 +335,7 @@ def at_last_stop(values: dict[str, Any], plan) -> dict[str, Any]:
         raise ScenarioError(f"run.last_stop_hold ends a journey's run at its last stop; "
                             f"profile.kind {values['profile.kind']} has no stops (give 0, or "
                             "profile.kind journey)")
-    return {**values, "run.last_stop_position": plan.journey_end}
+    return derived(values, "run.last_stop_position", plan.journey_end)
 
 
 def check_not_derived(given, values: dict[str, Any], where: str = "") -> None:
@@ -337,8 +357,8 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
     (DERIVED_PARAMETERS) set."""
     if values["run.duration"] < values["run.period"]:
         raise ScenarioError(f"{where}: run.duration must be at least one run.period")
-    values = weighed(values)
     try:
+        values = weighed(values)
         parse_fault(values["run.fault"])
         Requirement.parse_list(values["report.require"], "report.require")
     except ScenarioError as exc:

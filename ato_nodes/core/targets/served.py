@@ -60,6 +60,10 @@ from .timetable import Timetable, load_timetable, section_line
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
 _EXTENSION = r"\s*\d+\s*:\s*\d+(?:\.\d*)?\s*"
 LONGEST_EXTENSION = 3600.0  # s: a dwell extended longer is a service cancelled, not a delay
+# m: a journey's train starts standing at its first stop's mark, as a train stopped there
+# stands: within the stopping accuracy (scoring's STOP_TOLERANCE). Not the berth (up to
+# 100 m): a start that far off puts the train off every section's curve.
+AT_ORIGIN = 0.1
 
 JOURNEY_PARAMETERS = (
     param("profile.journey.timetable", "", "timetable file (msg_config/timetables/*.yaml) of "
@@ -382,10 +386,11 @@ def _journey(values, context) -> JourneyPlan:
         raise ScenarioError(f"timetable {path} is planned for train {timetable.train!r}, the "
                             f"run uses {values['plant.train'] or '(none)'!r}")
     first = timetable.stops[0]
-    if abs(values["plant.initial_position"] - first.position) > values["profile.journey.berth"]:
+    if abs(values["plant.initial_position"] - first.position) > AT_ORIGIN:
         raise ScenarioError(f"timetable {path} starts at {first.station} "
                             f"({first.position:g} m); plant.initial_position is "
-                            f"{values['plant.initial_position']:g} m")
+                            f"{values['plant.initial_position']:g} m (at most {AT_ORIGIN:g} m "
+                            f"from it)")
     return JourneyPlan(*journey_table(timetable, values, context.line, context.train),
                        tuple(stop.station for stop in timetable.stops))
 
