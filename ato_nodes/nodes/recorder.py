@@ -4,11 +4,13 @@ changes and a journey's re-plans (each stamped with the step it took effect at).
 
 Each message is stamped with the simulated time of its step (the k-th message
 of a topic belongs to step k), so a run's bag is identical however the
-messages interleaved. The bag is closed in every exit path (end of run,
-SIGINT, SIGTERM, a failing node): on a signal it first takes what DDS still
-delivers (the other nodes flush their data to it as they stop), then closes. The
-bag's metadata keeps the parameters the loop's nodes announced (each its own,
-with the line's text), so it can be scored and re-run alone; they are also
+messages interleaved. At the end of a run the bag is closed once it holds every step
+of every topic and as many re-plans as the profile says the run made (a re-plan travels
+on a topic of its own and may come after the last step's messages). The bag is closed
+in every exit path (end of run, SIGINT, SIGTERM, a failing node): on a signal it first
+takes what DDS still delivers (the other nodes flush their data to it as they stop),
+then closes. The bag's metadata keeps the parameters the loop's nodes announced (each
+its own, with the line's text), so it can be scored and re-run alone; they are also
 written to parameters.json in the bag as soon as they are known.
 
 Against a hard kill (SIGKILL, power loss) the MCAP chunk is closed and handed to
@@ -60,6 +62,10 @@ WAKING_TOPIC = "clock"
 # Topics of what happened at a step (not one message a step): the controller's live gain
 # changes and a journey's re-plans, recorded as they come
 STEP_STAMPED = ("parameter_changes", "replans")
+# s of wall time a bag that holds every step waits for the re-plans the profile says it
+# made (they come within milliseconds of the last step's messages); then it closes with
+# what it holds, and says what is missing
+REPLANS_LIMIT = 5.0
 
 
 class RecorderNode(AtoNode):
@@ -91,9 +97,14 @@ class RecorderNode(AtoNode):
         self.typestore = typestore
         self.event_connections: dict[str, object] = {}  # added with the first: most runs have none
         self.step_stamped = []  # (subscription, its callback): taken once more at the end
+        self.stamped_counts = dict.fromkeys(STEP_STAMPED, 0)
         for key in STEP_STAMPED:
             record = self._stamped_recorder(key)
-            self.step_stamped.append((self.subscription(key, record, raw=True), record))
+            self.step_stamped.append((self.subscription(key, self._then_check(record),
+                                                        raw=True), record))
+        self.replans_made = None  # the profile's 'replans N', said after the run's last step
+        self.replans_timer = None  # REPLANS_LIMIT, from when the bag holds every step
+        self.replans_overdue = False
         self.flush(0)  # the topics are on disk before any step: a kill leaves a bag to repair
         self.ready_when_matched()
 
@@ -138,9 +149,17 @@ class RecorderNode(AtoNode):
                         topic.name, topic.type, typestore=self.typestore,
                         offered_qos_profiles=offered_qos(topic))
                 self.writer.write(self.event_connections[key], round(step * self.period_ns), data)
+                self.stamped_counts[key] += 1
             except OSError as exc:
                 self.write_failed(exc)
         return record
+
+    def _then_check(self, record):
+        """`record`, then whether the bag is complete now (a re-plan may complete it)."""
+        def record_and_check(data: bytes) -> None:
+            record(data)
+            self._check_complete()
+        return record_and_check
 
     def flush(self, steps: int) -> None:
         """Close the MCAP chunk being filled and hand it to the operating system, then
@@ -176,16 +195,47 @@ class RecorderNode(AtoNode):
         elif word == "finished":
             self.expected = int(argument.split()[0])
             self._check_complete()
+        elif word == "replans":
+            self.replans_made = int(argument)
+            self._check_complete()
 
     def _check_complete(self) -> None:
-        if self.writer is not None and min(self.counts.values()) >= self.expected:
-            # what happened at a step is on its way apart from the step's messages and may
-            # be queued still (a re-plan at the last step: the profile has it here first)
-            for subscription, record in self.step_stamped:
-                for message in take_queued(subscription):
-                    record(message)
-            self.close()
-            self.announce(f"recorded {self.expected}")
+        if self.writer is None or self.expected is None or \
+                min(self.counts.values()) < self.expected:
+            return
+        # what happened at a step is on its way apart from the step's messages and may be
+        # queued still (a live gain change, a re-plan at the last step)
+        for subscription, record in self.step_stamped:
+            for message in take_queued(subscription):
+                record(message)
+        if not self._holds_every_replan():
+            return
+        self.close()
+        self.announce(f"recorded {self.expected}")
+
+    def _holds_every_replan(self) -> bool:
+        """Whether the bag holds as many re-plans as the profile said it made, or
+        REPLANS_LIMIT has passed since it held every step; until then it waits."""
+        made = self.replans_made
+        if self.replans_overdue or made is not None and self.stamped_counts["replans"] >= made:
+            if self.replans_timer is not None:
+                self.replans_timer.cancel()
+            return True
+        if self.replans_timer is None:
+            self.replans_timer = self.create_timer(REPLANS_LIMIT, self._replans_overdue,
+                                                   clock=self._wall_clock)
+        return False
+
+    def _replans_overdue(self) -> None:
+        self.replans_timer.cancel()
+        self.replans_overdue = True
+        held = self.stamped_counts["replans"]
+        missing = ("the profile did not say how many re-plans it made" if self.replans_made
+                   is None else f"{self.replans_made - held} of the {self.replans_made} "
+                   "re-plans the profile made did not arrive")
+        self.warn(f"{missing} within {REPLANS_LIMIT:g} s of the run's last step; the bag is "
+                  f"closed with the {held} it holds")
+        self._check_complete()
 
     def merged_parameters(self) -> dict:
         return {name: value for node in RUN_NODES
