@@ -41,32 +41,37 @@ def timetable():
 
 def test_a_section_is_its_curve_and_a_standing_train_waits_for_its_departure(plan, timetable):
     journey, market = plan.journey, timetable.stops[1]
-    start = plan.speed(0.0, 0.0)
+    ramp = journey.departure  # the target leaves standstill as the train can follow
+    assert plan.speed(0.0, 0.0) == 0.0
+    start = plan.speed(ramp.delay + ramp.rise, 0.0)
     assert start == metro()["profile.ato.start_speed"]
-    assert plan.speed(0.0, market.position - 500.0) > 10.0
-    assert plan.speed(0.0, market.position) == 0.0  # the curve stops at the mark
-    on_time = JourneyState(0, market.arrival - 3.0, 0)
+    assert plan.speed(100.0, market.position - 500.0) > 10.0
+    assert plan.speed(100.0, market.position) == 0.0  # the curve stops at the mark
+    on_time = JourneyState(0, market.arrival - 3.0, 0, 0.0)
     assert departure(journey, on_time) == market.departure
     assert journey_speed(journey, on_time, market.departure - 0.01, market.position) == 0.0
-    assert journey_speed(journey, on_time, market.departure, market.position) == start
+    assert journey_speed(journey, on_time, market.departure + ramp.delay, market.position) == 0.0
+    ramped = market.departure + ramp.delay + ramp.rise
+    assert journey_speed(journey, on_time, ramped, market.position) == start
     dwell = {s.name: s.dwell for s in timetable.line.stations}[market.station]
-    late = JourneyState(0, market.departure - 5.0, 0)  # the station's dwell from its arrival
+    late = JourneyState(0, market.departure - 5.0, 0, 0.0)  # the dwell from its arrival
     assert departure(journey, late) == market.departure - 5.0 + dwell
     assert journey_speed(journey, late, market.departure + 1.0, market.position) == 0.0
-    assert journey_speed(journey, late, departure(journey, late), market.position) == start
-    last = JourneyState(len(timetable.sections) - 1, 900.0, 0)
+    assert journey_speed(journey, late, departure(journey, late) + ramp.delay + ramp.rise,
+                         market.position) == start
+    last = JourneyState(len(timetable.sections) - 1, 900.0, 0, 0.0)
     assert journey_speed(journey, last, 1e6, timetable.stops[-1].position) == 0.0
 
 
 def test_the_state_follows_the_position_and_time(plan, timetable):
     journey, mark = plan.journey, timetable.stops[1].position
-    running = JourneyState(0, math.nan, 0)
+    running = JourneyState(0, math.nan, 0, 0.0)
     berth = journey.berth
     assert observed(journey, running, 100.0, mark - 0.05, 0.5) == running  # still moving
     assert observed(journey, running, 100.0, mark - 2 * berth, 0.0) == running  # short
-    assert observed(journey, running, 100.0, mark - 0.05, 0.0) == JourneyState(0, 100.0, 0)
-    assert observed(journey, running, 100.0, mark + 0.05, 0.0) == JourneyState(0, 100.0, 0)
-    standing = JourneyState(0, 100.0, 0)
+    assert observed(journey, running, 100.0, mark - 0.05, 0.0) == JourneyState(0, 100.0, 0, 0.0)
+    assert observed(journey, running, 100.0, mark + 0.05, 0.0) == JourneyState(0, 100.0, 0, 0.0)
+    standing = JourneyState(0, 100.0, 0, 0.0)
     leaving = timetable.stops[1].departure
     assert observed(journey, standing, leaving - 0.1, mark, 0.0) == standing
     after = observed(journey, standing, leaving, mark, 0.0)  # the next section, running
@@ -77,29 +82,33 @@ def test_the_horizon_shows_the_departure_as_it_will_happen(timetable):
     market = timetable.stops[1]
     values = metro("controller.preview=30")
     stage = ProfileStage(NodeValues("profile", values))
-    stage.context.plan.state = JourneyState(0, market.arrival, 0)
+    stage.context.plan.state = JourneyState(0, market.arrival, 0, 0.0)
     period = values["run.period"]
     step = round(market.departure / period) - 10  # 1 s before the departure
     horizon = stage.context.horizon(step, market.position, 30)
     times = (step + np.arange(31)) * period
     held = times < market.departure
     assert np.all(np.array(horizon)[held] == 0.0)
-    leaving = int(np.argmin(held))  # the first entry at the departure: the train starts
-    assert values["profile.ato.start_speed"] <= horizon[leaving] < 0.2
-    assert np.all(np.diff(horizon[leaving:]) > 0.0)
+    ramp = stage.context.plan.journey.departure  # 0 through the train's dead time and lag
+    starting = times >= market.departure + ramp.delay
+    assert np.all(np.array(horizon)[~starting] == 0.0)
+    leaving = int(np.argmax(starting))  # then the target rises: the train starts
+    assert 0.0 < horizon[leaving + 1] < values["profile.ato.start_speed"]
+    assert np.all(np.diff(horizon[leaving + 1:]) > 0.0)
 
 
 def test_a_run_stops_at_each_mark_and_leaves_at_its_departure(timetable):
     values = metro("run.duration=320")
     run = simulate(values)
     t, position, target = run["t"], run["position"], run["target"]
+    delay = RunContext(values).plan.journey.departure.delay  # the target held 0 through it
     for stop in timetable.stops[1:3]:
         held = np.flatnonzero((np.abs(position - stop.position) < 1.0) & (target == 0.0))
         assert abs(position[held[-1]] - stop.position) < 0.1
         assert np.all(run["speed"][held[10:]] == 0.0)  # standing while held
         arrived = t[held[0]]
         assert t[held[-1]] + values["run.period"] == pytest.approx(
-            max(stop.departure, arrived + 25.0), abs=0.5)
+            max(stop.departure, arrived + 25.0) + delay, abs=0.5)
 
 
 def late_timetable(tmp_path):
@@ -127,7 +136,8 @@ def test_a_late_train_leaves_its_dwell_after_it_arrived_compiled_as_in_python(tm
     held = np.flatnonzero((np.abs(position - 1550.0) < 1.0) & (target == 0.0) & standing)
     arrived, left = t[held[0]], t[held[-1]] + values["run.period"]
     assert arrived > 125.0 - 25.0  # late: after its departure less the dwell
-    assert left == pytest.approx(arrived + 25.0, abs=0.5)
+    delay = plan.journey.departure.delay  # the target held 0 through it after the release
+    assert left == pytest.approx(arrived + 25.0 + delay, abs=0.5)
 
 
 def test_a_late_train_drives_the_slowest_curve_that_wins_its_lateness_back(plan):
@@ -151,7 +161,8 @@ def leaving_late(plan, lateness):
     journey = plan.journey
     extended = journey._replace(extensions=np.array([lateness, *journey.extensions[1:]]))
     fresh = JourneyPlan(extended, plan.notice, plan.stations)
-    fresh.state = JourneyState(0, journey.departures[0] - journey.dwells[0] - 10.0, 0)  # early
+    fresh.state = JourneyState(0, journey.departures[0] - journey.dwells[0] - 10.0, 0,
+                               0.0)  # early
     fresh.observe(departure(extended, fresh.state), journey.stops[1], 0.0)
     [made] = fresh.replans
     assert made.lateness == pytest.approx(lateness)
