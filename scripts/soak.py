@@ -149,7 +149,8 @@ def scan_records(data: bytes) -> tuple[int, int]:
         if end > len(data):
             break
         if opcode == MCAP_CHUNK:  # message_start_time, message_end_time, ...
-            latest = max(latest, struct.unpack_from("<Q", data, used + 17)[0])
+            first, last = struct.unpack_from("<QQ", data, used + 9)
+            latest = max(latest, last) if first <= last else latest  # else no message
         elif opcode == MCAP_MESSAGE:  # channel_id u16, sequence u32, log_time, ...
             latest = max(latest, struct.unpack_from("<Q", data, used + 15)[0])
         used = end
