@@ -291,10 +291,11 @@ def signal_run(process: subprocess.Popen, draw: Draw) -> str:
     """Send the draw's signal; what went wrong, if anything."""
     if draw.kind == "sigkill":
         nodes = node_processes(process.pid)
-        if draw.victim not in nodes:
+        try:
+            os.kill(nodes[draw.victim], signal.SIGKILL)
+            return ""
+        except (KeyError, ProcessLookupError):
             return f"signal: SIGKILL found no {draw.victim} node (nodes: {', '.join(nodes)})"
-        os.kill(nodes[draw.victim], signal.SIGKILL)
-        return ""
     process.send_signal(signal.SIGINT)
     if draw.kind == "double":
         time.sleep(draw.spacing)
@@ -329,6 +330,9 @@ def watch(process: subprocess.Popen, bag: Path, draw: Draw, lead: int, period: f
             time.sleep(POLL)
     finally:
         progress.close()
+    if STOPPING.is_set():  # the soak is interrupted: so is the run, as a user would
+        process.send_signal(signal.SIGINT)
+        return None, "signal: the soak was interrupted"
     return None, "signal: the run was over before its signal was due"
 
 
@@ -360,8 +364,8 @@ def one_run(draw: Draw, soak: Soak) -> Outcome:
             problem = f"exit: still running after {soak.timeout:g} s (its group killed)"
             os.killpg(process.pid, signal.SIGKILL)
         finally:
-            if process.poll() is None:  # the soak is stopping: stop the run as a user would
-                process.send_signal(signal.SIGINT)
+            if process.poll() is None:  # the soak is stopping: the run goes with it
+                os.killpg(process.pid, signal.SIGKILL)
                 process.wait()
         outcome.wall = time.monotonic() - started
         stderr.seek(0)
@@ -397,17 +401,17 @@ def bag_counts(bag: Path) -> tuple[dict[str, int], dict[str, int], list[dict]]:
 def check_bag(outcome: Outcome, bag: Path, ref: Reference) -> dict:
     """The bag's promises; summary.json's contents ({} if it has none)."""
     from ato_nodes.bagio import read_run
+    outcome.checked.append("readers")
     try:
         in_rosbags, in_mcap, held = bag_counts(bag)
+        outcome.landed = min(in_rosbags.get(topic.name, 0) for topic in step_topics())
+        scored = len(read_run(bag).series["t"]) if outcome.landed else 0
         summary = json.loads((bag / "summary.json").read_text())
-    except Exception as exc:  # noqa: BLE001 - whatever a reader raises is the finding
+    except Exception as exc:  # whatever a reader raises is what the soak reports
         outcome.failed.append(f"readers: {type(exc).__name__}: {exc}")
         return {}
-    outcome.landed = min(in_rosbags.get(topic.name, 0) for topic in step_topics())
-    outcome.checked.append("readers")
     if in_rosbags != in_mcap:
         outcome.failed.append(f"readers: rosbags {in_rosbags} but mcap {in_mcap}")
-    scored = len(read_run(bag).series["t"]) if outcome.landed else 0
     outcome.checked.append("counts")
     if summary.get("recorded") != in_rosbags or summary.get("scored_steps") != scored:
         outcome.failed.append(f"counts: summary.json {summary.get('recorded')}, "
