@@ -11,14 +11,15 @@ progress says, not after a guessed delay, and every promise checked where each l
 The run is first simulated in this process (the stack records the same steps, bit for
 bit): that says at which steps the train stands in a dwell and at which a journey
 re-plans. Each run then draws where its signal is to land: a random step while the loop
-steps, and on a journey as often inside a dwell or within 2 s of simulated time of a
-re-plan; --after-end SIGINTs come once the recorder has closed the bag, while the run is
-scored. The signal is sent when the bag being written (the MCAP chunks the recorder hands
-the operating system every half run.record_lag) reaches that step, less the lead the
-earlier runs of that kind measured. SIGINT goes to run_stack.py, a double SIGINT gets a
-second one 0.05-1 s later, SIGKILL goes to a random node (a SIGKILL that finds no node is
-a failure). The steps the bag then holds are where the signal landed; the phase (stepping,
-dwell, re-plan, after end) is the reference run's there.
+steps, and on a journey as many inside a dwell and within 2 s of simulated time of a
+re-plan, in turn; --after-end SIGINTs come once the recorder has closed the bag and the
+supervisor has ended, while the run is scored. The signal is sent when the bag being
+written (the MCAP chunks the recorder hands the operating system every half
+run.record_lag) reaches that step, less the lead the earlier runs of that kind measured.
+SIGINT goes to run_stack.py, a double SIGINT gets a second one 0.05-1 s later, SIGKILL
+goes to a random node (a SIGKILL that finds no node is a failure). The steps the bag
+then holds are where the signal landed; the phase (stepping, dwell, re-plan, after end)
+is the reference run's there.
 
 Checked after every run: the bag opens in rosbags and in mcap's reader, both hold per
 topic the counts summary.json states, and its scored steps are what the bag scores;
@@ -27,7 +28,7 @@ after the end), 1 for a killed node, and agrees with summary.json's status; a ki
 is named; a journey's bag holds its re-plans up to its last step; no process the run
 started is left; stderr holds no traceback. One line per run, a table of kind by phase at
 the end; exit status 1 if any run broke a promise or its signal missed the run.
-Not a test: a run takes 5-20 s of wall time.
+Not a test: a run takes 5-40 s of wall time (the --duration, the machine's load).
 """
 
 from __future__ import annotations
@@ -205,13 +206,14 @@ class Draw:
 
 def draws(counts: dict[str, int], after_end: int, ref: Reference,
           rng: random.Random) -> list[Draw]:
-    """Every run's draw, in order (the same for a seed whatever the timing)."""
+    """Every run's draw, in order (the same for a seed whatever the timing): the runs
+    of a kind aim at the phases the run has in turn, each at a random step of it."""
     pools = {aim: ref.candidates(aim) for aim in ("stepping", "dwell", "re-plan")}
     aims = [aim for aim, steps in pools.items() if steps]
-    plan = [kind for kind, count in counts.items() for _ in range(count)]
+    plan = [(kind, aims[turn % len(aims)]) for kind, count in counts.items()
+            for turn in range(count)]
     made = []
-    for index, kind in enumerate(plan + ["sigint"] * after_end):
-        aim = "after end" if index >= len(plan) else rng.choice(aims)
+    for index, (kind, aim) in enumerate(plan + [("sigint", "after end")] * after_end):
         target = None if aim == "after end" else rng.choice(pools[aim])
         made.append(Draw(index, kind, aim, target, rng.choice(NODES),
                          round(rng.uniform(0.05, 1.0), 2)))
@@ -493,19 +495,22 @@ def parse_args():
     parser = _cli.argument_parser(__doc__)
     for kind in KINDS:
         parser.add_argument(f"--{kind}", type=int, default=20 if kind != "sigint" else 100,
-                            help=f"runs that get a {KINDS[kind]}")
+                            help=f"runs that get a {KINDS[kind]} (default %(default)s)")
     parser.add_argument("--after-end", type=int, default=0,
                         help="runs that get a SIGINT once their bag is closed (default 0)")
-    parser.add_argument("--scenario", default="seed000")
+    parser.add_argument("--scenario", default="seed000", help="as run_stack.py takes it "
+                        "(default seed000)")
     parser.add_argument("--duration", type=float, default=100.0,
                         help="simulated seconds of each run (default 100)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="a parameter of every run, as run_stack.py takes it")
-    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=1, help="of the draws (default 1)")
     parser.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
     parser.add_argument("--timeout", type=float, default=300.0,
-                        help="wall seconds a run may take before it counts as hung")
-    parser.add_argument("--out", type=Path, default=Path("bags/soak"))
+                        help="wall seconds a run may take before it counts as hung "
+                             "(default 300)")
+    parser.add_argument("--out", type=Path, default=Path("bags/soak"),
+                        help="directory to create for the runs' bags (default bags/soak)")
     parser.add_argument("--keep", action="store_true", help="keep the bags of held runs")
     args = parser.parse_args()
     for name in (*KINDS, "after_end"):

@@ -107,7 +107,12 @@ def test_draws_cover_the_kinds_and_phases_and_repeat_for_a_seed(soak):
     made = soak.draws(counts, 3, ref, random.Random(7))
     assert made == soak.draws(counts, 3, ref, random.Random(7))
     assert [draw.kind for draw in made].count("sigint") == 33
-    assert {draw.aim for draw in made} == {"stepping", "dwell", "re-plan", "after end"}
+    for kind, count in counts.items():  # as many of a kind aim at each phase
+        aims = [draw.aim for draw in made if draw.kind == kind and draw.target is not None]
+        assert len(aims) == count
+        assert {aim: aims.count(aim) for aim in ("stepping", "dwell", "re-plan")} == \
+            {aim: (count + 2 - turn) // 3 for turn, aim in enumerate(("stepping", "dwell",
+                                                                      "re-plan"))}, kind
     assert all((draw.target is None) == (draw.aim == "after end") for draw in made)
     assert {draw.victim for draw in made if draw.kind == "sigkill"} <= set(soak.NODES)
     cruise = soak.Reference(period=0.05, total=400, standing=np.zeros(400, dtype=bool),
