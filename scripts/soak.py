@@ -69,7 +69,8 @@ SCAN = 0.25          # s between looks for the run's processes
 # server exits on the launcher's end, some 0.2 s later; guarantees.md: no node outlives
 # its launcher by more than 5 s)
 LEFT_GRACE = 5.0
-TRACEBACK_MARKS = ("Traceback (most recent call last)", "Fatal Python error")
+# a Python traceback, a thread's stack dumped by faulthandler (a stalled teardown), a crash
+TRACEBACK_MARKS = ("(most recent call last)", "(most recent call first)", "Fatal Python error")
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 MCAP_MESSAGE, MCAP_CHUNK = 0x05, 0x06  # record opcodes (the MCAP specification)
 STOPPING = threading.Event()  # the soak itself was interrupted: stop the runs
@@ -274,6 +275,14 @@ def left_behind(seen: dict[int, str], group: int) -> list[int]:
         time.sleep(SCAN)
 
 
+def named(pid: int) -> str:
+    """A process as `ps` names it: its name and pid."""
+    try:
+        return f"{Path(f'/proc/{pid}/comm').read_text().strip()} ({pid})"
+    except OSError:
+        return str(pid)
+
+
 @dataclass
 class Outcome:
     draw: Draw
@@ -453,8 +462,9 @@ def check_run(outcome: Outcome, bag: Path, ref: Reference, errors: str,
             outcome.failed.append(f"named: {draw.victim} not in {summary.get('message')!r}")
     outcome.checked += ["processes", "stderr"]
     if left:
-        outcome.failed.append(f"processes: {', '.join(map(str, left))} left")
-    marks = [line for line in errors.splitlines() if line.startswith(TRACEBACK_MARKS)]
+        outcome.failed.append(f"processes: {', '.join(map(named, left))} left")
+    marks = [line for line in errors.splitlines()
+             if any(mark in line for mark in TRACEBACK_MARKS)]
     if marks:
         outcome.failed.append(f"stderr: {marks[0]}")
 
