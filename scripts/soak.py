@@ -314,6 +314,13 @@ def signal_run(process: subprocess.Popen, draw: Draw) -> str:
     return ""
 
 
+def trigger_step(target: int, lead: int) -> int:
+    """The bag's steps at which a signal aimed at step `target` goes: `lead` early, but
+    never before the bag holds a step (before, the run may still be starting Python, where
+    a SIGINT is Python's own; guarantees.md)."""
+    return max(1, target - lead)
+
+
 def due(progress: BagProgress, trigger: int | None, launcher: int) -> bool:
     """The signal is due: the bag has reached the trigger's step, or (None) the run is
     over, its bag closed and its supervisor gone, and the launcher finishes it. A run over
@@ -328,7 +335,7 @@ def watch(process: subprocess.Popen, bag: Path, draw: Draw, lead: int, period: f
     """Follow the run until its signal is due, then send it: (the bag's steps then, or
     None if the run ended first; what went wrong). `seen` collects its processes."""
     progress = BagProgress(bag, period)
-    trigger = None if draw.target is None else draw.target - lead
+    trigger = None if draw.target is None else trigger_step(draw.target, lead)
     next_scan = 0.0
     try:
         while process.poll() is None and not STOPPING.is_set():

@@ -141,6 +141,11 @@ def test_a_signal_is_due_at_its_step_or_once_the_run_is_over(soak):
     assert soak.due(Bag(400, True), None, launcher)
 
 
+def test_no_signal_goes_before_the_bag_holds_a_step(soak):
+    assert soak.trigger_step(500, 30) == 470
+    assert soak.trigger_step(24, 30) == 1 and soak.trigger_step(0, 0) == 1
+
+
 def test_leads_start_at_the_record_lag_then_follow_the_landings(soak):
     leads = soak.Leads(10)
     assert leads.steps("sigint") == 10
