@@ -298,10 +298,10 @@ class Outcome:
         return not self.failed
 
 
-def signal_run(process: subprocess.Popen, draw: Draw) -> str:
-    """Send the draw's signal; what went wrong, if anything."""
+def signal_run(process: subprocess.Popen, draw: Draw, nodes: dict[str, int]) -> str:
+    """Send the draw's signal (a SIGKILL to its victim among the run's `nodes`); what
+    went wrong, if anything."""
     if draw.kind == "sigkill":
-        nodes = node_processes(process.pid)
         try:
             os.kill(nodes[draw.victim], signal.SIGKILL)
             return ""
@@ -344,7 +344,9 @@ def watch(process: subprocess.Popen, bag: Path, draw: Draw, lead: int, period: f
                 next_scan = time.monotonic() + SCAN
             if due(progress, trigger, process.pid):
                 seen.update(descendants(process.pid))
-                return progress.steps(), signal_run(process, draw)
+                # the nodes looked up first: the bag's steps are read just as it goes
+                nodes = node_processes(process.pid) if draw.kind == "sigkill" else {}
+                return progress.steps(), signal_run(process, draw, nodes)
             time.sleep(POLL)
     finally:
         progress.close()
