@@ -502,6 +502,8 @@ def table(outcomes: list[Outcome]) -> str:
             held = sum(o.held() for o in here)
             cells.append(f"{held} held, {len(here) - held} failed" if here else "-")
         rows.append(f"{name:<16}" + "".join(f"{cell:>{width}}" for cell in cells))
+    if not outcomes:
+        return "\n".join(rows)
     aimed = sum(o.phase == o.draw.aim for o in outcomes)
     walls = sorted(o.wall for o in outcomes)
     rows.append(f"{aimed} of {len(outcomes)} landed in the phase they aimed at; wall time per "
@@ -516,7 +518,8 @@ def parse_args():
         parser.add_argument(f"--{kind}", type=int, default=20 if kind != "sigint" else 100,
                             help=f"runs that get a {KINDS[kind]} (default %(default)s)")
     parser.add_argument("--after-end", type=int, default=0,
-                        help="runs that get a SIGINT once their bag is closed (default 0)")
+                        help="runs that get a SIGINT once they have ended (the bag closed), while "
+                             "they are scored (default 0)")
     parser.add_argument("--scenario", default="seed000", help="as run_stack.py takes it "
                         "(default seed000)")
     parser.add_argument("--duration", type=float, default=100.0,
