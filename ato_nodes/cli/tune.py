@@ -105,9 +105,10 @@ def tune() -> None:
         cli.fail(str(exc).splitlines()[0])
     except TuningLost as exc:
         cli.fail(str(exc), 1)
-    except KeyboardInterrupt:
-        print(f"interrupted; every finished evaluation is in {args.out / 'evaluations.jsonl'}; "
-              "continue with --resume", file=sys.stderr)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM (cli.interrupted_quietly)
+        log = args.out / "evaluations.jsonl"
+        print(f"interrupted; every finished evaluation is in {log}; continue with --resume"
+              if log.exists() else "interrupted", file=sys.stderr)  # else none had begun
         sys.exit(130)
     report(json.loads((args.out / "summary.json").read_text()), args.out)
 
