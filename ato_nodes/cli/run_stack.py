@@ -59,21 +59,22 @@ def run_stack() -> None:
                       timeout=args.timeout)
     except RuntimeError as exc:
         cli.fail(str(exc))
+    # From here a stop is the run's: noted and handled by stack.run(), which decides the
+    # outcome; one that comes after it (while the bag is scored) changes nothing.
+    for number in cli.STOP_SIGNALS:
+        signal.signal(number, stack.interrupt)
     at_most = "at most " if values["run.last_stop_hold"] > 0 else ""  # it may end at its stop
     print(f"scenario {name}: {at_most}{steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
-    pressed = []  # a Ctrl-C after the run (while the bag is scored): the summary first
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, lambda *_: pressed.append(True))
-    outcome = stack.run()  # interrupted by either signal meanwhile (its own handlers)
+    outcome = stack.run()
     summary = summarized(name, bag, outcome, stack.params_yaml)
-    if pressed or outcome.status == "interrupted":
-        print(f"interrupted; {summary.get('scored_steps', 0)} steps recorded in {bag}",
-              file=sys.stderr)
+    recorded = f"{summary.get('scored_steps', 0)} steps recorded in {bag}"
+    if outcome.status == "interrupted":  # the message after what every interrupt says
+        details = summary["message"].split("; ", 1)[1:]
+        print("; ".join(["interrupted", recorded, *details]), file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
     if not outcome.ok or "indices" not in summary:
-        print(f"error: {summary['message']}; {summary.get('scored_steps', 0)} steps recorded "
-              f"in {bag}", file=sys.stderr)
+        print(f"error: {summary['message']}; {recorded}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
     if outcome.report.get("ended") == AT_LAST_STOP:
