@@ -106,9 +106,9 @@ def tune() -> None:
     except TuningLost as exc:
         cli.fail(str(exc), 1)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM (cli.interrupted_quietly)
-        log = args.out / "evaluations.jsonl"
-        print(f"interrupted; every finished evaluation is in {log}; continue with --resume"
-              if log.exists() else "interrupted", file=sys.stderr)  # else none had begun
+        print(f"interrupted; every finished evaluation is in {args.out / 'evaluations.jsonl'}; "
+              "continue with --resume" if args.out.is_dir() else "interrupted",  # else it
+              file=sys.stderr)  # was still checking its input: nothing to continue
         sys.exit(130)
     report(json.loads((args.out / "summary.json").read_text()), args.out)
 
