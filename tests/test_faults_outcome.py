@@ -136,3 +136,27 @@ def test_ctrl_c_after_a_frozen_recorder_was_named_leaves_the_run_failed(tmp_path
     summary, _, stderr = said_once(process, bag)
     assert summary["status"] == "failed" and "node 'recorder' is stopped" in summary["message"]
     assert stderr.strip().splitlines()[-1].startswith(f"error: {summary['message']}; ")
+
+
+def test_sigterm_stops_a_tuning_as_ctrl_c_does(tmp_path):
+    """It once ended the tuner by the signal (status 143), its workers left running."""
+    out = tmp_path / "tuning"
+    log = out / "evaluations.jsonl"
+    tuning = subprocess.Popen([*invocation("tune"), "--algorithm", "pso", "--in-process",
+                               "--params", "adrc.mu1=600:60000", "--evaluations", "400",
+                               "--population", "4", "--workers", "2", "--set",
+                               "run.duration=60", "--out", str(out), "--quiet"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    until(lambda: log.exists() and log.read_text().count("\n") >= 2, "two evaluations logged")
+    workers = [int(pid) for pid in Path(f"/proc/{tuning.pid}/task/{tuning.pid}/children")
+               .read_text().split()]
+    tuning.send_signal(signal.SIGTERM)
+    try:
+        _, stderr = tuning.communicate(timeout=120)  # the workers hold its pipes open too
+    finally:
+        left = [pid for pid in workers if Path(f"/proc/{pid}").exists()]
+        for pid in left:  # not left running on the machine when the test fails
+            os.kill(pid, signal.SIGKILL)
+    assert tuning.returncode == 130 and stderr.endswith("continue with --resume\n"), stderr
+    assert log.read_text().endswith("\n")  # every logged evaluation whole
+    assert workers and not left
