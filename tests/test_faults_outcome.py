@@ -15,6 +15,7 @@ import pytest
 
 from ato_nodes.launch import WORKDIR_PREFIX
 from commands import ROOT, invocation
+from test_bag_integrity import write
 from test_faults import holds_what_its_summary_says, opens_everywhere
 from test_stack import children, start_stack, wait_for_children, wait_for_stepping
 
@@ -55,6 +56,31 @@ def test_a_stop_while_a_command_validates_is_one_line_and_exit_130(tmp_path, com
     stdout, stderr = process.communicate(timeout=60)
     assert (process.returncode, stderr, stdout) == (130, "interrupted\n", "")
     assert not out.exists()  # nothing had started, nothing is left
+
+
+def rclpy_loaded(pid: int) -> bool:
+    try:
+        return "_rclpy_pybind11" in Path(f"/proc/{pid}/maps").read_text()
+    except OSError:
+        return False
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_of_a_replay_is_one_line_and_exit_130(tmp_path, ros_domain, signum):
+    """A SIGTERM once ended a replay with rclpy's traceback (its context shut down under
+    a publish), exit 1, where Ctrl-C said `interrupted`."""
+    bag = tmp_path / "small"
+    write(bag, 40)
+    replay = subprocess.Popen([*invocation("replay_bag"), str(bag), "--wait-subscribers", "1",
+                               "--domain-id", str(ros_domain.domain_id)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              cwd=ROOT, **ros_domain.handed_down())
+    until(lambda: rclpy_loaded(replay.pid), "rclpy loaded: the replay is starting or "
+          "waiting for a subscriber (it has none)", timeout=60)
+    replay.send_signal(signum)
+    stdout, stderr = replay.communicate(timeout=60)
+    assert (replay.returncode, stderr, stdout) == (130, "interrupted\n", "")
 
 
 def said_once(process: subprocess.Popen, bag: Path) -> tuple[dict, str, str]:
