@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.launch import WORKDIR_PREFIX
+from ato_nodes.cli.run_stack import summarized
+from ato_nodes.launch import WORKDIR_PREFIX, RunOutcome
 from commands import ROOT, invocation
 from test_bag_integrity import write
 from test_faults import holds_what_its_summary_says, opens_everywhere
@@ -186,3 +187,15 @@ def test_sigterm_stops_a_tuning_as_ctrl_c_does(tmp_path):
     assert tuning.returncode == 130 and stderr.endswith("continue with --resume\n"), stderr
     assert log.read_text().endswith("\n")  # every logged evaluation whole
     assert workers and not left
+
+
+def test_a_completed_run_whose_bag_cannot_be_scored_is_a_failure_in_its_summary(tmp_path):
+    """run_stack.py exits 1 for it (`error: ... bag not scored`): summary.json says the
+    same, not `completed`."""
+    bag = tmp_path / "unreadable"
+    bag.mkdir()
+    (bag / "unreadable_0.mcap").write_bytes(b"not a bag")
+    summary = summarized("seed000", bag, RunOutcome("completed", report={"steps": 10}), "")
+    written = json.loads((bag / "summary.json").read_text())
+    assert summary["status"] == written["status"] == "failed"
+    assert written["message"].startswith("bag not scored: ")

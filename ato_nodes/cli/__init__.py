@@ -76,6 +76,7 @@ def new_directory(path: Path, what: str = "--out") -> None:
     if not path.parent.is_dir() or not os.access(path.parent, os.W_OK | os.X_OK):
         fail(f"{what} {path}: {path.parent} is not a writable directory")
     probe = path / ".write-test"
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)  # a stop waits: none left
     try:
         path.mkdir()
         try:
@@ -85,6 +86,8 @@ def new_directory(path: Path, what: str = "--out") -> None:
             path.rmdir()
     except OSError as exc:
         fail(f"{what} {path}: cannot be written: {exc.strerror or exc}")
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def seconds(value: float | None, what: str) -> None:

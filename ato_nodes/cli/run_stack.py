@@ -67,13 +67,13 @@ def run_stack() -> None:
     print(f"scenario {name}: {at_most}{steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
     outcome = stack.run()
-    summary = summarized(name, bag, outcome, stack.params_yaml)
+    summary = summarized(name, bag, outcome, stack.params_yaml)  # the console says it
     recorded = f"{summary.get('scored_steps', 0)} steps recorded in {bag}"
-    if outcome.status == "interrupted":  # the message after what every interrupt says
+    if summary["status"] == "interrupted":  # the message after what every interrupt says
         details = summary["message"].split("; ", 1)[1:]
         print("; ".join(["interrupted", recorded, *details]), file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    if not outcome.ok or "indices" not in summary:
+    if summary["status"] != "completed":
         print(f"error: {summary['message']}; {recorded}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
@@ -106,14 +106,23 @@ def checked_values(args: argparse.Namespace) -> dict:
 
 def summarized(name: str, bag: Path, outcome, params_yaml: str) -> dict:
     """summary.json's contents, written into the bag with params.yaml when there is a
-    bag; what could not be written is said in its message."""
+    bag; what could not be written is said in its message. Its status is the run's
+    outcome, as the console and the exit status say it: a run that completed but whose
+    bag cannot be scored has failed."""
     summary = {"scenario": name, "bag": str(bag), "status": outcome.status,
                "message": outcome.message, "domain_id": outcome.domain_id,
                "wall_time": outcome.wall_time, **outcome.report}
     if bag.exists():
         summary.update(bag_contents(bag))
-        if "bag_error" in summary:
-            summary["message"] += f"; bag not scored: {summary['bag_error']}"
+    said = [summary["message"]]
+    if "bag_error" in summary:
+        said.append(f"bag not scored: {summary['bag_error']}")
+    if outcome.ok and "indices" not in summary:  # said as a failure everywhere
+        summary["status"] = "failed"
+        if "bag_error" not in summary:
+            said.append("the run completed without a scored step")
+    summary["message"] = "; ".join(filter(None, said))
+    if bag.exists():
         try:
             (bag / "params.yaml").write_text(params_yaml)
         except OSError as exc:
