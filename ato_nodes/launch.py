@@ -411,7 +411,7 @@ class Stack:
             finally:
                 blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if main else None
                 try:
-                    outcome = self._stopped(outcome)
+                    outcome = self._stop_and_decide(outcome)
                 finally:
                     if main:  # a Ctrl-C pressed while stopping is spent, not re-raised;
                         # the caller's handlers are back before any signal can come
@@ -426,7 +426,7 @@ class Stack:
         outcome.wall_time = time.monotonic() - started
         return outcome
 
-    def _stopped(self, outcome: RunOutcome) -> RunOutcome:
+    def _stop_and_decide(self, outcome: RunOutcome) -> RunOutcome:
         """Every node stopped, the domain released, the bag complete; the run's outcome.
         A run interrupted after the supervisor had reported its end (it writes its report
         once the recorder holds every step) ended as reported: its bag is complete."""
