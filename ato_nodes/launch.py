@@ -244,7 +244,9 @@ class Stack:
         self.values["supervisor.report"] = str(self.report_path)
         self.params_yaml = yaml.safe_dump(ros_parameter_file(self.values), sort_keys=False)
 
-    def _on_signal(self, signum, frame) -> None:
+    def interrupt(self, signum=None, frame=None) -> None:
+        """Stop the run (a signal handler: run() installs it for SIGINT and SIGTERM; a
+        launcher may install it before, so that a stop before run() is not lost)."""
         self.signalled = True
 
     def _start(self) -> None:
@@ -339,7 +341,9 @@ class Stack:
             if self.cancel is not None and self.cancel.is_set():
                 return RunOutcome("interrupted", "stopped by its tuning")
             if self.signalled:
-                return RunOutcome("interrupted", "interrupted by the user")
+                return RunOutcome("interrupted", "; ".join([
+                    "interrupted by the user", *(f"node '{role}' was stopped (SIGSTOP or a "
+                                                 "debugger)" for role in stopped_since)]))
             self.node_ended.wait(POLL)
 
     def _stall(self) -> str:
@@ -390,12 +394,13 @@ class Stack:
     def run(self) -> RunOutcome:
         """Start, watch, stop. SIGTERM interrupts a run as Ctrl-C does; once the run is
         stopping, further signals wait until every node is stopped and the bag is
-        complete (repaired if its writer died)."""
+        complete (repaired if its writer died). The outcome is decided here, once: a
+        stop that comes after the supervisor reported the run's end changes nothing."""
         started = time.monotonic()
         main = threading.current_thread() is threading.main_thread()
         # A signal only sets a flag that the watch loop reads (within POLL): raised as an
         # exception it could land anywhere, a second one inside the handling of the first.
-        previous = {number: signal.signal(number, self._on_signal) for number in STOP_SIGNALS} \
+        previous = {number: signal.signal(number, self.interrupt) for number in STOP_SIGNALS} \
             if main else {}
         try:
             try:
@@ -405,13 +410,8 @@ class Stack:
                 outcome = RunOutcome("failed", str(exc))
             finally:
                 blocked = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if main else None
-                supervisor = self.processes.get("supervisor")
                 try:
-                    self.stop(ended=supervisor is not None and supervisor.poll() == 0)
-                    self.lock.release()
-                    outcome.message = "; ".join(filter(None, [outcome.message, self._repair()]))
-                    if outcome.status == "timeout":
-                        outcome.message += self._stall()
+                    outcome = self._stop_and_decide(outcome)
                 finally:
                     if main:  # a Ctrl-C pressed while stopping is spent, not re-raised;
                         # the caller's handlers are back before any signal can come
@@ -420,12 +420,26 @@ class Stack:
                         signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
                         for number, handler in previous.items():
                             signal.signal(number, handler)
-            if self.report_path.exists() and not outcome.report:
-                outcome.report = json.loads(self.report_path.read_text())
         finally:
             shutil.rmtree(self.workdir, ignore_errors=True)  # thousands of runs when tuning
         outcome.domain_id = self.lock.domain_id
         outcome.wall_time = time.monotonic() - started
+        return outcome
+
+    def _stop_and_decide(self, outcome: RunOutcome) -> RunOutcome:
+        """Every node stopped, the domain released, the bag complete; the run's outcome.
+        A run interrupted after the supervisor had reported its end (it writes its report
+        once the recorder holds every step) ended as reported: its bag is complete."""
+        supervisor = self.processes.get("supervisor")
+        self.stop(ended=supervisor is not None and supervisor.poll() == 0)
+        self.lock.release()
+        if outcome.status == "interrupted" and self.report_path.exists():
+            outcome = self._finish()
+        outcome.message = "; ".join(filter(None, [outcome.message, self._repair()]))
+        if outcome.status == "timeout":
+            outcome.message += self._stall()
+        if self.report_path.exists() and not outcome.report:
+            outcome.report = json.loads(self.report_path.read_text())
         return outcome
 
 

@@ -620,8 +620,9 @@ class Tuner:
             self._warm_kernels()
         with contextlib.ExitStack() as stack:
             if threading.current_thread() is threading.main_thread():
-                previous = signal.signal(signal.SIGINT, self._on_interrupt)
-                stack.callback(signal.signal, signal.SIGINT, previous)
+                for number in (signal.SIGINT, signal.SIGTERM):  # either one stops it
+                    previous = signal.signal(number, self._on_interrupt)
+                    stack.callback(signal.signal, number, previous)
             pool = self._pool()
             if self.client is not None:  # the tuner says what goes wrong, in one line
                 stack.enter_context(_dask_logs_silenced())

@@ -2,9 +2,10 @@
 
 import signal
 
-# A Ctrl-C during the imports below is held, not raised where it lands (a traceback):
-# handle_signals_while_starting() installs the handler, then lets it through.
-signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+# A Ctrl-C or SIGTERM during the imports below is held, not raised where it lands (a
+# traceback) nor fatal (SIGTERM's default): handle_signals_while_starting() installs the
+# handler, then lets it through.
+signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
 
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402

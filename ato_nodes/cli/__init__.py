@@ -18,6 +18,11 @@ import textwrap
 from pathlib import Path
 
 
+# Ctrl-C and SIGTERM (a service manager, `timeout`, `kill`) both mean interrupt: the same
+# line, exit status 130, whatever was written kept whole.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
 def start(command: str) -> None:
     """Run ato_nodes.cli.<command>.main() as a program."""
     handle_signals_while_starting()
@@ -25,16 +30,17 @@ def start(command: str) -> None:
 
 
 def handle_signals_while_starting() -> None:
-    """A closed pipe ends the output quietly (`score_bag ... | head`), and Ctrl-C means
-    interrupt, even when started from a shell's background job (which hands its children
-    SIGINT ignored); interrupted_quietly() takes over in main()."""
+    """A closed pipe ends the output quietly (`score_bag ... | head`), and Ctrl-C or
+    SIGTERM means interrupt, even when started from a shell's background job (which hands
+    its children SIGINT ignored); interrupted_quietly() takes over in main()."""
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)
-    signal.signal(signal.SIGINT, _interrupted_while_starting)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # held since scripts/_cli.py
+    for number in STOP_SIGNALS:
+        signal.signal(number, _interrupted_while_starting)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)  # held since scripts/_cli.py
 
 
 def _interrupted_while_starting(signum, frame) -> None:
-    """Ctrl-C before main() runs (while importing): nothing started, nothing to keep."""
+    """A stop before main() runs (while importing): nothing started, nothing to keep."""
     os.write(2, b"interrupted\n")
     os._exit(130)
 
@@ -70,6 +76,7 @@ def new_directory(path: Path, what: str = "--out") -> None:
     if not path.parent.is_dir() or not os.access(path.parent, os.W_OK | os.X_OK):
         fail(f"{what} {path}: {path.parent} is not a writable directory")
     probe = path / ".write-test"
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)  # a stop waits: none left
     try:
         path.mkdir()
         try:
@@ -79,6 +86,8 @@ def new_directory(path: Path, what: str = "--out") -> None:
             path.rmdir()
     except OSError as exc:
         fail(f"{what} {path}: cannot be written: {exc.strerror or exc}")
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def seconds(value: float | None, what: str) -> None:
@@ -88,8 +97,10 @@ def seconds(value: float | None, what: str) -> None:
 
 
 def interrupted_quietly(main):
-    """Run a script's main(); a Ctrl-C outside its own handling is one line, exit 130."""
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    """Run a script's main(); a Ctrl-C or SIGTERM outside its own handling is one line,
+    exit 130: either raises KeyboardInterrupt, so both take the same way out."""
+    for number in STOP_SIGNALS:
+        signal.signal(number, signal.default_int_handler)
     try:
         main()
     except KeyboardInterrupt:
@@ -99,5 +110,5 @@ def interrupted_quietly(main):
         # Ignored, not only blocked: the mask is this thread's, and the interpreter's exit
         # puts Python's handlers back to the default (death by the signal) while another
         # thread (the fork server's reader) could still take one.
-        for number in (signal.SIGINT, signal.SIGTERM):
+        for number in STOP_SIGNALS:
             signal.signal(number, signal.SIG_IGN)

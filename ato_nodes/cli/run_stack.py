@@ -59,21 +59,22 @@ def run_stack() -> None:
                       timeout=args.timeout)
     except RuntimeError as exc:
         cli.fail(str(exc))
+    # From here a stop is the run's: noted and handled by stack.run(), which decides the
+    # outcome; one that comes after it (while the bag is scored) changes nothing.
+    for number in cli.STOP_SIGNALS:
+        signal.signal(number, stack.interrupt)
     at_most = "at most " if values["run.last_stop_hold"] > 0 else ""  # it may end at its stop
     print(f"scenario {name}: {at_most}{steps(values)} steps of {values['run.period']:g} s, "
           f"ROS_DOMAIN_ID={stack.lock.domain_id}, bag {bag}", file=sys.stderr)
-    pressed = []  # a Ctrl-C after the run (while the bag is scored): the summary first
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, lambda *_: pressed.append(True))
-    outcome = stack.run()  # interrupted by either signal meanwhile (its own handlers)
-    summary = summarized(name, bag, outcome, stack.params_yaml)
-    if pressed or outcome.status == "interrupted":
-        print(f"interrupted; {summary.get('scored_steps', 0)} steps recorded in {bag}",
-              file=sys.stderr)
+    outcome = stack.run()
+    summary = summarized(name, bag, outcome, stack.params_yaml)  # the console says it
+    recorded = f"{summary.get('scored_steps', 0)} steps recorded in {bag}"
+    if summary["status"] == "interrupted":  # the message after what every interrupt says
+        details = summary["message"].split("; ", 1)[1:]
+        print("; ".join(["interrupted", recorded, *details]), file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    if not outcome.ok or "indices" not in summary:
-        print(f"error: {summary['message']}; {summary.get('scored_steps', 0)} steps recorded "
-              f"in {bag}", file=sys.stderr)
+    if summary["status"] != "completed":
+        print(f"error: {summary['message']}; {recorded}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
     print(format_indices(summary["indices"]))
     if outcome.report.get("ended") == AT_LAST_STOP:
@@ -105,14 +106,23 @@ def checked_values(args: argparse.Namespace) -> dict:
 
 def summarized(name: str, bag: Path, outcome, params_yaml: str) -> dict:
     """summary.json's contents, written into the bag with params.yaml when there is a
-    bag; what could not be written is said in its message."""
+    bag; what could not be written is said in its message. Its status is the run's
+    outcome, as the console and the exit status say it: a run that completed but whose
+    bag cannot be scored has failed."""
     summary = {"scenario": name, "bag": str(bag), "status": outcome.status,
                "message": outcome.message, "domain_id": outcome.domain_id,
                "wall_time": outcome.wall_time, **outcome.report}
     if bag.exists():
         summary.update(bag_contents(bag))
-        if "bag_error" in summary:
-            summary["message"] += f"; bag not scored: {summary['bag_error']}"
+    said = [summary["message"]]
+    if "bag_error" in summary:
+        said.append(f"bag not scored: {summary['bag_error']}")
+    if outcome.ok and "indices" not in summary:  # said as a failure everywhere
+        summary["status"] = "failed"
+        if "bag_error" not in summary:
+            said.append("the run completed without a scored step")
+    summary["message"] = "; ".join(filter(None, said))
+    if bag.exists():
         try:
             (bag / "params.yaml").write_text(params_yaml)
         except OSError as exc:

@@ -105,9 +105,10 @@ def tune() -> None:
         cli.fail(str(exc).splitlines()[0])
     except TuningLost as exc:
         cli.fail(str(exc), 1)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM (cli.interrupted_quietly)
         print(f"interrupted; every finished evaluation is in {args.out / 'evaluations.jsonl'}; "
-              "continue with --resume", file=sys.stderr)
+              "continue with --resume" if args.out.is_dir() else "interrupted",  # else it
+              file=sys.stderr)  # was still checking its input: nothing to continue
         sys.exit(130)
     report(json.loads((args.out / "summary.json").read_text()), args.out)
 
