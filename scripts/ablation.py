@@ -12,7 +12,8 @@ The additions (docs/tracking.md), each undone by the overrides beside it:
   delay-aware         ladrc.delay_aware=false (observer input, Smith predictor)
   feasible curve      profile.envelope_share=0
   rounded curve       profile.jerk=0
-  departure and berth profile.ato.start_speed=0.3, controller.holding_target=0
+  departure and berth profile.ato.start_speed=0.3, profile.departure_jerk=0,
+                      controller.holding_target=0
   tuned gains         the --untuned values (the tuning objective's work; not a
                       parameter another addition undoes)
 Runs in-process (the stack gives the same numbers bit for bit); --reference adds the
@@ -39,7 +40,8 @@ ADDITIONS = (
     ("delay-aware", ["ladrc.delay_aware=false"]),
     ("feasible curve", ["profile.envelope_share=0"]),
     ("rounded curve", ["profile.jerk=0"]),
-    ("departure and berth", ["profile.ato.start_speed=0.3", "controller.holding_target=0"]),
+    ("departure and berth", ["profile.ato.start_speed=0.3", "profile.departure_jerk=0",
+                             "controller.holding_target=0"]),
 )
 TUNED = "tuned gains"
 
