@@ -390,8 +390,24 @@ def _stations(path: Path, node: yaml.Node | None, length: float) -> tuple[Statio
         dwell = node_number(path, entry["dwell"], "dwell") if "dwell" in entry else 0.0
         if dwell < 0:
             raise node_error(path, entry["dwell"], f"stations: dwell {dwell:g} s is negative")
-        name = str(yaml.safe_load(yaml.serialize(entry["name"]))) if "name" in entry else ""
+        name = _station_name(path, item, entry, stations)
         if stations and position <= stations[-1].position:
             raise node_error(path, item, "stations must be in increasing position order")
         stations.append(Station(name, position, dwell))
     return tuple(stations)
+
+
+def _station_name(path: Path, item: yaml.Node, entry: dict, before: list[Station]) -> str:
+    """The station's name: text (a timetable's stops and a report's rows name stations by
+    it), given, and no other station's of the line."""
+    if "name" not in entry:
+        raise node_error(path, item, "stations: missing 'name'")
+    value = yaml.safe_load(yaml.serialize(entry["name"]))
+    if not isinstance(entry["name"], yaml.ScalarNode) or value is None or not str(value).strip():
+        raise node_error(path, entry["name"], f"stations: a name is text, not {value!r}")
+    name = str(value)
+    same = next((station for station in before if station.name == name), None)
+    if same is not None:
+        raise node_error(path, entry["name"], f"stations: {name!r} is already the name of the "
+                         f"station at {same.position:g} m (names are unique on a line)")
+    return name
