@@ -40,7 +40,7 @@ from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import resolve_file
 from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
-                          node_error, node_number)
+                          node_error, node_number, node_value)
 from ..train.plant import TrainParameters
 from .profiles import ato_curve
 
@@ -140,7 +140,7 @@ def _timetable(path, fields: dict[str, yaml.Node], line: Line, line_file: str) -
 
 
 def _text(node: yaml.Node) -> str:
-    return str(yaml.safe_load(yaml.serialize(node)))
+    return str(node_value(node))
 
 
 def _stops(path, node: yaml.Node, line: Line) -> tuple[Stop, ...]:
