@@ -65,11 +65,12 @@ def load(args):
         if args.timetable is None and line_file.parent != config_dir() / "lines":
             raise ScenarioError(f"line {line_file} is not one of msg_config/lines/: give its "
                                 "--timetable FILE")
-        timetable = load_timetable(given_file(args.timetable or line_file.stem, "timetables",
-                                              "timetable"))
+        timetable = load_timetable(
+            given_file(args.timetable, "timetables", "timetable") if args.timetable
+            else config_dir() / "timetables" / f"{line_file.stem}.yaml")
         if Path(timetable.line_file).resolve() != line_file.resolve():
             raise ScenarioError(f"timetable {timetable.path} is for line "
-                                f"{timetable.line_file}, not {line_file}")
+                                f"{timetable.line_file}, not {args.line}")
         train = args.train or timetable.train
         train_preset(train)
         values = complete({"plant.train": train}, [])

@@ -350,7 +350,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
                             f"{values['controller.kind']} does not use the on-board estimator "
                             f"(those that do: {', '.join(estimating_kinds())})")
     try:
-        check_journey(values)  # before the plan: its curves then never evict the plan's
+        check_journey(values, line)  # before the plan: its curves then never evict the plan's
         profile = RunContext(NodeValues("profile", values), line)
         _ = profile.berth_mark  # a berth where there is no stop to berth at is refused now
         values = at_last_stop(values, profile.plan)
