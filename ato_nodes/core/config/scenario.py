@@ -25,7 +25,6 @@ from ..train.line import line_of
 from .components import CONTROLLERS
 from .context import RunContext
 from .faults import parse_fault
-from .timetables import check_journey
 from .schema import (
     FILE_PARAMETERS,
     NODES,
@@ -36,6 +35,7 @@ from .schema import (
     shared,
     unused,
 )
+from .timetables import check_journey
 
 
 def _unknown(name: str, where: str) -> ScenarioError:

@@ -225,6 +225,9 @@ def section_line(line: Line, start: float, end: float) -> Line:
         planned_run_time=None)
 
 
+CURVE_PARAMETERS = ("plant.length", "profile.jerk")  # what ato_curve reads besides profile.ato.*
+
+
 def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -> float:
     """The fastest the run's nominal train (plant.*), at `load` times its mass, runs
     `line` to its stop mark: the ato curve (profile.ato.*) at the train's full envelope
@@ -234,9 +237,6 @@ def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -
                          if name.startswith("profile.ato.") or name in CURVE_PARAMETERS))
     return _minimum_running_time(line, dataclasses.replace(nominal, mass=load * nominal.mass),
                                  curve)
-
-
-CURVE_PARAMETERS = ("plant.length", "profile.jerk")  # what ato_curve reads besides profile.ato.*
 
 
 # Its own cache, of the train and the curve's values alone: a run's timetable is checked at
