@@ -7,8 +7,9 @@ its time (seed 002's dynamic programme).
     python scripts/plan_journey.py metro-line
     python scripts/plan_journey.py hsr-journey --compare
 
-LINE names msg_config/lines/LINE.yaml; its timetable is msg_config/timetables/LINE.yaml
-(or --timetable FILE, which must be for that line). --train plans for another train
+LINE is a line file, or the name of one in msg_config/lines/ (LINE.yaml); its timetable
+is --timetable, a file or the name of one in msg_config/timetables/ (default: the line's
+own name there), which must be for that line. --train plans for another train
 preset than the timetable's (its minimum running times are checked again). Prints per
 section the minimum running time (the ato curve at the full envelope share), the
 timetable's time, the allocated time and the energy of the section driven in it, and the
@@ -32,24 +33,42 @@ from ato_nodes.core.targets.timetable import check_minimum_times, load_timetable
 
 def parse_args():
     parser = _cli.argument_parser(__doc__)
-    parser.add_argument("line", metavar="LINE", help="line name (msg_config/lines/LINE.yaml)")
-    parser.add_argument("--timetable", type=Path, help="timetable file (default: "
-                        "msg_config/timetables/LINE.yaml)")
+    parser.add_argument("line", metavar="LINE", help="line file, or its name in "
+                        "msg_config/lines/")
+    parser.add_argument("--timetable", help="timetable file, or its name in "
+                        "msg_config/timetables/ (default: LINE's name there)")
     parser.add_argument("--train", help="train preset (default: the timetable's)")
     parser.add_argument("--compare", action="store_true", help="also the uniform allocation "
                         "and the exact optimum (about twice the time)")
     return parser.parse_args()
 
 
+def given_file(given: str, folder: str, what: str) -> Path:
+    """The file a user gave: a path as given (with a folder or a .yaml suffix), else the
+    name's file in msg_config/FOLDER/; ScenarioError naming what was given."""
+    path = Path(given)
+    if path.suffix in (".yaml", ".yml") or len(path.parts) > 1:
+        return path
+    shipped = config_dir() / folder / f"{given}.yaml"
+    if not shipped.is_file():
+        raise ScenarioError(f"unknown {what} {given!r}: neither a file nor a name in "
+                            f"{config_dir() / folder}")
+    return shipped
+
+
 def load(args):
     """(timetable, run values, minimum running times), or one line and exit 2."""
-    line_file = (config_dir() / "lines" / f"{args.line}.yaml").resolve()
     try:
+        line_file = given_file(args.line, "lines", "line")
         if not line_file.is_file():
-            raise ScenarioError(f"unknown line {args.line!r} (no {line_file})")
-        timetable = load_timetable(args.timetable or
-                                   config_dir() / "timetables" / f"{args.line}.yaml")
-        if Path(timetable.line_file).resolve() != line_file:
+            raise ScenarioError(f"no line file {line_file}")
+        if args.timetable is None and line_file.parent != config_dir() / "lines":
+            raise ScenarioError(f"line {line_file} is not one of msg_config/lines/: give its "
+                                "--timetable FILE")
+        timetable = load_timetable(
+            given_file(args.timetable, "timetables", "timetable") if args.timetable
+            else config_dir() / "timetables" / f"{line_file.stem}.yaml")
+        if Path(timetable.line_file).resolve() != line_file.resolve():
             raise ScenarioError(f"timetable {timetable.path} is for line "
                                 f"{timetable.line_file}, not {args.line}")
         train = args.train or timetable.train

@@ -35,6 +35,7 @@ from .schema import (
     shared,
     unused,
 )
+from .timetables import check_journey
 
 
 def _unknown(name: str, where: str) -> ScenarioError:
@@ -369,6 +370,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
                             f"{values['controller.kind']} does not use the on-board estimator "
                             f"(those that do: {', '.join(estimating_kinds())})")
     try:
+        check_journey(values, line)  # before the plan: its curves then never evict the plan's
         profile = RunContext(NodeValues("profile", values), line)
         # a berth or a departure ramp where the plan has no such stop or start: refused now
         _ = profile.berth_mark, profile.departure

@@ -182,6 +182,13 @@ def _check(series: dict[str, np.ndarray], timetable: Timetable, window: float) -
     if len(lengths) > 1 or 0 in lengths:
         raise ScenarioError(f"journey indices need series of one nonzero length, not "
                             f"{sorted(lengths)} samples")
+    check_stop_window(timetable, window)
+
+
+def check_stop_window(timetable: Timetable, window: float = STOP_WINDOW) -> None:
+    """ScenarioError unless `window` is positive and under half the timetable's shortest
+    section (each standstill belongs to one station at most): what a journey run's
+    stations must leave room for, checked before it runs."""
     shortest = min(timetable.sections, key=lambda s: s.end - s.start)
     if not 0.0 < window < (shortest.end - shortest.start) / 2:
         raise ScenarioError(f"the stop window {window:g} m must be positive and under half "

@@ -28,6 +28,7 @@ is one ScenarioError line naming the file and the line.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +40,7 @@ from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import resolve_file
 from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
-                          node_error, node_number)
+                          node_error, node_number, node_value)
 from ..train.plant import TrainParameters
 from .profiles import ato_curve
 
@@ -48,6 +49,10 @@ REQUIRED_KEYS = TOP_KEYS - {"load"}
 NOMINAL_LOAD = 1.0   # a timetable without `load` is planned for the nominal train
 HEAVIEST_LOAD = 2.0  # the largest `load`, times the nominal train's mass
 STOP_KEYS = {"station", "arrival", "departure"}
+DAY = 86400.0  # s
+# s: a time on a journey's clock lies within this of its origin, either way (the longest
+# line, core/train/line.MAX_LENGTH, at 20 km/h takes about four days)
+LATEST_TIME = 7 * DAY
 
 
 @dataclass(frozen=True)
@@ -98,18 +103,34 @@ class Timetable:
 
 
 def load_timetable(path: str | Path) -> Timetable:
-    """A timetable file, checked against its line (not yet against a train: see
-    check_minimum_times)."""
-    text = yamlfile.read_text(path, "timetable file")
+    """A timetable file on the line its `line:` names, checked against that line (not
+    yet against a train: see check_minimum_times)."""
+    fields = _fields(path, yamlfile.read_text(path, "timetable file"))
+    line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
+    try:
+        line = load_line(line_file)
+    except ScenarioError as exc:  # the file the user gave, then what is wrong with its line
+        raise node_error(path, fields["line"], f"line: {exc}") from None
+    return _timetable(path, fields, line, line_file)
+
+
+def timetable_on(text: str, path: str | Path, line: Line, line_file: str) -> Timetable:
+    """A timetable from its text (a bag's copy of the file at `path`) on `line`, the line
+    the run drove (`line_file` names it), whatever the text's `line:` names now."""
+    return _timetable(path, _fields(path, text), line, line_file)
+
+
+def _fields(path, text: str) -> dict[str, yaml.Node]:
     yamlfile.check_structure(text, str(path))
-    root = yaml.compose(text)
-    fields = mapping_fields(path, root, TOP_KEYS,
+    fields = mapping_fields(path, yaml.compose(text), TOP_KEYS,
                             "a timetable file is a mapping (line, train, stops, load)")
     missing = sorted(REQUIRED_KEYS - set(fields))
     if missing:
         raise ScenarioError(f"{path}: missing {missing[0]!r}")
-    line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
-    line = load_line(line_file)
+    return fields
+
+
+def _timetable(path, fields: dict[str, yaml.Node], line: Line, line_file: str) -> Timetable:
     stops = _stops(path, fields["stops"], line)
     load = node_number(path, fields["load"], "load") if "load" in fields else NOMINAL_LOAD
     if not NOMINAL_LOAD <= load <= HEAVIEST_LOAD:
@@ -119,7 +140,7 @@ def load_timetable(path: str | Path) -> Timetable:
 
 
 def _text(node: yaml.Node) -> str:
-    return str(yaml.safe_load(yaml.serialize(node)))
+    return str(node_value(node))
 
 
 def _stops(path, node: yaml.Node, line: Line) -> tuple[Stop, ...]:
@@ -157,7 +178,14 @@ def _time(path, item: yaml.Node, entry: dict, key: str, index: int, count: int
         raise node_error(path, item, f"stops: {where} needs its {key}")
     if not needed and key in entry:
         raise node_error(path, entry[key], f"stops: {where} has no {key}")
-    return node_number(path, entry[key], key) if needed else None
+    if not needed:
+        return None
+    time = node_number(path, entry[key], key)
+    if abs(time) > LATEST_TIME:
+        raise node_error(path, entry[key], f"stops: {key} {time:g} s is more than "
+                         f"{LATEST_TIME:g} s ({LATEST_TIME / DAY:g} days) from the journey's "
+                         "clock origin")
+    return time
 
 
 def _check_order(path, item, stop: Stop, previous: Stop | None, station: Station) -> None:
@@ -197,13 +225,26 @@ def section_line(line: Line, start: float, end: float) -> Line:
         planned_run_time=None)
 
 
+CURVE_PARAMETERS = ("plant.length", "profile.jerk")  # what ato_curve reads besides profile.ato.*
+
+
 def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -> float:
     """The fastest the run's nominal train (plant.*), at `load` times its mass, runs
     `line` to its stop mark: the ato curve (profile.ato.*) at the train's full envelope
     share, from standstill to standstill (the on-time curve's count), s."""
-    fastest = {**values, "profile.envelope_share": 1.0, "profile.ato.on_time": True}
     nominal = TrainParameters.from_values(values)
-    train = dataclasses.replace(nominal, mass=load * nominal.mass)
+    curve = tuple(sorted((name, value) for name, value in values.items()
+                         if name.startswith("profile.ato.") or name in CURVE_PARAMETERS))
+    return _minimum_running_time(line, dataclasses.replace(nominal, mass=load * nominal.mass),
+                                 curve)
+
+
+# Its own cache, of the train and the curve's values alone: a run's timetable is checked at
+# each validation (every run of a study, each with its own plant.mass_factor or noise seed),
+# and these curves are not the journey's (the profile's cache keeps those).
+@functools.lru_cache(maxsize=32)
+def _minimum_running_time(line: Line, train: TrainParameters, curve: tuple) -> float:
+    fastest = {**dict(curve), "profile.envelope_share": 1.0, "profile.ato.on_time": True}
     return ato_curve(fastest, line, train).planned_run_time
 
 
@@ -212,12 +253,18 @@ def check_minimum_times(timetable: Timetable, values: dict) -> tuple[float, ...]
     plant.* and profile.ato.*), s; ScenarioError (the file and the stop's line) for a
     section the timetable gives less than that train's minimum at the timetable's
     load."""
-    minimums = []
+    check_running_times(timetable, values)
+    return tuple(minimum_running_time(section_line(timetable.line, s.start, s.end), values)
+                 for s in timetable.sections)
+
+
+def check_running_times(timetable: Timetable, values: dict) -> None:
+    """ScenarioError (the file and the stop's line) for a section the timetable gives less
+    than its minimum running time at the timetable's load, the train's of `values`: a
+    timetable no such train can keep (what a run checks before it starts)."""
     for section, stop in zip(timetable.sections, timetable.stops[1:], strict=True):
         line = section_line(timetable.line, section.start, section.end)
-        fastest = minimum_running_time(line, values)
-        loaded = fastest if timetable.load == NOMINAL_LOAD else minimum_running_time(
-            line, values, timetable.load)
+        loaded = minimum_running_time(line, values, timetable.load)
         if section.running_time < loaded:
             raise ScenarioError(
                 f"{timetable.path} line {stop.source_line}: the running time "
@@ -225,5 +272,3 @@ def check_minimum_times(timetable: Timetable, values: dict) -> tuple[float, ...]
                 f"is below its minimum {math.ceil(loaded * 10) / 10:g} s (train "
                 f"{values['plant.train'] or '(none)'} at {timetable.load:g} times its mass: "
                 "its ato curve at the full envelope)")
-        minimums.append(fastest)
-    return tuple(minimums)

@@ -282,7 +282,7 @@ def parse_line(text: str, path: str | Path = "<line>") -> Line:
     stations = _stations(path, fields.get("stations"), length)
     run_time = fields.get("planned_run_time")
     return Line(
-        name=str(yaml.safe_load(yaml.serialize(fields["name"]))), length=length,
+        name=str(node_value(fields["name"])), length=length,
         stations=stations,
         planned_run_time=node_number(path, run_time, "planned_run_time", positive=True)
         if run_time is not None else None,
@@ -307,8 +307,16 @@ def node_error(path: Path, node: yaml.Node, message: str) -> ScenarioError:
     return ScenarioError(f"{path} line {node.start_mark.line + 1}: {message}")
 
 
+def node_value(node: yaml.Node):
+    """A node's value as YAML reads it; None for an empty one (`key:` with nothing after it,
+    which yaml.serialize cannot write back)."""
+    if isinstance(node, yaml.ScalarNode) and node.tag == "tag:yaml.org,2002:null":
+        return None
+    return yaml.safe_load(yaml.serialize(node))
+
+
 def node_number(path: Path, node: yaml.Node, name: str, positive: bool = False) -> float:
-    value = yaml.safe_load(yaml.serialize(node))
+    value = node_value(node)
     if isinstance(value, str):  # YAML 1.1 reads 1e9 (no dot) as text
         try:
             value = float(value)
@@ -390,8 +398,24 @@ def _stations(path: Path, node: yaml.Node | None, length: float) -> tuple[Statio
         dwell = node_number(path, entry["dwell"], "dwell") if "dwell" in entry else 0.0
         if dwell < 0:
             raise node_error(path, entry["dwell"], f"stations: dwell {dwell:g} s is negative")
-        name = str(yaml.safe_load(yaml.serialize(entry["name"]))) if "name" in entry else ""
+        name = _station_name(path, item, entry, stations)
         if stations and position <= stations[-1].position:
             raise node_error(path, item, "stations must be in increasing position order")
         stations.append(Station(name, position, dwell))
     return tuple(stations)
+
+
+def _station_name(path: Path, item: yaml.Node, entry: dict, before: list[Station]) -> str:
+    """The station's name: text (a timetable's stops and a report's rows name stations by
+    it), given, and no other station's of the line."""
+    if "name" not in entry:
+        raise node_error(path, item, "stations: missing 'name'")
+    value = node_value(entry["name"])
+    if not isinstance(entry["name"], yaml.ScalarNode) or value is None or not str(value).strip():
+        raise node_error(path, entry["name"], f"stations: a name is text, not {value!r}")
+    name = str(value)
+    same = next((station for station in before if station.name == name), None)
+    if same is not None:
+        raise node_error(path, entry["name"], f"stations: {name!r} is already the name of the "
+                         f"station at {same.position:g} m (names are unique on a line)")
+    return name
