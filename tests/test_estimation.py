@@ -29,7 +29,7 @@ SETTLED = 1000.0  # m: past the metro's acceleration, where the heavy train satu
 # docs/tracking.md section 5.1): where the nominal train keeps off its envelope.
 CURVE = ("profile.ato.acceleration=0.6", "profile.ato.deceleration=0.6",
          "profile.ato.stop_jerk=0.4", "profile.ato.margin=1.3889", "profile.envelope_share=0.9",
-         "profile.jerk=0.5")
+         "profile.jerk=0.5", "profile.departure_jerk=0")
 
 
 @functools.lru_cache(maxsize=None)

@@ -225,7 +225,8 @@ def section_line(line: Line, start: float, end: float) -> Line:
         planned_run_time=None)
 
 
-CURVE_PARAMETERS = ("plant.length", "profile.jerk")  # what ato_curve reads besides profile.ato.*
+CURVE_PARAMETERS = ("plant.length", "profile.jerk", "profile.departure_jerk")  # what ato_curve
+# reads besides profile.ato.*
 
 
 def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -> float:
