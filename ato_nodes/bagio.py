@@ -470,12 +470,26 @@ def read_frame(bag: str | Path, mapping: dict[str, str] | None = None):
     return pandas.DataFrame(run_columns(read_run(bag, mapping))).set_index("t")
 
 
+def _on_kept_line(timetable: Path, line_copy: str) -> None:
+    """The timetable's copy made to name the line's copy: its `line:` named the line
+    where it was then (absolute, or relative to a folder the copy is not in)."""
+    text = timetable.read_text(encoding="utf-8")
+    try:
+        named = next(value for key, value in yaml.compose(text).value
+                     if key.value == "line")
+    except (yaml.YAMLError, AttributeError, TypeError, ValueError, StopIteration):
+        return  # the plan says what is wrong with the copy, in one line
+    timetable.write_text(text[:named.start_mark.index] + json.dumps(line_copy)
+                         + text[named.end_mark.index:], encoding="utf-8")
+
+
 def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
     """The run simulated in-process from its bag alone: its parameters, the files it
     keeps (line, tables, model) and its live parameter changes. Returns the series and
     the names of the recorded series that differ from it over the steps the bag holds
     (empty: bit for bit; an interrupted run's bag is compared over what it holds)."""
     from ato_nodes.core.run.loop import simulate
+    from ato_nodes.journeys import TIMETABLE
     if not run.parameters:
         raise BagError(f"{run.path}: the bag keeps no run parameters to simulate from")
     values = dict(run.parameters)
@@ -489,6 +503,8 @@ def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
                 copy.parent.mkdir()
                 copy.write_bytes(content)
                 values[name] = str(copy)
+        if kept[TIMETABLE] is not None and kept["line.file"] is not None:
+            _on_kept_line(Path(values[TIMETABLE]), values["line.file"])
         try:
             series = simulate(values, changes=run.parameter_changes)
         except ScenarioError as exc:

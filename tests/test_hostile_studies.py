@@ -150,6 +150,23 @@ def test_the_other_studies_check_their_counts_first(tmp_path, command):
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.parametrize("args, words", [
+    (["--seed", "-1"], [f"--seed must be 0 to {MAX_SEED:,}"]),
+    (["--workers", "99999999999999"], [f"--workers must be 1 to {MAX_WORKERS}"]),
+    (["--population", "99999999999"], [f"--population must be 2 to {MAX_SAMPLES:,}"]),
+])
+def test_a_tuning_refuses_its_counts_before_it_touches_out(tmp_path, args, words):
+    """A seed of -1 was refused only once OUT held its lock and tuning.json; a huge
+    --workers was an OverflowError traceback."""
+    out = tmp_path / "t"
+    out.mkdir()
+    result = script("tune.py", "--algorithm", "pso", "--scenario", "seed000-step", "--params",
+                    "adrc.mu1=600:60000", "--evaluations", "8", "--in-process", *args,
+                    "--out", out)
+    one_line_exit_2(result, *words)
+    assert not any(out.iterdir())
+
+
 BERTH_START = ["profile.journey.berth=100", "plant.initial_position=99"]
 
 

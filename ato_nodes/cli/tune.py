@@ -24,6 +24,7 @@ from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
+from ato_nodes.studies import MAX_SAMPLES, MAX_SEED, MAX_WORKERS, within
 from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
                               TuningSettings)
 
@@ -77,6 +78,12 @@ def tune() -> None:
     if args.evaluations < 1 or args.workers < 1 or (args.population or 2) < 2:
         cli.fail("--evaluations and --workers must be positive and --population at least 2")
     cli.seconds(args.timeout, "--timeout")
+    try:  # before OUT is touched: a refused command changes nothing there
+        within(args.workers, "--workers", 1, MAX_WORKERS)
+        within(args.seed, "--seed", 0, MAX_SEED)
+        within(args.population or 2, "--population", 2, MAX_SAMPLES)
+    except ScenarioError as exc:
+        cli.fail(str(exc))
     try:
         values = prepare(args.scenario, args.set)
         check_launcher_free(values)
