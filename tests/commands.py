@@ -27,3 +27,20 @@ def run_stack(scenario: str, bag: Path, overrides: list[str]) -> None:
                            *(f"--set={item}" for item in overrides)],
                           capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+def script(name: str, *args, timeout=300) -> subprocess.CompletedProcess:
+    """`name` (a command or a script) run with `args` from the checkout, its output kept."""
+    return subprocess.run([*invocation(name), *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+def one_line_exit_2(result: subprocess.CompletedProcess, *words) -> str:
+    """The refusal the project promises for bad input: exit 2, one line on stderr (no
+    traceback) holding every one of `words`; that line."""
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+    return lines[0]

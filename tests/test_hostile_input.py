@@ -2,11 +2,10 @@
 what it may read and expand to (no ROS graph is started here)."""
 
 import json
-import subprocess
 from pathlib import Path
 
 import pytest
-from commands import invocation
+from commands import one_line_exit_2, script
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = ROOT / "scripts"
@@ -16,17 +15,6 @@ BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
     for i in range(9))  # 9 * 8^9 = 1.2e9 elements once expanded
 
 
-def script(name: str, *args, timeout=60):
-    return subprocess.run([*invocation(name), *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-
-
-def one_line_exit_2(result, *words):
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2, result.stderr
-    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    for word in words:
-        assert word in lines[0], lines[0]
 
 
 def line_file(tmp_path: Path, body: str = "", length: str = "1000") -> Path:

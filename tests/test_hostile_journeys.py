@@ -7,12 +7,11 @@ import base64
 import hashlib
 import re
 import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
 from bagfile import write_run_bag
-from commands import invocation
+from commands import one_line_exit_2, script
 
 from ato_nodes.bagio import read_run, resimulate
 from ato_nodes.core.base.errors import ScenarioError
@@ -31,18 +30,6 @@ MARKET = "{name: Market (synthetic), position: 1550.0"
 TIMETABLE_LINE = "line: lines/metro-line.yaml"
 
 
-def script(name: str, *args, timeout=300):
-    return subprocess.run([*invocation(name), *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-
-
-def one_line_exit_2(result, *words):
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2, result.stdout + result.stderr
-    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    for word in words:
-        assert word in lines[0], lines[0]
-    return lines[0]
 
 
 def timetable_file(tmp_path: Path, name: str = "timetable.yaml", line: str | None = None,

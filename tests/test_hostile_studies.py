@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from commands import invocation
+from commands import one_line_exit_2, script
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import prepare
@@ -20,18 +20,6 @@ DIGEST = "0" * 64
 HUGE = "99999999999999999999"
 
 
-def script(name: str, *args, timeout=120):
-    return subprocess.run([*invocation(name), *map(str, args)],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-
-
-def one_line_exit_2(result, *words):
-    lines = result.stderr.strip().splitlines()
-    assert result.returncode == 2, result.stderr
-    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
-    for word in words:
-        assert word in lines[0], lines[0]
-    return lines[0]
 
 
 def fingerprint(*args):
