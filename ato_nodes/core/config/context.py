@@ -103,9 +103,11 @@ class RunContext:
         """The plan's targets of steps step .. step + count, from `position` at step:
         exact for time-indexed plans; for position-indexed plans along the planned
         trajectory ds/dt = v(s) from `position` (Heun's method, one step per period)."""
-        plan, h, target = self.plan, self.period, self.target
+        plan, h, ramp = self.plan, self.period, self.departure
         if not plan.position_indexed:  # the papers' setting, every step of every run
             return [plan.speed((step + i) * h, position) for i in range(count + 1)]
+        # past the departure ramp (or without one) the plan's own speed, every step kept cheap
+        target = self.target if step * h < ramp.delay + ramp.rise else plan.speed
         speeds = [target(step * h, position)]
         for i in range(1, count + 1):
             t, v = (step + i) * h, speeds[-1]
