@@ -24,18 +24,25 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 
 
-# A study's counts, checked before anything is drawn, prepared or started (within()).
+# A study's counts, checked before anything is drawn, prepared or started (check_counts()).
 MAX_WORKERS = 64      # processes of a pool: more than the machine's cores only share them
 MAX_SAMPLES = 10_000  # runs drawn at once: every one is prepared before the first starts
 MAX_SEED = 2**31 - 1  # a study's seed, as the schema's (plant.noise_seed and the others)
+COUNT_BOUNDS = {"samples": (1, MAX_SAMPLES), "workers": (1, MAX_WORKERS), "seed": (0, MAX_SEED),
+                "seeds": (0, MAX_SEED), "population": (2, MAX_SAMPLES)}
 
 
-def within(value: int, option: str, low: int, high: int) -> None:
-    """ScenarioError (one line, stating the bound) unless low <= value <= high; a value
-    too long to read is said by its number of digits."""
-    if not low <= value <= high:
-        text = str(value) if abs(value) < 10**15 else f"a number of {len(str(abs(value)))} digits"
-        raise ScenarioError(f"{option} must be {low} to {high:,}, not {text}")
+def check_counts(**counts: int | Sequence[int]) -> None:
+    """ScenarioError (one line naming the option --NAME and its bound, COUNT_BOUNDS) for
+    the first count out of its bounds; a list (--seeds) is checked value by value, a
+    value too long to read is said by its number of digits."""
+    for name, given in counts.items():
+        low, high = COUNT_BOUNDS[name]
+        for value in given if isinstance(given, Sequence) else [given]:
+            if not low <= value <= high:
+                text = (str(value) if abs(value) < 10**15
+                        else f"a number of {len(str(abs(value)))} digits")
+                raise ScenarioError(f"--{name} must be {low} to {high:,}, not {text}")
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ import _cli
 from ato_nodes.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_given_once
-from ato_nodes.studies import (MAX_WORKERS, Variant, numeric, prepare_variants, run_study, within,
+from ato_nodes.studies import (Variant, check_counts, numeric, prepare_variants, run_study,
                                write_outputs)
 
 ADDITIONS = (
@@ -81,7 +81,7 @@ def main() -> None:
         if item.split("=", 1)[0] in undone:
             _cli.fail(f"--untuned {item}: another addition undoes {item.split('=', 1)[0]}")
     try:
-        within(args.workers, "--workers", 1, MAX_WORKERS)
+        check_counts(workers=args.workers)
         check_given_once(args.untuned)
         runs = prepare_variants(variants(args.scenario, additions, args.reference), args.set)
     except ScenarioError as exc:

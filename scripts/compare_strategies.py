@@ -25,7 +25,7 @@ from ato_nodes.core.base.paths import resolve_file
 from ato_nodes.core.config.scenario import complete
 from ato_nodes.core.targets import strategy
 from ato_nodes.core.train.line import load_line
-from ato_nodes.studies import MAX_SEED, MAX_WORKERS, in_pool, within, write_outputs
+from ato_nodes.studies import check_counts, in_pool, write_outputs
 
 SUPPLEMENTS = (0.03, 0.05, 0.10)
 
@@ -57,9 +57,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args()
     try:  # the counts, the line and the train, before the pool starts (its workers load them)
-        within(args.workers, "--workers", 1, MAX_WORKERS)
-        for seed in args.seeds:
-            within(seed, "--seeds", 0, MAX_SEED)
+        check_counts(workers=args.workers, seeds=args.seeds)
         load_line(resolve_file(args.line, [Path.cwd()]))
         complete({"plant.train": args.train}, [])
     except ScenarioError as exc:

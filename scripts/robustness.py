@@ -28,8 +28,8 @@ import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
-from ato_nodes.studies import (MAX_SAMPLES, MAX_SEED, MAX_WORKERS, Variant, in_pool,
-                               prepare_variants, within, write_outputs)
+from ato_nodes.studies import (Variant, check_counts, in_pool, prepare_variants,
+                               write_outputs)
 
 INDICES = (  # key, heading, worst is the largest of
     ("max_abs_error_kmh", "max abs(e) km/h"),
@@ -105,9 +105,7 @@ def counts(results: list[dict]) -> dict[str, int]:
 def main() -> None:
     args = parse_args()
     try:
-        within(args.samples, "--samples", 1, MAX_SAMPLES)
-        within(args.workers, "--workers", 1, MAX_WORKERS)
-        within(args.seed, "--seed", 0, MAX_SEED)
+        check_counts(samples=args.samples, workers=args.workers, seed=args.seed)
     except ScenarioError as exc:
         _cli.fail(str(exc))
     options = {"plant.mass_factor": "mass", "plant.resistance_factor": "resistance",

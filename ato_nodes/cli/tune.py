@@ -24,7 +24,7 @@ from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
-from ato_nodes.studies import MAX_SAMPLES, MAX_SEED, MAX_WORKERS, within
+from ato_nodes.studies import COUNT_BOUNDS, check_counts
 from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
                               TuningSettings)
 
@@ -79,9 +79,8 @@ def tune() -> None:
         cli.fail("--evaluations and --workers must be positive and --population at least 2")
     cli.seconds(args.timeout, "--timeout")
     try:  # before OUT is touched: a refused command changes nothing there
-        within(args.workers, "--workers", 1, MAX_WORKERS)
-        within(args.seed, "--seed", 0, MAX_SEED)
-        within(args.population or 2, "--population", 2, MAX_SAMPLES)
+        check_counts(workers=args.workers, seed=args.seed,
+                     population=args.population or COUNT_BOUNDS["population"][0])
     except ScenarioError as exc:
         cli.fail(str(exc))
     try:
