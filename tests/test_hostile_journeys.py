@@ -152,7 +152,7 @@ def test_a_studys_runs_check_their_timetable_once(monkeypatch):
     minimum running times are of the nominal train and are not built again."""
     from ato_nodes.core.targets import timetable
     prepare("seed004-metro-line")
-    monkeypatch.setattr(timetable, "ato_curve", None)  # a curve built again would fail
+    monkeypatch.setattr(timetable, "new_ato_curve", None)  # a curve built again would fail
     drawn = prepare("seed004-metro-line", ["plant.mass_factor=1.2", "plant.noise_seed=7"])
     assert drawn["plant.mass_factor"] == 1.2
 

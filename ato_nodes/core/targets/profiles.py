@@ -687,17 +687,22 @@ LATE_NOTICE = 0.05  # s an on-time curve may miss the planned time by without a 
 def ato_curve(values: dict, line, train: TrainParameters) -> AtoCurve:
     """The ATO curve a run's profile.ato.* parameters give on `line` for `train` (the
     run context's: the train the ATO knows)."""
+    return _ato_curve(*ato_curve_arguments(values, line, train))
+
+
+def ato_curve_arguments(values: dict, line, train: TrainParameters) -> tuple:
+    """What the ATO curve of `values` on `line` for `train` is built from (new_ato_curve's
+    arguments, in order): the key of any cache of curves."""
     if values["profile.ato.neutral_runout"] > 0.0 and not values["profile.envelope_share"]:
         raise ScenarioError("profile.ato.neutral_runout needs profile.envelope_share > 0 (the "
                             "curve without a share does not plan neutral sections)")
-    return _ato_curve(line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
-                      values["profile.ato.margin"], values["profile.ato.start_speed"],
-                      values["plant.length"], values["profile.ato.power_speed"] or math.inf,
-                      values["profile.ato.stop_jerk"],
-                      train if values["profile.envelope_share"] else None,
-                      values["profile.envelope_share"], values["profile.jerk"],
-                      departure_time(values, train) if values["profile.ato.on_time"] else None,
-                      values["profile.ato.neutral_runout"])
+    return (line, values["profile.ato.acceleration"], values["profile.ato.deceleration"],
+            values["profile.ato.margin"], values["profile.ato.start_speed"],
+            values["plant.length"], values["profile.ato.power_speed"] or math.inf,
+            values["profile.ato.stop_jerk"], train if values["profile.envelope_share"] else None,
+            values["profile.envelope_share"], values["profile.jerk"],
+            departure_time(values, train) if values["profile.ato.on_time"] else None,
+            values["profile.ato.neutral_runout"])
 
 
 def departure_time(values: dict, train: TrainParameters) -> float:
@@ -750,17 +755,20 @@ def departing(ramp: DepartureRamp, since: float, target: float) -> float:
     return min(target, ramp.speed * share * share * (3.0 - 2.0 * share))
 
 
-# a journey asks for two curves per section (on time, fastest): the metro line's twelve
-@functools.lru_cache(maxsize=16)
-def _ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
-               power_speed, stop_jerk, train, envelope_share, jerk, departure,
-               neutral_runout) -> AtoCurve:
-    """One curve per distinct line and parameters (the profile and the scorer both need
-    it; the bisection costs tens of ms); an AtoCurve is never changed once built."""
+def new_ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
+                  power_speed, stop_jerk, train, envelope_share, jerk, departure,
+                  neutral_runout) -> AtoCurve:
+    """The curve of ato_curve_arguments, built anew."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
                     power_speed=power_speed, stop_jerk=stop_jerk, train=train,
                     envelope_share=envelope_share, jerk=jerk, departure=departure,
                     neutral_runout=neutral_runout)
+
+
+# One curve per distinct line and parameters (the profile and the scorer both need it; the
+# bisection costs tens of ms; an AtoCurve is never changed once built); a journey asks for
+# two curves per section (on time, fastest): the metro line's twelve
+_ato_curve = functools.lru_cache(maxsize=16)(new_ato_curve)
 
 
 STEP_PARAMETERS = (

@@ -42,7 +42,7 @@ from ..base.paths import resolve_file
 from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
                           node_error, node_number, node_value)
 from ..train.plant import TrainParameters
-from .profiles import ato_curve
+from .profiles import ato_curve_arguments, new_ato_curve
 
 TOP_KEYS = {"line", "train", "stops", "load"}
 REQUIRED_KEYS = TOP_KEYS - {"load"}
@@ -225,28 +225,22 @@ def section_line(line: Line, start: float, end: float) -> Line:
         planned_run_time=None)
 
 
-CURVE_PARAMETERS = ("plant.length", "profile.jerk", "profile.departure_jerk")  # what ato_curve
-# reads besides profile.ato.*
-
-
 def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -> float:
     """The fastest the run's nominal train (plant.*), at `load` times its mass, runs
     `line` to its stop mark: the ato curve (profile.ato.*) at the train's full envelope
     share, from standstill to standstill (the on-time curve's count), s."""
     nominal = TrainParameters.from_values(values)
-    curve = tuple(sorted((name, value) for name, value in values.items()
-                         if name.startswith("profile.ato.") or name in CURVE_PARAMETERS))
-    return _minimum_running_time(line, dataclasses.replace(nominal, mass=load * nominal.mass),
-                                 curve)
+    fastest = {**values, "profile.envelope_share": 1.0, "profile.ato.on_time": True}
+    return _minimum_running_time(ato_curve_arguments(
+        fastest, line, dataclasses.replace(nominal, mass=load * nominal.mass)))
 
 
-# Its own cache, of the train and the curve's values alone: a run's timetable is checked at
-# each validation (every run of a study, each with its own plant.mass_factor or noise seed),
-# and these curves are not the journey's (the profile's cache keeps those).
+# Its own cache, keyed by what the curve is built from: a run's timetable is checked at each
+# validation (every run of a study, each with its own weighed train), and these curves are
+# not the journey's, which would evict them from the profile's cache (ato_curve's).
 @functools.lru_cache(maxsize=32)
-def _minimum_running_time(line: Line, train: TrainParameters, curve: tuple) -> float:
-    fastest = {**dict(curve), "profile.envelope_share": 1.0, "profile.ato.on_time": True}
-    return ato_curve(fastest, line, train).planned_run_time
+def _minimum_running_time(arguments: tuple) -> float:
+    return new_ato_curve(*arguments).planned_run_time
 
 
 def check_minimum_times(timetable: Timetable, values: dict) -> tuple[float, ...]:
