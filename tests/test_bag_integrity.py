@@ -133,6 +133,7 @@ def metro_run():
     return simulate(values), values
 
 
+@pytest.mark.slow
 def test_an_interrupted_run_is_scored_as_partial_and_says_where_it_stopped(metro_run,
                                                                              tmp_path):
     series, values = metro_run
@@ -175,6 +176,7 @@ def test_a_bag_stopped_before_its_first_complete_step_says_so(metro_run, tmp_pat
     assert "/ato/target_speed" in contents["notes"][0]
 
 
+@pytest.mark.slow
 def test_an_open_track_run_reads_into_a_frame_without_an_infinite_column(tmp_path):
     values = apply_overrides(load_scenario("seed000-step"), ["run.duration=2"])
     series = simulate(values)

@@ -43,6 +43,7 @@ def test_the_profile_publishes_a_zero_target_once_the_train_stands_in_its_berth(
     assert far.on_position(mark - 0.5)[0][0] > 0.0  # standing short of the berth: the plan's
 
 
+@pytest.mark.slow
 def test_a_train_stopped_short_in_its_berth_stays_there_and_arrives_then():
     creeping = simulate(prepare("seed004-metro-ato", [*CREEPING, "profile.berth=0"]))
     values = prepare("seed004-metro-ato", [*CREEPING, "profile.berth=0.1"])

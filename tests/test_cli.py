@@ -57,6 +57,7 @@ def test_importing_the_commands_leaves_the_signals_alone(monkeypatch):
 
 @pytest.mark.skipif(not (BIN / "score_bag").exists(),
                     reason="package not installed in this environment (pip install -e .)")
+@pytest.mark.slow
 def test_the_installed_command_scores_a_bag_as_the_script_does(tmp_path):
     bag = tmp_path / "small"
     write(bag, 40)

@@ -37,6 +37,7 @@ def run_start(scenario, jerk, seconds=20.0):
     return series, values
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed004-metro-ato", "seed004-metro-line"])
 def test_the_standing_train_follows_its_departure_target(scenario):
     stepped, _ = run_start(scenario, 0.0)

@@ -56,6 +56,7 @@ def python_run(monkeypatch, values, prune=None):
     return simulate(values, prune=prune, compiled=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario,overrides", VARIANTS)
 def test_the_compiled_loop_gives_the_python_loops_bits(monkeypatch, scenario, overrides):
     values = apply_overrides(load_scenario(scenario), ["run.duration=300", *overrides])
@@ -133,6 +134,7 @@ def test_the_compiled_loop_covers_every_shipped_scenario():
                                        ["gpc.constrained=false", "gpc.correction=false"],
                                        ["estimator.enabled=true", "plant.mass_factor=1.2",
                                         "plant.resistance_factor=1.3"]])
+@pytest.mark.slow
 def test_a_kind_without_compiled_steps_gives_the_python_loops_bits(monkeypatch, overrides):
     """The GPC's own Python step called from the compiled loop, for each of its models."""
     values = apply_overrides(load_scenario("seed001-crh380al"), ["run.duration=120",
@@ -143,6 +145,7 @@ def test_a_kind_without_compiled_steps_gives_the_python_loops_bits(monkeypatch, 
     assert not python_steps.RUNNING  # the run let go of its controller
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", COVERED)
 def test_every_covered_shipped_scenario_gives_the_python_loops_bits(monkeypatch, scenario):
     values = load_scenario(scenario)
@@ -153,6 +156,7 @@ def test_every_covered_shipped_scenario_gives_the_python_loops_bits(monkeypatch,
         assert np.array_equal(compiled[name], python[name], equal_nan=True), name
 
 
+@pytest.mark.slow
 def test_every_run_of_a_kind_calls_one_compiled_signature():
     """So one compilation per controller kind (setup.sh's, or a tuning's before its
     workers start) serves every compiled run of the checkout but journeys and runs with
@@ -243,6 +247,7 @@ def test_a_change_to_any_core_source_drops_the_compiled_cache(tmp_path):
     assert (cache / "module.looped.sources").read_text() == kernels.sources_digest()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed004-metro-ato", "seed002-hsr", "hsr-neutral-ato"])
 def test_a_plan_table_gives_the_plans_own_speeds_and_limits_compiled(scenario):
     """PlanTable's interpolation, written out for compiled code, against the plan's
@@ -264,6 +269,7 @@ def test_a_plan_table_gives_the_plans_own_speeds_and_limits_compiled(scenario):
             assert limit(position) == plan.limit(position), position
 
 
+@pytest.mark.slow
 def test_the_compiled_interpolation_is_numpys_on_uneven_points():
     """interpolated() and cell_of(), as compiled code runs them, against np.interp and
     np.searchsorted on points far from evenly spaced (the search starts where even points

@@ -67,10 +67,12 @@ def test_line_files_that_would_exhaust_or_mislead(tmp_path, make, words):
     (["--out", "/sys/bag"], ["/sys/bag", "cannot be written"]),
     (["--out", "/proc/bag"], ["/proc/bag", "cannot be written"]),
 ])
+@pytest.mark.slow
 def test_run_stack_options(args, words):
     one_line_exit_2(script("run_stack.py", *args), *words)
 
 
+@pytest.mark.slow
 def test_tuning_options_and_logs(tmp_path):
     base = ["--algorithm", "pso", "--scenario", "seed000", "--in-process", "--params",
             "adrc.mu1=600:60000", "--evaluations", "8", "--population", "4", "--set",
@@ -92,6 +94,7 @@ def test_tuning_options_and_logs(tmp_path):
     assert resumed.returncode == 0 and "line 3 is incomplete" in resumed.stderr
 
 
+@pytest.mark.slow
 def test_replay_times_must_be_finite(tmp_path):
     one_line_exit_2(script("replay_bag.py", tmp_path, "--start", "nan"), "finite")
     one_line_exit_2(script("replay_bag.py", tmp_path, "--end", "1e300"), "finite")
@@ -242,6 +245,7 @@ def metro_bag(tmp_path: Path, name: str = "bag", overrides=(), **kept) -> Path:
     ({"plant.mass": None}, ["plant.mass must be a number, not None"]),
     ({"run.period": "fast"}, ["run.period must be a number, not 'fast'"]),
 ])
+@pytest.mark.slow
 def test_offline_tools_refuse_a_bags_malformed_parameters_in_one_line(tmp_path, kept, words):
     bag = metro_bag(tmp_path, **kept)
     for name, args in (("score_bag.py", []), ("analyze.py", ["--out", tmp_path / "report"]),
@@ -273,6 +277,7 @@ def test_analyze_refuses_an_out_that_is_a_file_in_one_line(tmp_path):
     assert taken.read_text() == "mine\n"
 
 
+@pytest.mark.slow
 def test_report_markdown_shows_names_from_a_bag_as_text(tmp_path):
     """A bag's directory, scenario, train, line and station names are anyone's text: in
     report.md they stay text (no live HTML, no broken table) as in report.html."""

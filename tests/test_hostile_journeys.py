@@ -108,6 +108,7 @@ def test_plan_journey_refuses_an_absurd_arrival_in_one_short_line(tmp_path):
     assert len(said) < 200
 
 
+@pytest.mark.slow
 def test_a_run_refuses_a_timetable_its_train_cannot_keep(tmp_path):
     """10 s for the 1.55 km to Market, whose minimum is over 120 s: refused by prepare()
     (what robustness.py and tune --in-process run) as by plan_journey.py, not warned."""
@@ -121,6 +122,7 @@ def test_a_run_refuses_a_timetable_its_train_cannot_keep(tmp_path):
                     "running time 10 s", "below its minimum")
 
 
+@pytest.mark.slow
 def test_run_stack_refuses_an_impossible_timetable_before_anything_starts(tmp_path):
     path = timetable_file(tmp_path, change=("arrival: 131, departure: 156",
                                             "arrival: 10, departure: 35"))
@@ -147,6 +149,7 @@ def test_a_journey_refuses_line_planned_run_time_naming_why():
         prepare("seed004-metro-line", ["line.planned_run_time=500"])
 
 
+@pytest.mark.slow
 def test_a_studys_runs_check_their_timetable_once(monkeypatch):
     """Each draw of a study (its own plant.mass_factor, noise seed) is validated again; the
     minimum running times are of the nominal train and are not built again."""
@@ -159,6 +162,7 @@ def test_a_studys_runs_check_their_timetable_once(monkeypatch):
 
 # ---------------------------------------------------------------- plan_journey.py ----
 
+@pytest.mark.slow
 def test_plan_journey_takes_a_line_and_a_timetable_given_as_files(tmp_path):
     shutil.copy(CONFIG / "lines" / "metro-line.yaml", tmp_path / "my-line.yaml")
     path = timetable_file(tmp_path, line="my-line.yaml")
@@ -214,6 +218,7 @@ def market_row(report: Path) -> list[str]:
     return [cell.strip() for cell in row.strip("|").split(" | ")]
 
 
+@pytest.mark.slow
 def test_analyze_reads_a_users_line_back_after_it_moved_and_went(user_run, tmp_path):
     """analyze.py once read the kept timetable's ../lines/ against msg_config/ ("cannot
     read line file <checkout>/lines/my-12km.yaml"); a line since edited was read as it is

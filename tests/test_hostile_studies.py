@@ -53,6 +53,7 @@ def test_a_saved_set_is_read_bounded():
     one_line_exit_2(fingerprint("--compare", "/dev/zero"), "not a regular file")
 
 
+@pytest.mark.slow
 def test_a_series_changed_or_gone_is_not_identical(tmp_path):
     out = tmp_path / "fp.json"
     assert fingerprint("--out", out).returncode == 0
@@ -164,6 +165,7 @@ def test_a_journey_starts_at_its_first_stop_whatever_its_berth():
     assert prepare("seed004-metro-line", ["plant.initial_position=0.05"])  # stopped at it
 
 
+@pytest.mark.slow
 def test_the_stack_refuses_a_start_off_the_first_stop_before_it_starts(tmp_path):
     result = script("run_stack.py", "--scenario", "seed004-metro-line", "--out", tmp_path / "b",
                     *(f"--set={item}" for item in BERTH_START))

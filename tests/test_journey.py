@@ -88,6 +88,7 @@ def toy(tmp_path_factory):
     return timetable, plan
 
 
+@pytest.mark.slow
 def test_a_planned_journey_keeps_the_timetable_total_and_every_minimum(toy):
     timetable, plan = toy
     assert sum(plan.allocation.times) == pytest.approx(timetable.running_time)

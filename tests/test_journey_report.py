@@ -56,6 +56,7 @@ def table_row(text: str, station: str) -> list[str]:
     return [cell.strip() for cell in row.strip("|").split(" | ")]
 
 
+@pytest.mark.slow
 def test_the_report_tables_each_station_and_section_of_the_timetable(journey, tmp_path):
     markdown, page = write_report([journey], [], tmp_path / "report")
     text, series = markdown.read_text(), journey.series
@@ -90,6 +91,7 @@ def test_the_report_tables_each_station_and_section_of_the_timetable(journey, tm
                      html)
 
 
+@pytest.mark.slow
 def test_the_report_lists_the_replans_the_bag_recorded(journey, tmp_path):
     """A train held 20 s longer at Market leaves it late: the one re-plan, recorded as the
     profile node records it (its fields and step), is listed in report.md and report.html
@@ -165,6 +167,7 @@ def test_a_bag_moved_to_another_machine_is_scored_on_the_timetable_it_keeps(jour
         run_timetable(tampered)
 
 
+@pytest.mark.slow
 def test_a_run_lacking_a_series_is_noted_and_other_runs_have_no_journey(journey, tmp_path):
     series = {name: values for name, values in journey.series.items() if name != "force"}
     journeys, notes = journey_reports([judge(Run(journey.path, series, journey.parameters,

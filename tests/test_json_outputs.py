@@ -55,12 +55,14 @@ def test_score_bag_json_of_a_run_without_arrival_is_strict(metro_start, monkeypa
     assert indices["abs_stopping_error"] > 2000 and indices["steps"] == 300
 
 
+@pytest.mark.slow
 def test_the_reports_indices_json_of_a_run_without_arrival_is_strict(metro_start, tmp_path):
     write_report([read_run(metro_start)], [], tmp_path / "report")
     indices = strict((tmp_path / "report" / "indices.json").read_text())["metro-start"]
     assert all(indices[name] is None for name in NOT_MEASURED)
 
 
+@pytest.mark.slow
 def test_a_tunings_summary_is_strict(tmp_path):
     out = tmp_path / "tune"
     result = script("tune.py", "--algorithm", "pso", "--scenario", "seed004-metro", "--params",
@@ -72,6 +74,7 @@ def test_a_tunings_summary_is_strict(tmp_path):
     strict((out / "tuning.json").read_text())
 
 
+@pytest.mark.slow
 def test_the_robustness_report_is_strict(tmp_path):
     result = script("robustness.py", "seed004-metro", "--samples", "2", "--workers", "1",
                     "--set", "run.duration=20", "--out", tmp_path / "r")

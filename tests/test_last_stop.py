@@ -69,6 +69,7 @@ def test_standing_counts_the_samples_at_the_last_stop_and_the_hold_ends_the_run(
     assert last_stop({**values, "run.last_stop_hold": 0.26}).hold == 3  # whole periods
 
 
+@pytest.mark.slow
 def test_the_run_ends_its_hold_after_the_train_stands_at_the_last_stop_as_the_scorer_sees(
         tmp_path):
     values = short_journey(tmp_path)
@@ -90,6 +91,7 @@ def test_the_run_ends_its_hold_after_the_train_stands_at_the_last_stop_as_the_sc
         assert np.array_equal(python[name], unended[name][:len(t)]), name
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 def test_the_compiled_loop_ends_at_the_python_loops_step_with_its_bits_in_chunks_too(
         tmp_path, monkeypatch):

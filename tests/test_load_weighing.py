@@ -129,6 +129,7 @@ def planned_force(curve, speeds, train, line):
     return force, neutral
 
 
+@pytest.mark.slow
 def test_the_capped_curve_falls_where_the_share_cannot_hold_the_cruise_speed():
     # the curve without the coasting past its neutral sections, whose cruise is a little
     # higher: the grade's cell at 15211.5 m plans about 0.5 N/kN over the share then (0.518
@@ -146,6 +147,7 @@ def test_the_capped_curve_falls_where_the_share_cannot_hold_the_cruise_speed():
     assert np.max(force - share) > 5.0
 
 
+@pytest.mark.slow
 def test_the_capped_curve_coasts_through_neutral_sections():
     values = prepare("hsr-neutral-ato", [])
     context = RunContext(NodeValues("profile", values))

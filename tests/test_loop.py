@@ -80,6 +80,7 @@ def test_a_live_gain_set_to_its_own_value_changes_nothing(scenario, name, value)
     assert all(np.array_equal(plain[key], retuned[key]) for key in plain)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario,name,value", LIVE_GAINS)
 def test_a_live_gain_acts_from_its_step_on(scenario, name, value):
     run = run_of(scenario)

@@ -229,6 +229,7 @@ def test_the_split_interleaves_three_of_five_for_training():
     assert max(np.diff(train)) <= 2 and max(np.diff(test)) <= 3
 
 
+@pytest.mark.slow
 def test_the_hyperparameter_search_finds_a_fit_better_than_the_box_corner():
     x, t = train_like_samples(240)
     search = ident.search_hyperparameters(LAYOUT, x, t, seed=3, population=8, iterations=6)

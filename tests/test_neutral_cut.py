@@ -171,6 +171,7 @@ def hsr_curve(*overrides):
     return ato_curve(values, load_line(values["line.file"]), train), train, values
 
 
+@pytest.mark.slow
 def test_the_curve_coasts_on_past_a_neutral_section_for_its_runout():
     curve, train, values = hsr_curve()
     runout = values["profile.ato.neutral_runout"]

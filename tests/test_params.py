@@ -19,6 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 METRO_FILE = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
 
 
+@pytest.mark.slow
 def test_shipped_scenarios_load():
     names = scenario_names()
     assert {"seed000", "seed000-step", "seed000-realistic"} <= set(names)

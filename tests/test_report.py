@@ -75,6 +75,7 @@ def test_the_run_is_named_with_its_scenario_train_controller_gains_and_line(metr
     assert "2.6 km" in identity["line"]
 
 
+@pytest.mark.slow
 def test_the_page_is_self_contained_with_its_figures_and_verdict(metro, tmp_path):
     run = with_requirements(metro, "max_abs_error_kmh<=100, switch_count<=0", bands="0.3")
     markdown, page = write_report([run], [], tmp_path / "report")
@@ -90,6 +91,7 @@ def test_the_page_is_self_contained_with_its_figures_and_verdict(metro, tmp_path
     assert not (tmp_path / "report" / "convergence.png").exists()
 
 
+@pytest.mark.slow
 def test_two_runs_get_difference_plots(metro, tmp_path):
     other = make_run(tmp_path, "tuned", ["dadrc.b1=60"])
     _, page = write_report([metro, other], [], tmp_path / "report")
@@ -124,6 +126,7 @@ def test_bad_report_parameters_are_one_line(metro):
         apply_overrides(load_scenario("seed004-metro"), ["report.require=swich_count<=3"])
 
 
+@pytest.mark.slow
 def test_every_shipped_scenario_names_indices_the_scorer_gives():
     for name in scenario_names():
         parameters = load_scenario(name)
@@ -135,6 +138,7 @@ def metro_values(*overrides):
     return apply_overrides(load_scenario("seed004-metro"), list(overrides))
 
 
+@pytest.mark.slow
 def test_a_live_change_shows_in_the_gains_a_table_and_the_time_plots(tmp_path):
     values = metro_values()
     changes = {592: {"dadrc.b1": 100.0}}  # `ros2 param set /controller dadrc.b1 100.0`

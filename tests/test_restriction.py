@@ -104,6 +104,7 @@ def arrival(run, mark):
     return run["t"][np.argmax(standing)]
 
 
+@pytest.mark.slow
 def test_the_late_arrival_is_caught_up_after_it_compiled_as_in_python(timetable):
     held = "profile.journey.dwell_extension=3:10"  # leaving Riverside late: a re-plan there
     central, university = timetable.stops[3:5]
@@ -130,6 +131,7 @@ def test_the_late_arrival_is_caught_up_after_it_compiled_as_in_python(timetable)
     assert caught < late_kept - 1.0
 
 
+@pytest.mark.slow
 def test_the_recorded_and_scored_limit_is_the_restricted_one(timetable):
     values, plain = metro(RESTRICTION, "run.duration=460"), metro("run.duration=460")
     series = simulate(values)
@@ -190,6 +192,7 @@ def test_bad_input_is_one_line(restriction, message):
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_the_delay_study_refuses_a_restriction_off_the_line_in_one_line():
     done = subprocess.run([*invocation("journey_delay.py"), SCENARIO,
                            "--restriction", "11000:12000:8"],

@@ -44,6 +44,7 @@ def script(*args):
                           timeout=120)
 
 
+@pytest.mark.slow
 def test_the_robustness_script_draws_inside_its_ranges_and_reports_the_worst(tmp_path):
     result = script("seed004-metro", "--samples", "3", "--set", "run.duration=20",
                     "--mass", "0.9:1.1", "--out", tmp_path / "r")

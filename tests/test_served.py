@@ -121,6 +121,7 @@ def late_timetable(tmp_path):
     return str(path)
 
 
+@pytest.mark.slow
 def test_a_late_train_leaves_its_dwell_after_it_arrived_compiled_as_in_python(tmp_path):
     # A run refuses a timetable its train cannot keep (tests/test_hostile_journeys.py); the
     # plan of one, built here past that check, makes the train late at Market.
@@ -187,6 +188,7 @@ def arrival(run, mark):
     return run["t"][np.argmax(standing)]
 
 
+@pytest.mark.slow
 def test_a_delayed_train_catches_up_compiled_as_in_python(timetable):
     delayed = ("profile.journey.dwell_extension=2:30", "run.duration=430")
     values = metro(*delayed)
@@ -252,6 +254,7 @@ def test_bad_input_is_one_line(override, message):
     assert "\n" not in str(error.value)
 
 
+@pytest.mark.slow
 def test_run_stack_refuses_a_dwell_extension_beyond_an_hour_in_one_line(tmp_path):
     done = subprocess.run([*invocation("run_stack"), "--scenario", SCENARIO, "--out",
                            str(tmp_path / "bag"), "--set=profile.journey.dwell_extension=2:3601"],
@@ -267,6 +270,7 @@ def test_the_delay_study_refuses_a_run_that_is_not_a_journey_first_in_one_line()
     assert "seed004-metro is not a journey" in done.stderr
 
 
+@pytest.mark.slow
 def test_the_delay_study_refuses_a_delay_outside_the_journey_in_one_line():
     done = subprocess.run([*invocation("journey_delay.py"), SCENARIO, "--delay", "1:30"],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)

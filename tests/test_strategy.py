@@ -34,6 +34,7 @@ def runs(modes):
     return [m for i, m in enumerate(modes) if i == 0 or modes[i - 1] != m]
 
 
+@pytest.mark.slow
 def test_on_a_flat_line_the_optimum_is_full_power_cruise_coast_full_brake():
     track = strategy.Track.of(line(), CRH5, ds=100.0)
     fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
@@ -51,6 +52,7 @@ def test_on_a_flat_line_the_optimum_is_full_power_cruise_coast_full_brake():
     assert best.speeds[0] == 0.0 and best.speeds[-1] == pytest.approx(0.0, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_traction_is_off_through_every_neutral_section_and_the_cap_holds():
     neutral = "neutral_sections:\n  - {start: 6000, end: 6300}\n  - {start: 12000, end: 12300}\n"
     grades = "gradients:\n  - {start: 0, end: 20000, grade: 6.0}\n"
@@ -73,6 +75,7 @@ def test_a_planned_time_below_the_flat_out_run_is_refused():
         strategy.solve(track, CRH5, 0.9, fastest.time - 5.0)
 
 
+@pytest.mark.slow
 def test_more_time_costs_less_energy():
     track = strategy.Track.of(line(), CRH5, ds=200.0)
     fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)
@@ -265,6 +268,7 @@ def test_a_coasting_command_leads_into_a_coming_traction_stage_only_when_behind(
     assert on_plan_side(u, planned, coming, speed, 10.0, 0.1) == expected
 
 
+@pytest.mark.slow
 def test_the_plans_force_keeps_the_tracked_strategys_coasting_and_modes(tmp_path):
     line_path, path, result = shipped_like_strategy(tmp_path)
     runs_of = {}

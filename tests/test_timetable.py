@@ -157,6 +157,7 @@ def test_a_section_line_is_the_line_seen_from_its_first_stop(tmp_path):
             line.additional_resistance(x + 1200.0, 100.0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["metro-line", "hsr-journey"])
 def test_the_shipped_timetables_add_5_to_10_percent_to_every_loaded_minimum(name):
     """Planned for the crush-laden train (the heaviest robustness.py draws), with the

@@ -198,6 +198,7 @@ def test_a_rounded_traction_turning_straight_into_braking_keeps_its_jerk():
     assert np.all(rounded.speeds[1:][falling] <= corners.speeds[1:][falling] + 1e-9)
 
 
+@pytest.mark.slow
 def test_a_feasible_time_plan_falls_behind_where_the_plan_asks_too_much():
     values = load_scenario("seed000-realistic")
     train = TrainParameters.from_values(values)
@@ -230,6 +231,7 @@ def stop_errors(values) -> list[float]:
             if not math.isnan(station.stop_error)]
 
 
+@pytest.mark.slow
 def test_a_train_ahead_of_its_stopping_curve_brakes_for_where_it_will_be():
     # a heavy train with a fast actuator (the nominal model's lag x0.75) rolls past the
     # first two marks of the metro line; tracking the curve where it is predicted to be,
@@ -258,6 +260,7 @@ def test_the_holding_brake_takes_a_target_below_the_holding_target():
     assert CommandLimiter(-100.0, 100.0, holding_brake=30.0).apply(5.0, 0.015, 0.05) == 5.0
 
 
+@pytest.mark.slow
 def test_the_ablation_script_undoes_each_addition_and_builds_them_up(tmp_path):
     result = subprocess.run(
         [*invocation("ablation"), "seed004-metro-ato",
@@ -314,6 +317,7 @@ def test_compare_scenarios_runs_each_through_the_stack_and_checks_it_in_process(
     ("seed004-metro-line:profile.journey.dwell_extension=2:3601", "3601 s at stop 2"),
     ("seed004-metro-line:profile.journey.dwell_extension=2:30:run.duration=-1", "run.duration"),
 ])
+@pytest.mark.slow
 def test_compare_scenarios_splits_a_variant_at_the_colons_before_each_name(tmp_path, text, words):
     result = subprocess.run([*invocation("compare_scenarios"), text, "--out", tmp_path / "c"],
                             capture_output=True, text=True, cwd=ROOT, timeout=120)

@@ -39,6 +39,7 @@ def strict(text: str):
     return json.loads(text, parse_constant=refuse)
 
 
+@pytest.mark.slow
 def test_a_refused_resume_changes_nothing_and_the_right_one_still_resumes(tmp_path):
     whole, out = tmp_path / "whole", tmp_path / "out"
     assert tune(*SMALL, "--quiet", "--out", whole).returncode == 0
@@ -59,6 +60,7 @@ def test_a_refused_resume_changes_nothing_and_the_right_one_still_resumes(tmp_pa
             == json.loads((whole / "summary.json").read_text())["best_params"])
 
 
+@pytest.mark.slow
 def test_when_every_candidate_fails_there_is_no_best_yaml(tmp_path):
     out = tmp_path / "out"
     result = tune("--scenario", "seed000", "--params", "adrc.b0=0.0001:0.001", "--evaluations",
@@ -71,6 +73,7 @@ def test_when_every_candidate_fails_there_is_no_best_yaml(tmp_path):
     assert strict((out / "summary.json").read_text())["failed_evaluations"] == {"diverged": 2}
 
 
+@pytest.mark.slow
 def test_in_process_candidates_end_at_their_timeout_on_the_compiled_loop(tmp_path):
     """Each candidate takes about a minute at 10000 RK4 sub-steps per step."""
     out = tmp_path / "out"
@@ -84,6 +87,7 @@ def test_in_process_candidates_end_at_their_timeout_on_the_compiled_loop(tmp_pat
     assert not (out / "best.yaml").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 def test_the_compile_step_is_announced_when_the_cache_is_cold_only(tmp_path):
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}  # cold: an empty cache
@@ -94,6 +98,7 @@ def test_the_compile_step_is_announced_when_the_cache_is_cold_only(tmp_path):
     assert COMPILING not in warm.stderr
 
 
+@pytest.mark.slow
 def test_resuming_a_finished_tuning_runs_nothing_and_prints_its_result(tmp_path):
     out = tmp_path / "out"
     finished = tune(*SMALL, "--quiet", "--out", out)
@@ -105,6 +110,7 @@ def test_resuming_a_finished_tuning_runs_nothing_and_prints_its_result(tmp_path)
     assert files(out) == before
 
 
+@pytest.mark.slow
 def test_the_logs_json_is_strict_and_a_resume_reads_it_back(tmp_path):
     """Candidates whose runs do not arrive (arrival_time not measured: null) and some
     that diverge; the resumed tuning ends where the uninterrupted one does."""

@@ -41,6 +41,7 @@ def test_a_parameter_of_another_controller_kind_is_refused():
         "dadrc.b1", "controller.max_rate")  # its own and shared parameters pass
 
 
+@pytest.mark.slow
 def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_path):
     result = subprocess.run(
         [*invocation("tune"), "--algorithm", "pso",
@@ -58,6 +59,7 @@ def test_tune_without_params_tunes_the_default_space_and_warns_on_a_line(tmp_pat
     assert "pid.kp belongs to controller kind pid" in refused.stderr
 
 
+@pytest.mark.slow
 def test_best_yaml_is_the_base_scenario_and_its_changes_and_history_is_plain_numbers(tmp_path):
     out = tmp_path / "t"
     result = subprocess.run(
