@@ -31,8 +31,9 @@ from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.scoring.catalogue import FITNESS, GROWING_INDICES, STOP_INDICES, Requirement
-from ato_nodes.core.run.scoring import (observer_b0, run_line, score_series, stop_not_reached,
-                                        total_disturbance)
+from ato_nodes.core.run.scoring import observer_b0, run_line, stop_not_reached, total_disturbance
+from ato_nodes.core.scoring.journey import last_stop_missed
+from ato_nodes.journeys import score_run
 
 if TYPE_CHECKING:  # annotations only: in-process tuning plots without the bag reader
     from ato_nodes.bagio import Run
@@ -204,7 +205,7 @@ def read_tuning(directory: Path) -> Tuning:
 
 def run_indices(run: Run) -> dict:
     """The scorer's indices for a run, plus which roles the bag lacked."""
-    indices = score_series(run.series, run.parameters)
+    indices = score_run(run.series, run.parameters)
     indices["skipped"] = run.missing
     return indices
 
@@ -393,7 +394,9 @@ class RunReport:
 
     def __post_init__(self):
         self.partial = self.run.partial
-        self.stop_not_reached = stop_not_reached(self.run.series, self.run.parameters)
+        self.stop_not_reached = last_stop_missed(self.indices["journey"]) \
+            if "journey" in self.indices else stop_not_reached(self.run.series,
+                                                               self.run.parameters)
 
     def judged(self, key: str) -> tuple[str, str]:
         """(PASS, FAIL or UNMEASURED, why it is not judged) for a required index;
