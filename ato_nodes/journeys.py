@@ -67,9 +67,9 @@ def run_journey(series: dict[str, np.ndarray], parameters: dict, timetable: Time
     an interrupted run's stations ahead are not reached). ScenarioError (one line)
     when the run lacks a series they need."""
     series = common_steps(series)
-    return journey_indices(series, timetable, **energy_terms(parameters),
-                           neutral=pantograph_in_neutral(series, parameters,
-                                                         run_line(parameters)))
+    neutral = pantograph_in_neutral(series, parameters, run_line(parameters)) \
+        if "position" in series else None  # without it, journey_indices says what is missing
+    return journey_indices(series, timetable, **energy_terms(parameters), neutral=neutral)
 
 
 def score_run(series: dict[str, np.ndarray], parameters: dict | None) -> dict:

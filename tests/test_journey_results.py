@@ -186,3 +186,12 @@ def test_the_stacks_summary_json_and_print_hold_each_station_of_a_cut_journey(tm
     scored = subprocess.run([*invocation("score_bag"), str(bag), "--json"],
                             capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert json.loads(scored.stdout) == summary
+
+
+def test_a_journey_lacking_a_series_says_which_instead_of_failing():
+    """seed002-journey's line has neutral sections, which are looked for at positions."""
+    values = prepare("seed002-journey", ["run.duration=2"])
+    series = {name: data for name, data in simulate(values).items() if name != "position"}
+    journey = score_run(series, values)["journey"]
+    assert journey["timetable"] == "hsr-journey.yaml"
+    assert "need the series position" in journey["error"]
