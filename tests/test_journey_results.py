@@ -195,3 +195,17 @@ def test_a_journey_lacking_a_series_says_which_instead_of_failing():
     journey = score_run(series, values)["journey"]
     assert journey["timetable"] == "hsr-journey.yaml"
     assert "need the series position" in journey["error"]
+
+
+def test_a_journey_run_to_its_end_keeps_its_stop_indices():
+    """Ended at its last stop, the line's last station: the stop indices are the whole
+    run's as before, and the last station's row."""
+    values = prepare(SCENARIO, [])
+    series = simulate(values)
+    plain, indices = score_series(series, values), score_run(series, values)
+    assert {key: indices[key] for key in STOP_INDICES if key in plain} == \
+        {key: plain[key] for key in STOP_INDICES if key in plain}
+    last = indices["journey"]["stations"][-1]
+    assert (last["stop_error"], last["arrival"]) == (plain["stopping_error"],
+                                                     plain["arrival_time"])
+    assert indices["journey"]["verdict"] == last["verdict"] == "pass"
