@@ -188,12 +188,15 @@ def test_the_stacks_summary_json_and_print_hold_each_station_of_a_cut_journey(tm
     assert json.loads(scored.stdout) == summary
 
 
-def test_a_journey_lacking_a_series_says_which_instead_of_failing():
-    """seed002-journey's line has neutral sections, which are looked for at positions."""
-    values = prepare("seed002-journey", ["run.duration=2"])
-    series = {name: data for name, data in simulate(values).items() if name != "position"}
-    journey = score_run(series, values)["journey"]
-    assert journey["timetable"] == "hsr-journey.yaml"
+def test_a_journey_lacking_a_series_says_which_instead_of_failing(cut, tmp_path):
+    """On a line with a neutral section, which is looked for at the positions."""
+    line = tmp_path / "metro-neutral.yaml"
+    line.write_text((ROOT / "msg_config" / "lines" / "metro-line.yaml").read_text()
+                    + "neutral_sections:\n  - {start: 2500.0, end: 2600.0}\n")
+    _, series, values = cut
+    without = {name: data for name, data in series.items() if name != "position"}
+    journey = score_run(without, {**values, "line.file": str(line)})["journey"]
+    assert journey["timetable"] == "metro-line.yaml"
     assert "need the series position" in journey["error"]
 
 
