@@ -30,7 +30,8 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
-from ato_nodes.core.scoring.catalogue import FITNESS, GROWING_INDICES, STOP_INDICES, Requirement
+from ato_nodes.core.scoring.catalogue import (FITNESS, GROWING_INDICES, STOP_INDICES, Requirement,
+                                              journey_last_stop)
 from ato_nodes.core.run.scoring import observer_b0, run_line, stop_not_reached, total_disturbance
 from ato_nodes.core.scoring.journey import last_stop_missed
 from ato_nodes.journeys import score_run
@@ -417,6 +418,14 @@ class RunReport:
                 "but the run is partial"
         return (PASS if met else FAIL), ""
 
+    def index_text(self, key: str) -> str:
+        """An index's value as the verdict table gives it: a journey's stop index without
+        a stop at its last stop says why ("- (not reached)")."""
+        value = self.indices[key]
+        if key in STOP_INDICES and "journey" in self.indices and not math.isfinite(value):
+            return f"- ({journey_last_stop(self.indices['journey'])[1]})"
+        return format_index(key, value)
+
     def status(self, key: str) -> str:
         """PASS, FAIL or UNMEASURED for a required index, "" for one without requirement."""
         return self.judged(key)[0]
@@ -562,7 +571,7 @@ def verdict_rows(reports: list[RunReport]) -> list[VerdictRow]:
         row = VerdictRow(key, heading(key), limits.pop() if len(limits) == 1 else
                          "per run" if limits else "")
         for report in reports:
-            text = format_index(key, report.indices[key]) if key in report.indices else "-"
+            text = report.index_text(key) if key in report.indices else "-"
             if row.requirement == "per run" and key in report.requirements:
                 text += f" (<= {report.requirements[key].limit:g})"
             row.cells.append((text, report.status(key)))

@@ -212,3 +212,12 @@ def test_a_journey_run_to_its_end_keeps_its_stop_indices():
     assert (last["stop_error"], last["arrival"]) == (plain["stopping_error"],
                                                      plain["arrival_time"])
     assert indices["journey"]["verdict"] == last["verdict"] == "pass"
+
+
+def test_the_report_does_not_fail_a_cut_journey_on_the_stop_it_never_reached(cut, tmp_path):
+    markdown, _ = write_report([read_run(cut[0])], [], tmp_path / "report")
+    text = markdown.read_text()
+    assert "- **NOT JUDGED** cut: 3 of 4 requirements met; not judged: abs(stopping error) m " \
+           "(Depot Road (synthetic), the last stop: not reached (the run ended" in text
+    assert "| abs(stopping error) m | <= 0.1 | - (not reached) not judged |" in text
+    assert "| arrival s |  | - (not reached) |" in text

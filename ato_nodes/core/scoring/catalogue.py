@@ -103,14 +103,15 @@ def format_indices(indices: dict) -> str:
         *([f"max |e| o. steps {indices['max_abs_error_outside_steps_kmh']:.4f} km/h outside "
            f"{indices['stepped_time']:.1f} s of stepped approach"]
           if "max_abs_error_outside_steps_kmh" in indices else []),
-        *format_operation(indices, _last_stop(indices.get("journey"))),
+        *format_operation(indices, journey_last_stop(indices.get("journey"))),
         *(format_journey(indices["journey"]) if "journey" in indices else []),
     ])
 
 
-def _last_stop(journey: dict | None) -> tuple[str, str] | None:
-    """format_operation's last stop of a journey (journey.journey_record), None for
-    another run."""
+def journey_last_stop(journey: dict | None) -> tuple[str, str] | None:
+    """A journey's last stop, as its stop indices name it (format_operation): which,
+    and the word for no stop there (e.g. "not reached"); None for another run (no
+    `journey`, journey.journey_record)."""
     if journey is None:
         return None
     if "error" in journey:
