@@ -30,9 +30,11 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
-from ato_nodes.core.scoring.catalogue import FITNESS, GROWING_INDICES, STOP_INDICES, Requirement
-from ato_nodes.core.run.scoring import (observer_b0, run_line, score_series, stop_not_reached,
-                                        total_disturbance)
+from ato_nodes.core.scoring.catalogue import (FITNESS, GROWING_INDICES, STOP_INDICES, Requirement,
+                                              journey_last_stop)
+from ato_nodes.core.run.scoring import observer_b0, run_line, stop_not_reached, total_disturbance
+from ato_nodes.core.scoring.journey import last_stop_missed
+from ato_nodes.journeys import score_run
 
 if TYPE_CHECKING:  # annotations only: in-process tuning plots without the bag reader
     from ato_nodes.bagio import Run
@@ -204,7 +206,7 @@ def read_tuning(directory: Path) -> Tuning:
 
 def run_indices(run: Run) -> dict:
     """The scorer's indices for a run, plus which roles the bag lacked."""
-    indices = score_series(run.series, run.parameters)
+    indices = score_run(run.series, run.parameters)
     indices["skipped"] = run.missing
     return indices
 
@@ -393,7 +395,9 @@ class RunReport:
 
     def __post_init__(self):
         self.partial = self.run.partial
-        self.stop_not_reached = stop_not_reached(self.run.series, self.run.parameters)
+        self.stop_not_reached = last_stop_missed(self.indices["journey"]) \
+            if "journey" in self.indices else stop_not_reached(self.run.series,
+                                                               self.run.parameters)
 
     def judged(self, key: str) -> tuple[str, str]:
         """(PASS, FAIL or UNMEASURED, why it is not judged) for a required index;
@@ -413,6 +417,14 @@ class RunReport:
             return UNMEASURED, ("met" if met else "broken") + " over the steps recorded, " \
                 "but the run is partial"
         return (PASS if met else FAIL), ""
+
+    def index_text(self, key: str) -> str:
+        """An index's value as the verdict table gives it: a journey's stop index without
+        a stop at its last stop says why ("- (not reached)")."""
+        value = self.indices[key]
+        if key in STOP_INDICES and "journey" in self.indices and not math.isfinite(value):
+            return f"- ({journey_last_stop(self.indices['journey'])[1]})"
+        return format_index(key, value)
 
     def status(self, key: str) -> str:
         """PASS, FAIL or UNMEASURED for a required index, "" for one without requirement."""
@@ -559,7 +571,7 @@ def verdict_rows(reports: list[RunReport]) -> list[VerdictRow]:
         row = VerdictRow(key, heading(key), limits.pop() if len(limits) == 1 else
                          "per run" if limits else "")
         for report in reports:
-            text = format_index(key, report.indices[key]) if key in report.indices else "-"
+            text = report.index_text(key) if key in report.indices else "-"
             if row.requirement == "per run" and key in report.requirements:
                 text += f" (<= {report.requirements[key].limit:g})"
             row.cells.append((text, report.status(key)))

@@ -21,7 +21,9 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import (common_steps, energy_terms, kept_file,
                                         pantograph_in_neutral, run_line, score_series)
-from ato_nodes.core.scoring.journey import STOPPED, JourneyIndices, journey_indices
+from ato_nodes.core.scoring.catalogue import STOP_INDICES
+from ato_nodes.core.scoring.journey import (STOPPED, JourneyIndices, journey_indices,
+                                            journey_record, last_stop_indices)
 from ato_nodes.core.targets.timetable import Timetable, timetable_on
 
 TIMETABLE = "profile.journey.timetable"
@@ -65,9 +67,37 @@ def run_journey(series: dict[str, np.ndarray], parameters: dict, timetable: Time
     an interrupted run's stations ahead are not reached). ScenarioError (one line)
     when the run lacks a series they need."""
     series = common_steps(series)
-    return journey_indices(series, timetable, **energy_terms(parameters),
-                           neutral=pantograph_in_neutral(series, parameters,
-                                                         run_line(parameters)))
+    neutral = pantograph_in_neutral(series, parameters, run_line(parameters)) \
+        if "position" in series else None  # without it, journey_indices says what is missing
+    return journey_indices(series, timetable, **energy_terms(parameters), neutral=neutral)
+
+
+def score_run(series: dict[str, np.ndarray], parameters: dict | None) -> dict:
+    """score_series' indices of a run, as summary.json, score_bag and the report's
+    indices.json give them. A journey run's results per station and section are under
+    `journey` (its timetable's name and core/scoring/journey.journey_record) and its stop
+    indices are its last stop's (last_stop_indices: NaN without a stop there); one that
+    cannot be scored per station (its timetable nowhere, a series missing) has NaN stop
+    indices and `journey` says why."""
+    indices = score_series(series, parameters)
+    if not is_journey(parameters):
+        return indices
+    name = Path(parameters[TIMETABLE]).name
+    stop_indices = [key for key in STOP_INDICES if key in indices]
+    try:
+        timetable = run_timetable(parameters)
+        if timetable is None:
+            raise ScenarioError(f"the timetable {name} is neither kept in the bag nor on "
+                                "this machine")
+        journey = run_journey(series, parameters, timetable)
+    except ScenarioError as exc:
+        indices.update(dict.fromkeys(stop_indices, math.nan))
+        indices["journey"] = {"timetable": name, "error": str(exc)}
+        return indices
+    last_stop = last_stop_indices(journey, timetable.line.planned_run_time)
+    indices.update({key: last_stop[key] for key in stop_indices})
+    indices["journey"] = {"timetable": name, **journey_record(journey)}
+    return indices
 
 
 # The worst station of a journey run, as studies count it (inf: a station missed or not

@@ -1,7 +1,8 @@
 """The journey part of a run's report (scripts/analyze.py): for each run of a timetable
 (ato_nodes.journeys), a table per station (stop error, arrival and departure lateness,
 dwell, verdict) and per section (running time, traction energy), the journey's totals
-and verdict (core/scoring/journey.py's), the re-plans the bag recorded (a late departure
+and verdict (core/scoring/journey.py's, the summary line the console and the JSON files
+give too), the re-plans the bag recorded (a late departure
 and the curve it drove), and speed against position over the line: its
 stations marked, its speed limits, its neutral sections shaded, the planned (target)
 and driven speed. In report.md (a PNG figure) and report.html (Plotly) alike; SI inside,
@@ -22,7 +23,7 @@ from ato_nodes.analysis import (LIMIT_COLOUR, MARK, RUN_COLOURS, Figure, Markup,
                                 _markdown_rows, _pyplot, _save, md_text)
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
-from ato_nodes.core.scoring.journey import NOT_JUDGED, PASS, REQUIRED, JourneyIndices
+from ato_nodes.core.scoring.journey import REQUIRED, JourneyIndices, summary_line
 from ato_nodes.core.targets.restriction import restricted_line
 from ato_nodes.core.targets.served import Replan
 from ato_nodes.core.targets.timetable import Timetable
@@ -114,36 +115,13 @@ def section_rows(journey: JourneyReport) -> list[list[str]]:
                                   strict=True)]
 
 
-def summary(indices: JourneyIndices) -> str:
-    """The journey's totals on one line."""
-    judged = [s for s in indices.stations if s.verdict]
-    unjudged = sum(s.verdict == NOT_JUDGED for s in judged)
-    parts = [f"{sum(s.verdict == PASS for s in judged)} of {len(judged)} stations met"
-             + (f", {unjudged} not judged" if unjudged else "")]
-    if indices.worst_stop is not None:
-        parts.append(f"worst stop {indices.worst_stop.stop_error:+.3f} m at "
-                     f"{indices.worst_stop.station}")
-    if indices.worst_lateness is not None:
-        parts.append(f"worst arrival {indices.worst_lateness.arrival_lateness:+.1f} s at "
-                     f"{indices.worst_lateness.station}")
-    running = sum(s.running_time for s in indices.sections)
-    if math.isfinite(indices.final_arrival_lateness):
-        parts.append(f"final arrival {indices.final_arrival_lateness:+.1f} s")
-    if math.isfinite(running):  # every section run
-        parts.append(f"running time {running:.1f} s")
-    if math.isfinite(indices.neutral_traction_command_time):
-        parts.append(f"traction commanded in neutral sections "
-                     f"{indices.neutral_traction_command_time:.1f} s")
-    return "; ".join(parts + [f"traction {indices.traction_energy_kwh:.2f} kWh"])
-
-
 def markdown_sections(journeys: list[JourneyReport], notes: list[str]) -> list[str]:
     """report.md's journey tables, after the verdict."""
     lines = [f"- {md_text(note)}" for note in notes]
     for journey in journeys:
         verdict = journey.indices.verdict
         lines += ["", f"## Journey: {md_text(journey.label)} ({md_text(journey.name)})", "",
-                  f"- **{verdict.upper()}** {md_text(summary(journey.indices))}", "",
+                  f"- **{verdict.upper()}** {md_text(summary_line(journey.indices))}", "",
                   md_text(EXPLAINED), ""]
         lines += _markdown_rows(STATION_HEADER, [
             cells + [Markup(": ".join(filter(None, (MARK[verdict], md_text(reason)))) or "-")]
@@ -161,7 +139,7 @@ def html_sections(journeys: list[JourneyReport], notes: list[str]) -> list[str]:
         verdict = journey.indices.verdict
         parts += [f"<h2>Journey: {html.escape(journey.label)} ({html.escape(journey.name)})"
                   f"</h2><div class='summary' style='background:{STATUS_COLOURS[verdict]}'>"
-                  f"{html.escape(verdict.upper())}: {html.escape(summary(journey.indices))}"
+                  f"{html.escape(verdict.upper())}: {html.escape(summary_line(journey.indices))}"
                   f"</div><p>{html.escape(EXPLAINED)}</p>"]
         parts.append(_table(STATION_HEADER, [
             [(cell, "") for cell in cells] + [(verdict or "-", verdict, reason)]

@@ -1,4 +1,5 @@
-"""A run's summary.json: how the run ended and what its bag holds, with the indices.
+"""A run's summary.json: how the run ended and what its bag holds, with the indices (a
+journey's per station: ato_nodes.journeys.score_run).
 
 Written into the bag directory by whoever ran the run: scripts/run_stack.py after
 its launcher stopped every node, or the supervisor node itself when no launcher
@@ -12,7 +13,7 @@ from typing import Any
 
 from ato_nodes import jsontext
 from ato_nodes.bagio import BagError, message_counts, read_run
-from ato_nodes.core.run.scoring import score_series
+from ato_nodes.journeys import score_run
 
 FILE_NAME = "summary.json"
 
@@ -34,7 +35,7 @@ def bag_contents(bag: Path) -> dict[str, Any]:
     except BagError as exc:
         return {"bag_error": str(exc)}
     contents.update(scored_steps=len(run.series["t"]), notes=run.notes,
-                    indices=score_series(run.series, run.parameters))
+                    indices=score_run(run.series, run.parameters))
     return contents
 
 

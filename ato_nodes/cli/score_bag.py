@@ -8,7 +8,10 @@ timed out or diverged before its planned steps) is scored over the steps it hold
 said so ("partial: interrupted at step 99 of 2000"; in --json, "partial"); a journey
 that ended at its last stop (run.last_stop_hold) is complete, and said so; a run that
 ended short of its stop, still moving, is said so too: its stopping and running-time
-errors judge nothing. A bag with no message is one line, exit 2.
+errors judge nothing. A journey's results are also given per station (stop error,
+arrival and departure lateness, dwell, verdict) and per section, and its stopping error
+and arrival time are its last stop's: none (null, "not reached") if the train did not
+stop there. A bag with no message is one line, exit 2.
 """
 
 from __future__ import annotations
@@ -20,7 +23,9 @@ from ato_nodes import cli
 from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
-from ato_nodes.core.run.scoring import score_series, stop_not_reached
+from ato_nodes.core.run.scoring import stop_not_reached
+from ato_nodes.core.scoring.journey import last_stop_missed
+from ato_nodes.journeys import score_run
 
 
 def main() -> None:
@@ -39,7 +44,7 @@ def main() -> None:
         differ = resimulate(run)[1] if args.resimulate else []
     except BagError as exc:
         cli.fail(str(exc))
-    indices = score_series(run.series, run.parameters)
+    indices = score_run(run.series, run.parameters)
     if run.partial:
         indices["partial"] = run.partial
     if args.resimulate:
@@ -53,7 +58,8 @@ def main() -> None:
             print(f"complete: ended {AT_LAST_STOP} after {run.recorded_steps} steps "
                   f"(run.last_stop_hold {run.parameters['run.last_stop_hold']:g} s)")
         print(format_indices(indices))
-        short = stop_not_reached(run.series, run.parameters)
+        short = last_stop_missed(indices["journey"]) if "journey" in indices \
+            else stop_not_reached(run.series, run.parameters)
         if short:
             print(f"not at the stop: {short}; its stopping and running-time errors are not judged")
     if args.resimulate and not args.json:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..base.errors import ScenarioError
+from .journey import format_journey
 from .operation import format_operation
 
 # Every index score_series can give (a run gives those that apply to it).
@@ -102,5 +103,18 @@ def format_indices(indices: dict) -> str:
         *([f"max |e| o. steps {indices['max_abs_error_outside_steps_kmh']:.4f} km/h outside "
            f"{indices['stepped_time']:.1f} s of stepped approach"]
           if "max_abs_error_outside_steps_kmh" in indices else []),
-        *format_operation(indices),
+        *format_operation(indices, journey_last_stop(indices.get("journey"))),
+        *(format_journey(indices["journey"]) if "journey" in indices else []),
     ])
+
+
+def journey_last_stop(journey: dict | None) -> tuple[str, str] | None:
+    """A journey's last stop, as its stop indices name it (format_operation): which,
+    and the word for no stop there (e.g. "not reached"); None for another run (no
+    `journey`, journey.journey_record)."""
+    if journey is None:
+        return None
+    if "error" in journey:
+        return "the last stop (no per-station results)", "not judged"
+    last = journey["stations"][-1]
+    return f"{last['station']}, the last stop", last["outcome"]

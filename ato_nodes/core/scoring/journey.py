@@ -274,3 +274,95 @@ def _section(planned: JourneySection, begin: _Stop, end: _Stop, series: tuple[np
         running_time - planned.running_time,
         traction_energy_kwh(t[span], speed[span], force[span], *energy_terms),
         float(np.max(np.abs(target[span] - speed[span]))))
+
+
+def summary_line(indices: JourneyIndices) -> str:
+    """The journey's totals on one line, as the report and the console say them."""
+    judged = [s for s in indices.stations if s.verdict]
+    unjudged = sum(s.verdict == NOT_JUDGED for s in judged)
+    parts = [f"{sum(s.verdict == PASS for s in judged)} of {len(judged)} stations met"
+             + (f", {unjudged} not judged" if unjudged else "")]
+    if indices.worst_stop is not None:
+        parts.append(f"worst stop {indices.worst_stop.stop_error:+.3f} m at "
+                     f"{indices.worst_stop.station}")
+    if indices.worst_lateness is not None:
+        parts.append(f"worst arrival {indices.worst_lateness.arrival_lateness:+.1f} s at "
+                     f"{indices.worst_lateness.station}")
+    running = sum(s.running_time for s in indices.sections)
+    if math.isfinite(indices.final_arrival_lateness):
+        parts.append(f"final arrival {indices.final_arrival_lateness:+.1f} s")
+    if math.isfinite(running):  # every section run
+        parts.append(f"running time {running:.1f} s")
+    if math.isfinite(indices.neutral_traction_command_time):
+        parts.append(f"traction commanded in neutral sections "
+                     f"{indices.neutral_traction_command_time:.1f} s")
+    return "; ".join(parts + [f"traction {indices.traction_energy_kwh:.2f} kWh"])
+
+
+def journey_record(indices: JourneyIndices) -> dict:
+    """The journey's results as the run's JSON files hold them (summary.json, score_bag
+    --json, indices.json): its verdict and summary line, a row per station and per
+    section with StationIndices' and SectionIndices' fields, SI (m, s, kWh, m/s); NaN
+    where nothing was measured (null in the files)."""
+    return {"verdict": indices.verdict, "summary": summary_line(indices),
+            "stations": [station._asdict() for station in indices.stations],
+            "sections": [section._asdict() for section in indices.sections]}
+
+
+def last_stop_indices(indices: JourneyIndices, planned_run_time: float | None
+                      ) -> dict[str, float]:
+    """A journey's whole-run stop indices (catalogue.STOP_INDICES): its last stop's, the
+    timetable's last (not the line's last station, nor the last stop reached), as an
+    interstation run's are its one stop's; NaN when the train did not stop there."""
+    last = indices.stations[-1]  # NaN stop error and arrival without a stop
+    stop = {"stopping_error": last.stop_error, "abs_stopping_error": abs(last.stop_error),
+            "arrival_time": last.arrival}
+    if planned_run_time is not None:
+        stop["running_time_error"] = last.arrival - planned_run_time
+    return stop
+
+
+def _known(value) -> bool:
+    return isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def last_stop_missed(record: dict) -> str | None:
+    """Why a journey's stop indices judge nothing (None when the train stopped at its
+    last stop), from its journey_record (or read back from JSON); `error`: the
+    journey could not be scored per station."""
+    if "error" in record:
+        return f"no per-station results: {record['error']}"
+    last = record["stations"][-1]
+    if last["outcome"] == STOPPED:
+        return None
+    return f"{last['station']}, the last stop: {last['outcome']} ({last['reason']})"
+
+
+def _cell(value, form: str) -> str:
+    return form.format(value) if _known(value) else "-"
+
+
+def _timed(time, lateness) -> str:
+    """A time on the run's clock (s) with its lateness (s, + late), "-" without one."""
+    return f"{time:.1f} ({lateness:+.1f})" if _known(time) else "-"
+
+
+def format_journey(record: dict) -> list[str]:
+    """Console lines of a journey_record (or one read back from JSON): its verdict and
+    a row per station; or why it has none."""
+    if "error" in record:
+        return [f"{'journey':<17}{record['timetable']}: no per-station results: "
+                f"{record['error']}"]
+    width = max(len(station["station"]) for station in record["stations"])
+    lines = [f"{'journey':<17}{record['timetable']}: {record['verdict'].upper()}: "
+             f"{record['summary']}",
+             f"  {'station':<{width}}  {'stop error m':>12}  {'arrival s (late)':>16}  "
+             f"{'departure s (late)':>18}  {'dwell s':>7}  verdict"]
+    for s in record["stations"]:
+        why = s["reason"] or ("" if s["outcome"] == STOPPED else s["outcome"])
+        lines.append(f"  {s['station']:<{width}}  {_cell(s['stop_error'], '{:+.3f}'):>12}  "
+                     f"{_timed(s['arrival'], s['arrival_lateness']):>16}  "
+                     f"{_timed(s['departure'], s['departure_lateness']):>18}  "
+                     f"{_cell(s['dwell'], '{:.1f}'):>7}  "
+                     f"{': '.join(filter(None, (s['verdict'] or '-', why)))}")
+    return lines

@@ -136,8 +136,21 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
     return result
 
 
-def format_operation(indices: dict) -> list[str]:
-    """Human-readable lines for whichever operation indices are present."""
+# The console lines that judge a run's one stop: a journey's say which stop they are of.
+STOP_LINES = ("stopping_error", "arrival_time", "running_time_error")
+
+
+def _stop_text(text: str, value: float, last_stop: tuple[str, str]) -> str:
+    """A journey's stop index as text: of its last stop, or the word for why there is
+    none (`last_stop`: which stop, that word)."""
+    where, missing = last_stop
+    return f"{text} at {where}" if np.isfinite(value) else f"{missing}: {where}"
+
+
+def format_operation(indices: dict, last_stop: tuple[str, str] | None = None) -> list[str]:
+    """Human-readable lines for whichever operation indices are present; a journey's
+    stop lines name its last stop (`last_stop`: which, and the word for no stop there,
+    e.g. "not reached")."""
     formats = [
         ("traction_energy_kwh", "traction energy", "{:.2f} kWh"),
         ("regenerated_energy_kwh", "regenerated", "{:.2f} kWh"),
@@ -154,5 +167,12 @@ def format_operation(indices: dict) -> list[str]:
         ("neutral_traction_command_time", "neutral traction", "{:.1f} s commanded"),
         ("neutral_traction_force_time", "neutral traction", "{:.1f} s applied"),
     ]
-    return [f"{label:<17}{fmt.format(indices[key])}"
-            for key, label, fmt in formats if key in indices]
+    lines = []
+    for key, label, fmt in formats:
+        if key not in indices:
+            continue
+        text = fmt.format(indices[key])
+        if last_stop is not None and key in STOP_LINES:
+            text = _stop_text(text, indices[key], last_stop)
+        lines.append(f"{label:<17}{text}")
+    return lines
