@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import sys
 
-from ato_nodes import jsontext
+from ato_nodes.results import jsontext
 from ato_nodes import cli
-from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
+from ato_nodes.bags.bagio import BagError, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.run.scoring import score_series, stop_not_reached

@@ -10,8 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ato_nodes import jsontext
-from ato_nodes.bagio import BagError, message_counts, read_run
+from ato_nodes.results import jsontext
+from ato_nodes.bags.bagio import BagError, message_counts, read_run
 from ato_nodes.core.run.scoring import score_series
 
 FILE_NAME = "summary.json"
