@@ -33,7 +33,7 @@ setup(
     install_requires=["setuptools", "numpy", "daqp", "PyYAML", "matplotlib", "rosbags",
                       "mcap", "mcap-ros2-support", "plotly"],
     extras_require={"dask": ["dask[distributed]"],  # tune.py --cluster
-                    "tables": ["pandas", "pyarrow"],  # bagio.read_frame, export.py --parquet
+                    "tables": ["pandas", "pyarrow"],  # bags.bagio.read_frame, export.py --parquet
                     "fast": ["numba"]},  # compiled in-process runs (core/run/fast_loop.py)
     zip_safe=True,
     maintainer="ATO stack maintainers",

@@ -33,7 +33,7 @@ from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.config.schema import steps
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.config.schema import NODES
-from ato_nodes.launch import DomainLock, Stack, node_environment
+from ato_nodes.launcher.launch import DomainLock, Stack, node_environment
 from ato_nodes.nodes.timing import VARIABLE as TIMING_VARIABLE
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run import loop
 from ato_nodes.core.run.stages import ControllerStage
-from ato_nodes.studies import Variant, prepare_variants
+from ato_nodes.studies.runner import Variant, prepare_variants
 
 VARIANTS = {
     "gpc lssvm (adaptive)": Variant("seed001-crh380al"),
@@ -97,7 +97,7 @@ def qp_costs(nu: int, repeats: int = 2000) -> dict[str, float]:
 
 
 def stack_rate(values, bag: Path) -> float:
-    from ato_nodes.launch import Stack
+    from ato_nodes.launcher.launch import Stack
     outcome = Stack(values, bag, quiet=True, timeout=600).run()
     if not outcome.ok:
         _cli.fail(f"stack run failed: {outcome.message}", 1)

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.bagio import read_messages
-from ato_nodes.launch import DomainLock
+from ato_nodes.bags.bagio import read_messages
+from ato_nodes.launcher.launch import DomainLock
 
 ROOT = Path(__file__).resolve().parents[1]
 

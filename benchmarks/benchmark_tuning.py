@@ -33,8 +33,8 @@ from pathlib import Path
 import _cli
 
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.launch import Stack
-from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings, evaluate_in_process
+from ato_nodes.launcher.launch import Stack
+from ato_nodes.studies.tuning import SearchSpace, Tuner, TuningSettings, evaluate_in_process
 
 SEED000_SPACE = ("adrc.mu1=600:60000,adrc.mu2=550:55000,adrc.beta1=120:12000,"
                  "adrc.beta2=170:17000,adrc.beta3=450:45000,adrc.b0=0.02:2,adrc.r0=0.5:500,"
@@ -73,7 +73,7 @@ def in_process_rate(values, count: int, workers: int) -> float:
 def dask_overhead(values, count: int = 60) -> float | None:
     """Seconds per task a Dask LocalCluster (2 workers) adds over the local pool."""
     try:
-        from ato_nodes.tuning import open_cluster
+        from ato_nodes.studies.tuning import open_cluster
         client, cluster = open_cluster("local:2")
     except Exception:  # no dask: nothing to measure
         return None

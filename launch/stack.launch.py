@@ -27,7 +27,7 @@ from launch_ros.actions import Node
 
 from ato_nodes.core.config.scenario import DERIVED_PARAMETERS, prepare, resolve_scenario
 from ato_nodes.core.config.schema import NODES, SPEC_BY_NAME
-from ato_nodes.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
+from ato_nodes.launcher.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
 
 def nodes(context):

@@ -28,11 +28,11 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.analysis import markdown_table
+from ato_nodes.reports.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_given_once
-from ato_nodes.studies import (Variant, check_counts, numeric, prepare_variants, run_study,
-                               write_outputs)
+from ato_nodes.studies.runner import (Variant, check_counts, numeric, prepare_variants, run_study,
+                                      write_outputs)
 
 ADDITIONS = (
     ("feedforward", ["ladrc.feedforward=false"]),

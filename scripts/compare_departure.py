@@ -24,8 +24,8 @@ from ato_nodes.core.base.units import KMH
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.journeys import (WORST_ARRIVAL, WORST_STOP, run_journey, run_timetable,
-                                worst_stations)
+from ato_nodes.results.journeys import (WORST_ARRIVAL, WORST_STOP, run_journey, run_timetable,
+                                        worst_stations)
 
 TARGETS = {"step": ["profile.departure_jerk=0"], "ramp": []}
 FIRST_SECONDS = 10.0  # s: where a departure's error shows

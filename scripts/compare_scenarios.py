@@ -20,9 +20,10 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.analysis import markdown_table
+from ato_nodes.reports.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.studies import Outcome, Variant, numeric, prepare_variants, run_study, write_outputs
+from ato_nodes.studies.runner import (Outcome, Variant, numeric, prepare_variants, run_study,
+                                     write_outputs)
 
 
 # a ':' that starts the next NAME=VALUE; any other stays in its value (dwell_extension=2:30)

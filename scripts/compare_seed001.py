@@ -21,9 +21,9 @@ from pathlib import Path
 import _cli
 import numpy as np
 
-from ato_nodes.bagio import read_run
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.studies import Outcome, Variant, prepare_variants, run_study, write_outputs
+from ato_nodes.studies.runner import Outcome, Variant, prepare_variants, run_study, write_outputs
 
 VARIANTS = {
     "GPC, adaptive LSSVM": Variant("seed001-crh380al"),

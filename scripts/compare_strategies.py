@@ -25,7 +25,7 @@ from ato_nodes.core.base.paths import resolve_file
 from ato_nodes.core.config.scenario import complete
 from ato_nodes.core.targets import strategy
 from ato_nodes.core.train.line import load_line
-from ato_nodes.studies import check_counts, in_pool, write_outputs
+from ato_nodes.studies.runner import check_counts, in_pool, write_outputs
 
 SUPPLEMENTS = (0.03, 0.05, 0.10)
 

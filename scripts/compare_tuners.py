@@ -25,15 +25,15 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.analysis import plot_convergence
-from ato_nodes.bagio import read_run
+from ato_nodes.reports.analysis import plot_convergence
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.optimizers import create
 from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.launch import Stack
-from ato_nodes.studies import write_outputs
-from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
+from ato_nodes.launcher.launch import Stack
+from ato_nodes.studies.runner import write_outputs
+from ato_nodes.studies.tuning import SearchSpace, Tuner, TuningSettings
 
 PAPER_MAX_ERROR = {  # seed 000's reported tracking errors, km/h
     "bas-pso": "±0.05 (body), ±0.4 (abstract)",

@@ -31,7 +31,7 @@ from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.train.line import line_of
 from ato_nodes.core.train.plant import TrainParameters
-from ato_nodes.studies import Variant, prepare_variants
+from ato_nodes.studies.runner import Variant, prepare_variants
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ("seed004-metro-ato", "seed003-maglev-ato")

@@ -7,7 +7,7 @@
 Columns: t (simulated s from the run's start), every series the bag gives (target,
 speed, measured_speed, acceleration, disturbance, force, resistance, line_resistance,
 speed_limit, position, command, the controller's outputs) and preview_0 .. preview_N
-(the target horizon). The same table in Python: ato_nodes.bagio.read_frame(BAG).
+(the target horizon). The same table in Python: ato_nodes.bags.bagio.read_frame(BAG).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.bagio import BagError, parse_mapping, read_frame, read_run, run_columns
+from ato_nodes.bags.bagio import BagError, parse_mapping, read_frame, read_run, run_columns
 
 
 def main() -> None:

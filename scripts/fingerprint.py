@@ -43,8 +43,8 @@ def digests(series: dict[str, np.ndarray]) -> dict[str, str]:
 
 
 def stack_series(values: dict, bag: Path) -> dict[str, np.ndarray]:
-    from ato_nodes.bagio import read_run
-    from ato_nodes.launch import Stack
+    from ato_nodes.bags.bagio import read_run
+    from ato_nodes.launcher.launch import Stack
     outcome = Stack(values, bag, quiet=True).run()
     if not outcome.ok:
         _cli.fail(f"{bag}: {outcome.message}", 1)

@@ -27,8 +27,8 @@ from pathlib import Path
 import _cli
 import numpy as np
 
-from ato_nodes import jsontext
-from ato_nodes.bagio import BagError, Run, read_run
+from ato_nodes.results import jsontext
+from ato_nodes.bags.bagio import BagError, Run, read_run
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.control import identification as ident

@@ -27,8 +27,8 @@ from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.scoring.journey import STOPPED
 from ato_nodes.core.targets.served import replans
-from ato_nodes.journeys import run_journey, run_timetable
-from ato_nodes.studies import write_outputs
+from ato_nodes.results.journeys import run_journey, run_timetable
+from ato_nodes.studies.runner import write_outputs
 
 ON_TIME, KEPT, CAUGHT_UP = "on time", "delayed, on-time curves kept", "delayed, catching up"
 

@@ -34,7 +34,7 @@ from pathlib import Path
 import _cli
 import numpy as np
 
-from ato_nodes import jsontext
+from ato_nodes.results import jsontext
 from ato_nodes.core.targets import strategy
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.train.line import load_line

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.bagrepair import RepairError, repair
+from ato_nodes.bags.bagrepair import RepairError, repair
 
 
 def main() -> None:

@@ -27,9 +27,9 @@ import _cli
 import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
-from ato_nodes.studies import (Variant, check_counts, in_pool, prepare_variants,
-                               write_outputs)
+from ato_nodes.results.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
+from ato_nodes.studies.runner import (Variant, check_counts, in_pool, prepare_variants,
+                                      write_outputs)
 
 INDICES = (  # key, heading, worst is the largest of
     ("max_abs_error_kmh", "max abs(e) km/h"),

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import _cli
 
-from ato_nodes.report_html import RENDERED_ATTRIBUTE
+from ato_nodes.reports.report_html import RENDERED_ATTRIBUTE
 
 BROWSERS = ("chromium", "chromium-browser")
 SCRIPT_TIME = 60.0    # s of the page's (virtual) time for its scripts before the capture

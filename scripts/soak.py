@@ -55,7 +55,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.topics import step_topics, topic_map
 from ato_nodes.core.config.schema import NODES, recording_steps
 from ato_nodes.core.targets.served import STANDSTILL
-from ato_nodes.launch import node_processes
+from ato_nodes.launcher.launch import node_processes
 
 ROOT = Path(__file__).resolve().parents[1]
 PHASES = ("stepping", "dwell", "re-plan", "after end")
@@ -420,7 +420,7 @@ def bag_counts(bag: Path) -> tuple[dict[str, int], dict[str, int], list[dict]]:
 
 def check_bag(outcome: Outcome, bag: Path, ref: Reference) -> dict:
     """The bag's promises; summary.json's contents ({} if it has none)."""
-    from ato_nodes.bagio import read_run
+    from ato_nodes.bags.bagio import read_run
     outcome.checked.append("readers")
     try:
         in_rosbags, in_mcap, held = bag_counts(bag)

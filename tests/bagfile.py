@@ -10,7 +10,7 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.bagio import LABELLED, PARAMETERS_KEY, ROLES
+from ato_nodes.bags.bagio import LABELLED, PARAMETERS_KEY, ROLES
 from ato_nodes.core.run.loop import SERIES
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line
 from ato_nodes.core.base.topics import topic_map

@@ -6,7 +6,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ato_nodes.launch import DomainLock  # noqa: E402
+from ato_nodes.launcher.launch import DomainLock  # noqa: E402
 
 
 @pytest.fixture

@@ -11,7 +11,7 @@ import rclpy
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ato_nodes.launch import DomainLock  # noqa: E402
+from ato_nodes.launcher.launch import DomainLock  # noqa: E402
 
 LOCK_POLL = 0.05  # s between checks that the probe's domain is still held
 taken_over: list[DomainLock] = []  # the domain's lock once its holder let go: kept till exit

@@ -15,11 +15,11 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.bagio import PARAMETERS_KEY, read_frame, read_parameters, read_run
-from ato_nodes.bagrepair import RepairError, needs_repair, repair
+from ato_nodes.bags.bagio import PARAMETERS_KEY, read_frame, read_parameters, read_run
+from ato_nodes.bags.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.summary import bag_contents
+from ato_nodes.bags.summary import bag_contents
 from bagfile import write_run_bag
 from commands import invocation
 

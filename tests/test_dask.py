@@ -19,7 +19,7 @@ import pytest
 pytest.importorskip("distributed")
 import psutil  # noqa: E402  (a dependency of distributed)
 
-from ato_nodes.tuning import COMPILING  # noqa: E402
+from ato_nodes.studies.tuning import COMPILING  # noqa: E402
 from commands import invocation
 
 pytestmark = pytest.mark.integration

@@ -8,13 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.launch import DomainLock, node_environment
+from ato_nodes.launcher.launch import DomainLock, node_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 # Beyond DOMAIN_IDS, so that no launcher takes them by itself (a domain let go in 1-101
 # is at once the next run's on a busy host)
 UNCLAIMED_DOMAINS = (231, 232)
-TAKES_ITS_DOMAIN = ("import sys; from ato_nodes.launch import DomainLock; "
+TAKES_ITS_DOMAIN = ("import sys; from ato_nodes.launcher.launch import DomainLock; "
                     "DomainLock(int(sys.argv[1]))")
 
 

@@ -14,9 +14,9 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from ato_nodes.bagio import read_run
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.core.base.topics import step_topics
-from ato_nodes.launch import DOMAIN_LOCK_PORT, IGNORED_ENVIRONMENT, node_environment
+from ato_nodes.launcher.launch import DOMAIN_LOCK_PORT, IGNORED_ENVIRONMENT, node_environment
 from test_stack import (ROOT, alive, children, message_counts, run_stack, start_stack,
                         wait_for_children, wait_for_stepping)
 from commands import invocation
@@ -343,7 +343,7 @@ def test_runs_stay_on_this_host_whatever_the_environment(tmp_path):
 
 def test_an_in_process_candidate_past_its_timeout_is_a_timeout():
     from ato_nodes.core.config.scenario import load_scenario
-    from ato_nodes.tuning import PENALTY, evaluate_in_process
+    from ato_nodes.studies.tuning import PENALTY, evaluate_in_process
     record = evaluate_in_process(load_scenario("seed000"), {"adrc.mu1": 7000.0}, "itae", 0,
                                  timeout=1e-9)
     assert record.status == "timeout" and record.fitness == PENALTY

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from ato_nodes.cli.run_stack import summarized
-from ato_nodes.launch import WORKDIR_PREFIX, RunOutcome
+from ato_nodes.launcher.launch import WORKDIR_PREFIX, RunOutcome
 from commands import ROOT, invocation
 from test_bag_integrity import write
 from test_faults import holds_what_its_summary_says, opens_everywhere

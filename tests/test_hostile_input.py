@@ -230,7 +230,7 @@ def metro_bag(tmp_path: Path, name: str = "bag", overrides=(), **kept) -> Path:
     bag = write_run_bag(tmp_path / name, simulate(values), values)
     if kept:
         import yaml
-        from ato_nodes.bagio import PARAMETERS_KEY
+        from ato_nodes.bags.bagio import PARAMETERS_KEY
         metadata = yaml.safe_load((bag / "metadata.yaml").read_text())
         custom = metadata["rosbag2_bagfile_information"]["custom_data"]
         parameters = json.loads(custom[PARAMETERS_KEY])
@@ -283,8 +283,8 @@ def test_report_markdown_shows_names_from_a_bag_as_text(tmp_path):
     report.md they stay text (no live HTML, no broken table) as in report.html."""
     import re
 
-    from ato_nodes.report import write_report
-    from ato_nodes.bagio import read_run
+    from ato_nodes.reports.report import write_report
+    from ato_nodes.bags.bagio import read_run
     hostile = "<svg onload=alert(1)>|x"
     line = (ROOT / "msg_config" / "lines" / "metro-interstation.yaml").read_text()
     line = line.replace("name: synthetic metro interstation (Yizhuang-like)",

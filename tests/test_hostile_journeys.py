@@ -13,14 +13,14 @@ import pytest
 from bagfile import write_run_bag
 from commands import one_line_exit_2, script
 
-from ato_nodes.bagio import read_run, resimulate
+from ato_nodes.bags.bagio import read_run, resimulate
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.targets.timetable import LATEST_TIME, load_timetable
 from ato_nodes.core.train.line import parse_line
-from ato_nodes.journeys import TIMETABLE, run_timetable
+from ato_nodes.results.journeys import TIMETABLE, run_timetable
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "msg_config"

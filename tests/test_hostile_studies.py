@@ -13,7 +13,7 @@ from commands import one_line_exit_2, script
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import prepare
-from ato_nodes.studies import MAX_SAMPLES, MAX_SEED, MAX_WORKERS
+from ato_nodes.studies.runner import MAX_SAMPLES, MAX_SEED, MAX_WORKERS
 
 ROOT = Path(__file__).resolve().parents[1]
 DIGEST = "0" * 64

@@ -78,7 +78,7 @@ def test_the_graph_sees_every_kind_of_import():
     assert imported_modules("from . import e", "p.sub", True, modules) == {"p.sub.e"}
     graph = import_graph()
     assert "ato_nodes.core.config.schema" in graph["ato_nodes.core.run.loop"]
-    assert "ato_nodes.jsontext" in graph["ato_nodes.report"]
+    assert "ato_nodes.results.jsontext" in graph["ato_nodes.reports.report"]
     assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert find_cycle({"a": {"b"}, "b": set()}) == []
 
@@ -89,7 +89,8 @@ def test_the_package_has_no_import_cycle():
 
 
 def test_in_process_tuning_does_not_load_the_bag_reader():
-    code = "import ato_nodes.tuning, sys; assert 'rosbags' not in sys.modules, 'rosbags loaded'"
+    code = ("import ato_nodes.studies.tuning, sys; "
+            "assert 'rosbags' not in sys.modules, 'rosbags loaded'")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             timeout=120)
     assert result.returncode == 0, result.stderr
@@ -139,3 +140,40 @@ def test_the_core_knows_nothing_of_ros_bags_or_the_rest_of_the_package():
             if isinstance(node, ast.ImportFrom) and node.level:
                 depth = len(path.relative_to(PACKAGE / "core").parts) - 1
                 assert node.level <= depth + 1, f"{path} imports from beyond the core"
+
+
+# The package's rooms (ato_nodes/<room>/) and the rooms each may import besides itself,
+# from the bottom up (docs/architecture.md). The nodes and the launcher stand side by side:
+# the launcher starts the nodes by name in another process and imports none of them.
+PACKAGE_ROOMS_BELOW = {
+    "core": set(),
+    "api": {"core"},
+    "results": {"core"},
+    "bags": {"core", "results"},
+    "reports": {"core", "results", "bags"},
+    "launcher": {"core", "results", "bags"},
+    "nodes": {"core", "results", "bags"},
+    "studies": {"core", "results", "bags", "reports", "launcher"},
+    "cli": {"core", "results", "bags", "reports", "launcher", "nodes", "studies"},
+}
+
+
+def package_room(module: str) -> str | None:
+    """The room of a module of the package (ato_nodes.<room>...), None for the package."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def test_the_rooms_rules_have_no_cycle():
+    assert not find_cycle(ROOMS_BELOW)
+    assert not find_cycle(PACKAGE_ROOMS_BELOW)
+
+
+def test_every_module_of_the_package_sits_in_a_room_and_imports_only_the_rooms_below_it():
+    graph = import_graph()
+    assert {package_room(m) for m in graph} - {None} == set(PACKAGE_ROOMS_BELOW), \
+        "a module outside the rooms"
+    wrong = [f"{m} imports {t}" for m in graph for t in graph[m]
+             if package_room(m) is not None and package_room(t) != package_room(m)
+             and package_room(t) not in PACKAGE_ROOMS_BELOW[package_room(m)]]
+    assert not wrong, "; ".join(wrong)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.bagio import Run, resimulate
+from ato_nodes.bags.bagio import Run, resimulate
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
@@ -19,15 +19,15 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.targets.timetable import load_timetable
 from ato_nodes.core.train.line import Section
-from ato_nodes.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journey,
-                                run_timetable, worst_stations)
-from ato_nodes.report import write_report
+from ato_nodes.results.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journey,
+                                        run_timetable, worst_stations)
+from ato_nodes.reports.report import write_report
 from ato_nodes.core.targets.restriction import NAME as RESTRICTION
-from ato_nodes.report_journey import (NO_REPLANS, REPLANS, journey_figure, journey_reports,
-                                      limit_steps, station_rows)
+from ato_nodes.reports.report_journey import (NO_REPLANS, REPLANS, journey_figure, journey_reports,
+                                              limit_steps, station_rows)
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.targets.served import replans
-from ato_nodes.analysis import judge
+from ato_nodes.reports.analysis import judge
 
 DURATION = 300.0  # s: Market and Riverside reached, Central (arrival 422 s) not
 

@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from ato_nodes import jsontext
+from ato_nodes.results import jsontext
 from ato_nodes.cli import score_bag
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.run.loop import simulate
@@ -20,10 +20,10 @@ from ato_nodes.core.run.scoring import kept_files, score_series
 from ato_nodes.core.scoring.catalogue import STOP_INDICES, format_indices
 from ato_nodes.core.scoring.journey import (NOT_JUDGED, NOT_REACHED, STOPPED, format_journey,
                                             journey_record)
-from ato_nodes.journeys import TIMETABLE, run_journey, run_timetable, score_run
-from ato_nodes.report import write_report
-from ato_nodes.bagio import read_run
-from ato_nodes.summary import bag_contents
+from ato_nodes.results.journeys import TIMETABLE, run_journey, run_timetable, score_run
+from ato_nodes.reports.report import write_report
+from ato_nodes.bags.bagio import read_run
+from ato_nodes.bags.summary import bag_contents
 from bagfile import write_run_bag
 from commands import ROOT, invocation
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.report import write_report
-from ato_nodes.bagio import read_run
+from ato_nodes.reports.report import write_report
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.cli import score_bag
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario

@@ -10,7 +10,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from ato_nodes.bagio import Run, read_run, resimulate
+from ato_nodes.bags.bagio import Run, read_run, resimulate
 from ato_nodes.core.base import kernels
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
@@ -19,8 +19,8 @@ from ato_nodes.core.run import fast_loop
 from ato_nodes.core.run.last_stop import (AT_LAST_STOP, NEVER, LastStop, held, last_stop,
                                           planned_steps, standing)
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.journeys import run_journey, run_timetable
-from ato_nodes.tuning import evaluate_in_process
+from ato_nodes.results.journeys import run_journey, run_timetable
+from ato_nodes.studies.tuning import evaluate_in_process
 from commands import ROOT, invocation, run_stack
 
 SCENARIO = "seed004-metro-line"  # its run.last_stop_hold: 10 s

@@ -13,7 +13,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import (apply_overrides, check_launcher_free, load_scenario,
                                             ros_parameter_file, scenario_names)
 from ato_nodes.core.config.schema import SPECS, NodeValues, for_node, steps, unused
-from ato_nodes.launch import DomainLock, node_environment
+from ato_nodes.launcher.launch import DomainLock, node_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 METRO_FILE = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"

@@ -13,17 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes import jsontext
-from ato_nodes.report import write_report
-from ato_nodes.bagio import message_counts, read_parameters, read_run, read_series
+from ato_nodes.results import jsontext
+from ato_nodes.reports.report import write_report
+from ato_nodes.bags.bagio import message_counts, read_parameters, read_run, read_series
 from ato_nodes.core.train.line import load_line
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.core.run.scoring import kept_file, score_series
 from ato_nodes.core.config.schema import NODES
-from ato_nodes.launch import DomainLock, Stack, node_environment
-from ato_nodes.tuning import evaluate_in_process, evaluate_in_stack
+from ato_nodes.launcher.launch import DomainLock, Stack, node_environment
+from ato_nodes.studies.tuning import evaluate_in_process, evaluate_in_stack
 
 pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[1]

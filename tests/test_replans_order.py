@@ -10,14 +10,14 @@ import sys
 import pytest
 from rosbags.highlevel import AnyReader
 
-from ato_nodes.bagio import read_run
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.core.base.topics import step_topics, topic_map
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.config.schema import SPEC_BY_NAME, recording_steps
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.targets.served import replans
-from ato_nodes.launch import node_environment
+from ato_nodes.launcher.launch import node_environment
 from commands import ROOT
 from test_stack import start_stack
 

@@ -13,7 +13,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.base.topics import step_topics
-from ato_nodes.launch import node_environment
+from ato_nodes.launcher.launch import node_environment
 from commands import invocation
 
 pytestmark = pytest.mark.integration
@@ -196,7 +196,7 @@ def test_an_exported_run_reads_back_as_numbers_into_pandas(recorded, tmp_path):
     import numpy as np
     import pandas
 
-    from ato_nodes.bagio import read_frame, read_run
+    from ato_nodes.bags.bagio import read_frame, read_run
     result = script("export.py", recorded, "--csv", tmp_path / "run.csv")
     assert result.returncode == 0, result.stderr
     table = pandas.read_csv(tmp_path / "run.csv")

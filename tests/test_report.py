@@ -8,16 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.analysis import (FAIL, INDEX_COLUMNS, LIMIT_COLOUR, PASS, RUN_COLOURS, UNMEASURED,
-                                LiveChange, _mark_changes, heading, judge, live_changes,
-                                read_tuning, verdict_rows)
-from ato_nodes.bagio import Run
-from ato_nodes.report import write_report
+from ato_nodes.reports.analysis import (FAIL, INDEX_COLUMNS, LIMIT_COLOUR, PASS, RUN_COLOURS,
+                                        UNMEASURED, LiveChange, _mark_changes, heading, judge,
+                                        live_changes, read_tuning, verdict_rows)
+from ato_nodes.bags.bagio import Run
+from ato_nodes.reports.report import write_report
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, scenario_names
 from ato_nodes.core.scoring.operation import drive_modes, windowed_jerk
-from ato_nodes.report_html import mode_segments, time_figure
+from ato_nodes.reports.report_html import mode_segments, time_figure
 
 
 def make_run(tmp_path: Path, name: str, overrides=()) -> Run:

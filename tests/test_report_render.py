@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from ato_nodes.report import write_report
-from ato_nodes.bagio import Run
+from ato_nodes.reports.report import write_report
+from ato_nodes.bags.bagio import Run
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from commands import invocation

@@ -11,7 +11,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from ato_nodes.bagio import read_run
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.core.base import kernels
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import RunContext

@@ -11,7 +11,7 @@ import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import RunContext
-from ato_nodes.bagio import read_run
+from ato_nodes.bags.bagio import read_run
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.stages import ProfileStage

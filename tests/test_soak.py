@@ -28,12 +28,12 @@ def soak():
 
 
 def written_bag(bag: Path, steps: int, block: int, period_ns: int) -> bytes:
-    """A bag written as the recorder writes one (ato_nodes.bagwrite, a chunk closed and
+    """A bag written as the recorder writes one (ato_nodes.bags.bagwrite, a chunk closed and
     flushed every `block` steps); its MCAP file's bytes."""
     from rosbags.typesys import Stores, get_typestore
     from rosbags.typesys.stores.ros2_jazzy import std_msgs__msg__Float64 as Float64
 
-    from ato_nodes.bagwrite import close_writer, open_writer
+    from ato_nodes.bags.bagwrite import close_writer, open_writer
     typestore = get_typestore(Stores.ROS2_JAZZY)
     writer = open_writer(bag)
     connections = [writer.add_connection(name, Float64.__msgtype__, typestore=typestore)

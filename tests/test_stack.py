@@ -21,15 +21,15 @@ from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 from rosbags.highlevel import AnyReader
 
-from ato_nodes import jsontext
-from ato_nodes.bagio import read_run, read_series, resimulate
+from ato_nodes.results import jsontext
+from ato_nodes.bags.bagio import read_run, read_series, resimulate
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.config.schema import NODES
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.base.topics import step_topics
-from ato_nodes.launch import node_environment, node_processes
-from ato_nodes.nodefork import NODE_START
+from ato_nodes.launcher.launch import node_environment, node_processes
+from ato_nodes.launcher.nodefork import NODE_START
 from ato_nodes.nodes.base import STANDARD_EXECUTOR
 from ato_nodes.nodes.timing import VARIABLE as TIMING
 from commands import invocation
@@ -373,7 +373,7 @@ def test_a_compiled_in_process_run_equals_the_nodes_run_bit_for_bit(tmp_path):
     """seed000-realistic (lag, envelope, noisy quantised sensor) runs compiled in-process
     (core/run/fast_loop.py) and as Python in the nodes: every series is the same."""
     from ato_nodes.core.run import fast_loop
-    from ato_nodes.launch import run_checked
+    from ato_nodes.launcher.launch import run_checked
     if not fast_loop.AVAILABLE:
         pytest.skip("numba is not installed: in-process runs are Python too")
     values = apply_overrides(load_scenario("seed000-realistic"), ["run.duration=60"])
@@ -485,7 +485,7 @@ def test_a_fork_server_that_dies_before_forking_gives_a_plain_start(tmp_path, mo
                                                                      capfd):
     """The run's fork server is killed before it forks a node: one line says so, and the
     run completes with nodes started as plain processes, the in-process series."""
-    from ato_nodes import launch
+    from ato_nodes.launcher import launch
     started = launch.fork_server
 
     def dead_fork_server(env, cwd):

@@ -1,4 +1,4 @@
-"""The study runner (ato_nodes/studies.py): variants prepared before anything runs, the
+"""The study runner (ato_nodes/studies/runner.py): variants prepared before anything runs, the
 variant's own overrides winning over the study's common ones, runs scored in-process."""
 
 import json
@@ -9,7 +9,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.studies import Variant, numeric, prepare_variants, run_study, write_outputs
+from ato_nodes.studies.runner import Variant, numeric, prepare_variants, run_study, write_outputs
 
 
 def test_a_variant_overrides_the_common_overrides_of_its_scenario():

@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ato_nodes.analysis import markdown_table
+from ato_nodes.reports.analysis import markdown_table
 from ato_nodes.core.control.adrc import linear_adrc_of
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.train.line import Station, load_line
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.journeys import run_journey, run_timetable
+from ato_nodes.results.journeys import run_journey, run_timetable
 from ato_nodes.core.train.plant import PointMassTrain, TrainParameters, TrainState
 from ato_nodes.core.targets.profiles import AtoCurve, FeasiblePlan, Seed000Profile
 from ato_nodes.core.targets.timetable import section_line

@@ -12,9 +12,9 @@ import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.launch import node_processes as launched_nodes
-from ato_nodes.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings, evaluate_in_process,
-                              evaluate_in_stack)
+from ato_nodes.launcher.launch import node_processes as launched_nodes
+from ato_nodes.studies.tuning import (PENALTY, SearchSpace, Tuner, TuningSettings,
+                                      evaluate_in_process, evaluate_in_stack)
 from commands import invocation
 
 pytestmark = pytest.mark.integration
@@ -138,7 +138,7 @@ def test_bad_tuning_input_is_one_line_and_exit_2(tmp_path):
 
 
 def test_requirements_rank_infeasible_runs_after_feasible_ones_by_how_far_they_miss():
-    from ato_nodes.tuning import INFEASIBLE, Objective, Requirement
+    from ato_nodes.studies.tuning import INFEASIBLE, Objective, Requirement
     objective = Objective("j", (Requirement.parse("abs_stopping_error<=0.3"),
                                 Requirement.parse("overspeed_time<=0")))
     feasible = {"j_seed004": 900.0, "abs_stopping_error": 0.2, "overspeed_time": 0.0}
@@ -159,7 +159,7 @@ def test_requirements_rank_infeasible_runs_after_feasible_ones_by_how_far_they_m
 def test_a_tuning_with_a_requirement_never_picks_the_train_that_stays_at_the_platform(tmp_path):
     """Without the stop requirement, J rewards a metro controller that never moves
     (the position-indexed target is 0.3 m/s where it stands)."""
-    from ato_nodes.tuning import Objective, Requirement
+    from ato_nodes.studies.tuning import Objective, Requirement
     values = apply_overrides(load_scenario("seed004-metro"), ["run.duration=200"])
     parked = {"dadrc.b1": 0.0, "dadrc.b2": 0.0, "dadrc.b03": 0.0}  # no command ever builds up
     moving = {}

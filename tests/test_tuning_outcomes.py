@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from ato_nodes.core.base import kernels
-from ato_nodes.tuning import COMPILING
+from ato_nodes.studies.tuning import COMPILING
 from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]

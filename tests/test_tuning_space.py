@@ -15,7 +15,7 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.tuning import SearchSpace, Tuner, TuningSettings
+from ato_nodes.studies.tuning import SearchSpace, Tuner, TuningSettings
 from commands import invocation
 
 ROOT = Path(__file__).resolve().parents[1]

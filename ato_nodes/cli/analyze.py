@@ -17,10 +17,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from ato_nodes import cli
-from ato_nodes.analysis import ReportError
-from ato_nodes.bagio import BagError, parse_mapping, read_run
+from ato_nodes.reports.analysis import ReportError
+from ato_nodes.bags.bagio import BagError, parse_mapping, read_run
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.report import write_report
+from ato_nodes.reports.report import write_report
 
 
 def main() -> None:

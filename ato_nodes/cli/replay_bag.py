@@ -21,8 +21,8 @@ import time
 from pathlib import Path
 
 from ato_nodes import cli
-from ato_nodes.bagio import BagError, read_messages
-from ato_nodes.launch import DomainLock, isolate_to_this_host
+from ato_nodes.bags.bagio import BagError, read_messages
+from ato_nodes.launcher.launch import DomainLock, isolate_to_this_host
 
 WAIT_LIMIT = 30.0  # s to wait for --wait-subscribers
 TEARDOWN_LIMIT = 10.0  # s the ROS teardown may take before the process just exits

@@ -19,7 +19,7 @@ from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.core.config.schema import steps
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.scoring.catalogue import format_indices
-from ato_nodes.summary import bag_contents, write_summary
+from ato_nodes.bags.summary import bag_contents, write_summary
 
 EXIT_FAILED, EXIT_INTERRUPTED = 1, 130
 
@@ -53,7 +53,7 @@ def run_stack() -> None:
     cli.new_directory(bag)
     cli.seconds(args.timeout, "--timeout")
 
-    from ato_nodes.launch import Stack  # imports nothing of ROS itself; kept lazy for speed
+    from ato_nodes.launcher.launch import Stack  # imports no ROS itself; kept lazy for speed
     try:
         stack = Stack(values, bag, domain_id=args.domain_id, quiet=args.quiet,
                       timeout=args.timeout)

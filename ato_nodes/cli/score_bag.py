@@ -18,14 +18,14 @@ from __future__ import annotations
 
 import sys
 
-from ato_nodes import jsontext
+from ato_nodes.results import jsontext
 from ato_nodes import cli
-from ato_nodes.bagio import BagError, parse_mapping, read_run, resimulate
+from ato_nodes.bags.bagio import BagError, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.run.scoring import stop_not_reached
 from ato_nodes.core.scoring.journey import last_stop_missed
-from ato_nodes.journeys import score_run
+from ato_nodes.results.journeys import score_run
 
 
 def main() -> None:

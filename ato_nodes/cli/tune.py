@@ -24,9 +24,9 @@ from ato_nodes import cli
 from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
-from ato_nodes.studies import COUNT_BOUNDS, check_counts
-from ato_nodes.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
-                              TuningSettings)
+from ato_nodes.studies.runner import COUNT_BOUNDS, check_counts
+from ato_nodes.studies.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
+                                      TuningSettings)
 
 
 def parse_args() -> argparse.Namespace:

@@ -16,7 +16,7 @@ written to parameters.json in the bag as soon as they are known.
 Against a hard kill (SIGKILL, power loss) the MCAP chunk is closed and handed to
 the operating system every half run.record_lag of simulated time (0.5 s), and
 the plant never runs more than run.record_lag (1 s) ahead of what is on disk, so
-a killed recorder loses at most that, however loaded the machine; ato_nodes.bagrepair
+a killed recorder loses at most that, however loaded the machine; ato_nodes.bags.bagrepair
 makes what is on disk a complete bag again (the launcher runs it; scripts/repair_bag.py
 for a bag left by anything else).
 A write that fails (a full disk) ends the recording with one line and exit
@@ -35,8 +35,8 @@ from std_msgs.msg import String, UInt64
 from rosbags.interfaces import Qos
 from rosbags.typesys import Stores, get_typestore
 
-from ato_nodes.bagio import PARAMETERS_KEY
-from ato_nodes.bagwrite import close_writer, open_writer, qos
+from ato_nodes.bags.bagio import PARAMETERS_KEY
+from ato_nodes.bags.bagwrite import close_writer, open_writer, qos
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.schema import LOOP_NODES, recording_steps
 from ato_nodes.core.base.topics import Topic, step_topics

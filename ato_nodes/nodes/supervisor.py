@@ -23,12 +23,12 @@ from rclpy.duration import Duration
 
 from std_msgs.msg import Float64
 
-from ato_nodes import jsontext
+from ato_nodes.results import jsontext
 from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.config.schema import SUPERVISED_NODES, steps
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.nodes.base import AtoNode, parameter_files, run_node
-from ato_nodes.summary import bag_contents, write_summary
+from ato_nodes.bags.summary import bag_contents, write_summary
 
 PROGRESS_PERIOD = 0.5  # s of wall time
 SHUTDOWN_ACK_TIMEOUT = 2.0  # s the supervisor waits for every node to have 'shutdown'

@@ -261,7 +261,7 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
     return merged
 
 
-# Set by the launcher (ato_nodes.launch.Stack) for every run it starts, from the command's
+# Set by the launcher (ato_nodes.launcher.launch.Stack) for every run it starts, from the command's
 # --out: a value given to run_stack.py or tune.py would be overridden without a word.
 LAUNCHER_PARAMETERS = ("recorder.output", "supervisor.report")
 

@@ -3,7 +3,7 @@
 Importing rclpy, the message packages and a node's modules costs 0.5-1 s of CPU
 per process: with five processes on two cores, most of a tuning candidate's
 relaunch overhead. So the launcher starts one fork server per launcher process
-(`python -m ato_nodes.nodefork`, started at the first run), which imports them
+(`python -m ato_nodes.launcher.nodefork`, started at the first run), which imports them
 once, before any ROS context exists, and forks each node on request. A forked node
 makes itself what a freshly started `python -m ato_nodes.nodes.ROLE` is (own
 session, environment, arguments, working directory, console), then runs the
@@ -132,7 +132,7 @@ def _outlive_launcher(children: dict[int, dict], wake_read: int) -> None:
         if select.select([wake_read], [], [], None if killed else max(left, 0.0))[0]:
             os.read(wake_read, 4096)  # a SIGCHLD
     for bag in unclosed:
-        from ato_nodes.bagrepair import RepairError, needs_repair, repair
+        from ato_nodes.bags.bagrepair import RepairError, needs_repair, repair
         try:
             if needs_repair(Path(bag)):
                 print(f"launcher gone, recorder stopped: {repair(Path(bag)).describe()}",
@@ -289,7 +289,7 @@ class ForkServer:
     def __init__(self, env: dict[str, str], cwd: Path):
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "ato_nodes.nodefork", str(theirs.fileno())], env=env,
+            [sys.executable, "-m", "ato_nodes.launcher.nodefork", str(theirs.fileno())], env=env,
             cwd=cwd, stdin=subprocess.DEVNULL, pass_fds=(theirs.fileno(),),
             start_new_session=True)  # a Ctrl-C at the terminal is the launcher's to pass on
         theirs.close()
@@ -341,8 +341,9 @@ class ForkServer:
             with self.replied:
                 self.replied.wait_for(lambda: self.replies or not self.alive)
                 if not self.alive:
-                    raise NodeStartError("the node fork server (python -m ato_nodes.nodefork) "
-                                         f"ended with status {self.process.wait()}")
+                    raise NodeStartError("the node fork server (python -m "
+                                         "ato_nodes.launcher.nodefork) ended with status "
+                                         f"{self.process.wait()}")
                 node = ForkedNode(self.replies.pop(0), notify)
                 self.nodes[node.pid] = node
                 if node.pid in self.early_exits:

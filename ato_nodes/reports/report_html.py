@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ato_nodes.analysis import (CHANGES_HEADER, FAIL, LIMIT_COLOUR, PASS, RUN_COLOURS,
-                                UNMEASURED, RunReport, Tuning, VerdictRow, change_rows,
-                                convergence_axis, live_changes, report_notes)
+from ato_nodes.reports.analysis import (CHANGES_HEADER, FAIL, LIMIT_COLOUR, PASS, RUN_COLOURS,
+                                        UNMEASURED, RunReport, Tuning, VerdictRow, change_rows,
+                                        convergence_axis, live_changes, report_notes)
 from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH

@@ -26,7 +26,7 @@ from mcap.stream_reader import StreamReader
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from ato_nodes.bagwrite import close_writer, open_writer
+from ato_nodes.bags.bagwrite import close_writer, open_writer
 
 PARAMETERS_KEY = "ato_nodes.parameters"
 SIDECAR = "parameters.json"

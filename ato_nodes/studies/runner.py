@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ato_nodes import jsontext
+from ato_nodes.results import jsontext
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.loop import simulate
@@ -109,7 +109,7 @@ def run_in_process(values: dict[str, Any]) -> Outcome:
 
 def run_through_stack(values: dict[str, Any], bag: Path) -> Outcome:
     # Imported here: the launcher loads the bag libraries, which in-process studies skip.
-    from ato_nodes.launch import run_checked
+    from ato_nodes.launcher.launch import run_checked
     indices, identical = run_checked(values, bag)
     return Outcome(indices, bag, identical)
 

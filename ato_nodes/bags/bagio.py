@@ -489,7 +489,7 @@ def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
     the names of the recorded series that differ from it over the steps the bag holds
     (empty: bit for bit; an interrupted run's bag is compared over what it holds)."""
     from ato_nodes.core.run.loop import simulate
-    from ato_nodes.journeys import TIMETABLE
+    from ato_nodes.results.journeys import TIMETABLE
     if not run.parameters:
         raise BagError(f"{run.path}: the bag keeps no run parameters to simulate from")
     values = dict(run.parameters)

@@ -1,5 +1,5 @@
 """The journey part of a run's report (scripts/analyze.py): for each run of a timetable
-(ato_nodes.journeys), a table per station (stop error, arrival and departure lateness,
+(ato_nodes.results.journeys), a table per station (stop error, arrival and departure lateness,
 dwell, verdict) and per section (running time, traction energy), the journey's totals
 and verdict (core/scoring/journey.py's, the summary line the console and the JSON files
 give too), the re-plans the bag recorded (a late departure
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ato_nodes.analysis import (LIMIT_COLOUR, MARK, RUN_COLOURS, Figure, Markup, RunReport,
-                                _markdown_rows, _pyplot, _save, md_text)
+from ato_nodes.reports.analysis import (LIMIT_COLOUR, MARK, RUN_COLOURS, Figure, Markup, RunReport,
+                                        _markdown_rows, _pyplot, _save, md_text)
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.scoring.journey import REQUIRED, JourneyIndices, summary_line
@@ -28,8 +28,8 @@ from ato_nodes.core.targets.restriction import restricted_line
 from ato_nodes.core.targets.served import Replan
 from ato_nodes.core.targets.timetable import Timetable
 from ato_nodes.core.train.line import Line
-from ato_nodes.journeys import TIMETABLE, is_journey, run_journey, run_timetable
-from ato_nodes.report_html import STATUS_COLOURS, Panels, _f32, _line_shapes, _table, _text
+from ato_nodes.results.journeys import TIMETABLE, is_journey, run_journey, run_timetable
+from ato_nodes.reports.report_html import STATUS_COLOURS, Panels, _f32, _line_shapes, _table, _text
 
 STATION_HEADER = ["station", "km", "stop error m", "arrival s", "arrival lateness s",
                   "departure s", "departure lateness s", "dwell s", "verdict"]

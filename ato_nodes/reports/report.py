@@ -1,5 +1,5 @@
 """The report of runs and tunings that analyze.py writes: report.md with its PNG
-figures and report.html (ato_nodes.analysis judges and plots, ato_nodes.report_html
+figures and report.html (ato_nodes.reports.analysis judges and plots, ato_nodes.reports.report_html
 draws the page), and indices.json.
 """
 
@@ -7,15 +7,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ato_nodes import jsontext, report_html, report_journey
-from ato_nodes.analysis import (judge, markdown_report, plot_convergence, plot_runs,
-                                read_tuning, verdict_rows)
-from ato_nodes.bagio import Run
+from ato_nodes.reports import report_html, report_journey
+from ato_nodes.results import jsontext
+from ato_nodes.reports.analysis import (judge, markdown_report, plot_convergence, plot_runs,
+                                        read_tuning, verdict_rows)
+from ato_nodes.bags.bagio import Run
 
 
 def write_report(runs: list[Run], tunings: list[Path], out: Path) -> tuple[Path, Path]:
     """report.md with the PNG figures, report.html (interactive) and indices.json in
-    `out`, with a journey run's tables and figure (ato_nodes.report_journey). Every run
+    `out`, with a journey run's tables and figure (ato_nodes.reports.report_journey). Every run
     is judged and every tuning read before anything is written: a bad report.*
     parameter or a kept timetable that does not load is a ScenarioError, a tuning
     directory that is not tune.py's a ReportError (one line each)."""

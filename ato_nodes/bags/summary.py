@@ -1,5 +1,5 @@
 """A run's summary.json: how the run ended and what its bag holds, with the indices (a
-journey's per station: ato_nodes.journeys.score_run).
+journey's per station: ato_nodes.results.journeys.score_run).
 
 Written into the bag directory by whoever ran the run: scripts/run_stack.py after
 its launcher stopped every node, or the supervisor node itself when no launcher
@@ -11,9 +11,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ato_nodes import jsontext
-from ato_nodes.bagio import BagError, message_counts, read_run
-from ato_nodes.journeys import score_run
+from ato_nodes.results import jsontext
+from ato_nodes.bags.bagio import BagError, message_counts, read_run
+from ato_nodes.results.journeys import score_run
 
 FILE_NAME = "summary.json"
 

@@ -6,7 +6,7 @@ every one of them on the way out, whatever happened (end of run, a node
 that died, Ctrl-C, a timeout).
 
 The node processes are forked from a server that has imported rclpy and the
-node modules once (ato_nodes.nodefork): importing them was most of a tuning
+node modules once (ato_nodes.launcher.nodefork): importing them was most of a tuning
 candidate's relaunch overhead. With ATO_NODE_START=subprocess, and for a run
 whose fork server fails to start or dies before forking its first node (one line
 on stderr says so), each node is a plain `python -m ato_nodes.nodes.ROLE`
@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ato_nodes.bagrepair import RepairError, needs_repair, repair
+from ato_nodes.bags.bagrepair import RepairError, needs_repair, repair
 from ato_nodes.core.config.scenario import ros_parameter_file
 from ato_nodes.core.config.schema import NODES
-from ato_nodes.nodefork import (NODE_NAME_PREFIX, STOP_GRACE, ForkedNode, NodeStartError,
-                                fork_server, plain_start_requested, start_plain)
+from ato_nodes.launcher.nodefork import (NODE_NAME_PREFIX, STOP_GRACE, ForkedNode, NodeStartError,
+                                         fork_server, plain_start_requested, start_plain)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
@@ -350,7 +350,7 @@ class Stack:
         """Where a run that timed out stood: the topic with the fewest recorded messages
         names the node the loop waited for (the recorder, when every topic is level:
         the plant waits for it, run.record_lag)."""
-        from ato_nodes.bagio import BagError, message_counts
+        from ato_nodes.bags.bagio import BagError, message_counts
         from ato_nodes.core.base.topics import step_topics
         publishers = {topic.name: topic.publishers[0] for topic in step_topics()}
         try:  # per-step topics only (live parameter changes are few, or none)
@@ -448,7 +448,7 @@ def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0
     """One run through the stack, scored from its bag, and the same run in-process:
     (the bag's indices, whether the two agree bit for bit). A failed run raises
     RuntimeError with the launcher's one-line message."""
-    from ato_nodes.bagio import read_run
+    from ato_nodes.bags.bagio import read_run
     from ato_nodes.core.run.loop import simulate
     from ato_nodes.core.run.scoring import score_series
     outcome = Stack(values, bag, quiet=True, timeout=timeout).run()

@@ -1,5 +1,5 @@
 """The journey a run drove and its per-station indices, from the run's parameters and
-series alone (a bag's or an in-process run's): the report (ato_nodes.report_journey)
+series alone (a bag's or an in-process run's): the report (ato_nodes.reports.report_journey)
 and scripts/robustness.py (score_with_journey) read a journey through here.
 
 A journey run (profile.kind journey) names its timetable in profile.journey.timetable;

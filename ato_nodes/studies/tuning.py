@@ -1,7 +1,7 @@
 """Tuning controller parameters with the swarm optimizers.
 
 Every candidate is a set of parameter overrides. In stack mode it is run by
-relaunching the whole node graph (ato_nodes.launch.Stack) in a ROS domain of
+relaunching the whole node graph (ato_nodes.launcher.launch.Stack) in a ROS domain of
 its own and scored from its bag; in in-process mode by the same core code in
 a worker process. A candidate that crashes, hangs, diverges or is invalid gets
 PENALTY and is logged; tuning goes on. Every evaluation is appended to
@@ -36,8 +36,8 @@ from typing import Any, Callable
 import numpy as np
 import yaml
 
-from ato_nodes import jsontext
-from ato_nodes.analysis import plot_convergence
+from ato_nodes.results import jsontext
+from ato_nodes.reports.analysis import plot_convergence
 from ato_nodes.core.base import kernels
 from ato_nodes.core.run.loop import simulate, warm
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
@@ -249,8 +249,8 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
     """One candidate through the real node graph, scored from its bag. With a finite
     `bound` (see evaluate_in_process) the supervisor follows the running fitness and
     ends a run that passes it: `pruned`, with the value it reached."""
-    from ato_nodes.bagio import BagError, read_parameters, read_series
-    from ato_nodes.launch import Stack
+    from ato_nodes.bags.bagio import BagError, read_parameters, read_series
+    from ato_nodes.launcher.launch import Stack
 
     candidate = _candidate(values, overrides, objective, index, bound)
     if isinstance(candidate, Evaluation):

@@ -8,7 +8,7 @@ running-time errors), the bag is partial (a requirement met so far may still be
 broken later), the run does not give the index. Live parameter changes the bag
 records are listed, marked on the time plots and shown in the gains. The report is
 Markdown with PNG figures (matplotlib, Agg) and an interactive, self-contained HTML
-page (ato_nodes.report_html, Plotly). Names taken from a bag (runs, scenarios,
+page (ato_nodes.reports.report_html, Plotly). Names taken from a bag (runs, scenarios,
 trains, lines, stations) are escaped in both: a bag is anyone's file.
 """
 
@@ -34,10 +34,10 @@ from ato_nodes.core.scoring.catalogue import (FITNESS, GROWING_INDICES, STOP_IND
                                               journey_last_stop)
 from ato_nodes.core.run.scoring import observer_b0, run_line, stop_not_reached, total_disturbance
 from ato_nodes.core.scoring.journey import last_stop_missed
-from ato_nodes.journeys import score_run
+from ato_nodes.results.journeys import score_run
 
 if TYPE_CHECKING:  # annotations only: in-process tuning plots without the bag reader
-    from ato_nodes.bagio import Run
+    from ato_nodes.bags.bagio import Run
 
 # One colour per run, in the PNG figures and the page alike: none red, which is the
 # speed limit's (drawn dash-dotted as well), nor grey, the reference bands'.
