@@ -52,15 +52,16 @@ from ..targets.profiles import (DepartureRamp, PlanTable, departing, plan_table,
                                 table_speed)
 from ..targets.served import (START, JourneyState, JourneyTable, journey_limit,
                               journey_speed, observed)
-from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
+from ..train.line import line_arrays, speed_limit
 from ..train.plant import (
-    TrainConstants,
-    achievable,
+    TrainMotion,
+    TrainSettings,
     basic_resistance,
     disturbance,
-    rates,
-    rk4_substep,
     sensor_reading,
+    train_acceleration,
+    train_line_resistance,
+    train_step,
 )
 from .last_stop import LastStop, held, standing
 from .python_steps import PYTHON_STEPS, PythonController, running
@@ -119,13 +120,9 @@ class LoopInputs(NamedTuple):
     noise: float               # plant.speed_noise
     quantum: float             # plant.speed_quantum
     period: float              # s
-    substeps: int              # RK4 sub-steps per period
-    train: TrainConstants      # the real train's
-    pantograph_offset: float   # m behind the head
-    lagged: bool               # the force follows the command through the actuator lag
+    train: TrainSettings       # the real train's, on its line
     max_speed: float           # m/s, past it the run has diverged
     last_stop: LastStop        # where and how long a journey's train stands before the end
-    line: LineTables           # arrays (empty: the open track)
     plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
     departure: DepartureRamp   # how that plan's target leaves the start (RunContext.departure)
     preview: int               # the horizon entry the controller tracks
@@ -137,21 +134,6 @@ class LoopInputs(NamedTuple):
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
     fitness_limit: float       # the running fitness past which the run ends (inf: never)
     columns: SeriesColumns     # where each series goes in a row
-
-
-class PlantState(NamedTuple):
-    """What the train carries from one period to the next (PointMassTrain)."""
-
-    steps: int                 # periods run
-    time: float                # s, the plant's clock
-    position: float            # m
-    speed: float               # m/s, true
-    force: float               # N/kN applied
-    lag: float                 # the lag's output before the envelope (lag_state)
-    acting: float              # the command that acted over the last period
-    powered: bool              # traction power over the last sub-step
-    delayed: np.ndarray        # commands inside the dead time (a ring, oldest at `oldest`)
-    oldest: int
 
 
 class ProfileState(NamedTuple):
@@ -176,7 +158,7 @@ class LoopState(NamedTuple):
     computed in chunks gives the bits of one computed in a single call."""
 
     step: int                  # the next step k
-    plant: PlantState
+    plant: TrainMotion
     profile: ProfileState
     controller: Any            # the controller kind's state NamedTuple
     last: float                # the limiter's last command
@@ -244,10 +226,10 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
     draws = plant.rng.standard_normal(total) if plant.noise > 0.0 else np.zeros(total)
     return LoopInputs(
         draws=draws, noise=float(plant.noise), quantum=float(plant.quantum),
-        period=float(train.period), substeps=int(train.substeps), train=train.constants,
-        pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
-        max_speed=float(plant.max_speed), last_stop=plant.last_stop,
-        line=line_arrays(train.line), plan=plan, departure=profile.context.departure,
+        period=float(train.settings.period),
+        train=train.settings._replace(line=line_arrays(train.line)),  # arrays: compiled code's
+        max_speed=float(plant.max_speed), last_stop=plant.last_stop, plan=plan,
+        departure=profile.context.departure,
         preview=int(controller.preview), approach_step=float(profile.approach_step),
         berth=float(profile.berth), berth_mark=float(profile.berth_mark),
         settings=settings, limits=controller.limiter.settings,
@@ -255,14 +237,8 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
 
 
 def _first_state(profile, plant, controller, controller_state, running_index) -> LoopState:
-    train, state = plant.train, plant.train.state
     return LoopState(
-        step=0,
-        plant=PlantState(
-            steps=int(train.steps), time=float(state.time), position=float(state.position),
-            speed=float(state.speed), force=float(state.force), lag=float(train.lag_state),
-            acting=float(train.acting), powered=bool(train.powered),
-            delayed=np.array(train.delayed, dtype=float), oldest=0),
+        step=0, plant=plant.train.motion,
         profile=ProfileState(last_position=float(profile.last_position), stair=math.nan,
                              journey=JourneyState(*getattr(profile.context.plan, "state",
                                                            START)),
@@ -340,8 +316,9 @@ def _speed_limit(inputs: LoopInputs, journey: JourneyTable | None, position: flo
         return journey_limit(journey, position)
     if inputs.plan.limits_speed:
         return table_limit(inputs.plan, position)
-    if inputs.line.limits_end > inputs.line.tunnels_end:
-        return speed_limit(inputs.line, position)
+    line = inputs.train.line
+    if line.limits_end > line.tunnels_end:
+        return speed_limit(line, position)
     return math.inf
 
 
@@ -371,7 +348,7 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
             extras[k, i] = outputs[i]
         speed = plant.speed
         stood = standing(inputs.last_stop, stood, plant.position, speed)  # PlantStage.apply
-        plant = _plant_step(inputs, plant, u)
+        plant = train_step(inputs.train, plant, u)
         if not (abs(plant.speed) <= inputs.max_speed):  # PlantStage.diverged
             ended = True
         else:
@@ -409,44 +386,20 @@ def _publish_horizons(inputs: LoopInputs, journey: JourneyTable | None, profile:
 
 
 @jitable(inline=True)
-def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: PlantState,
+def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: TrainMotion,
             target: float, measured: float, command: float) -> None:
     """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command)."""
-    train, column, x, v = inputs.train, inputs.columns, plant.position, plant.speed
-    line_resistance = belt_resistance(inputs.line, x, train.length)
+    train, column, x, v = inputs.train.constants, inputs.columns, plant.position, plant.speed
+    line_resistance = train_line_resistance(inputs.train, plant)
     row[column.t], row[column.target], row[column.position] = k * inputs.period, target, x
     row[column.measured_speed], row[column.speed] = measured, v
-    row[column.acceleration] = rates(plant.time, v, plant.lag, plant.acting, plant.powered,
-                                     line_resistance, train)[0]
+    row[column.acceleration] = train_acceleration(inputs.train, plant, line_resistance)
     row[column.disturbance] = disturbance(plant.time, train.disturbance_amplitude,
                                           train.disturbance_frequency, train.disturbance_phase)
     row[column.force] = plant.force
     row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b, train.davis_c)
     row[column.line_resistance] = line_resistance
     row[column.speed_limit], row[column.command] = _speed_limit(inputs, journey, x), command
-
-
-@jitable(inline=True)
-def _plant_step(inputs: LoopInputs, plant: PlantState, command: float) -> PlantState:
-    """PointMassTrain.step: the command through the dead time, RK4 over the period."""
-    train, line = inputs.train, inputs.line
-    delayed, oldest = plant.delayed, plant.oldest
-    if len(delayed):
-        command, delayed[oldest] = delayed[oldest], command
-        oldest = (oldest + 1) % len(delayed)
-    sub = inputs.period / inputs.substeps
-    x, v, lag = plant.position, plant.speed, plant.lag
-    for i in range(inputs.substeps):
-        powered = not in_neutral_section(line, x - inputs.pantograph_offset)
-        x, v, lag = rk4_substep(plant.time + i * sub, x, v, lag, sub, command, powered, train,
-                                line)
-    powered = not in_neutral_section(line, x - inputs.pantograph_offset)  # as the plant's
-    steps = plant.steps + 1
-    force = achievable(lag if inputs.lagged else command, v, train.limited, train.envelope)
-    if not powered and force > 0.0:
-        force = 0.0
-    return PlantState(steps, steps * inputs.period, x, v, force, lag, command, powered, delayed,
-                      oldest)
 
 
 _steps = compiled(_steps_source)
