@@ -34,8 +34,6 @@ uninterrupted call.
 
 from __future__ import annotations
 
-import functools
-import json
 import math
 import time
 from contextlib import contextmanager
@@ -45,14 +43,11 @@ import numpy as np
 
 from ..base.kernels import AVAILABLE, compiled, jitable, overload
 from ..config.components import CONTROLLERS
-from ..config.schema import NodeValues
 from ..control.limiter import LimiterSettings
 from ..scoring.indices import RunningIndex, running_add
-from ..targets.profiles import (DepartureRamp, PlanTable, departing, plan_table, table_limit,
-                                table_speed)
-from ..targets.served import (START, JourneyState, JourneyTable, journey_limit,
-                              journey_speed, observed)
-from ..train.line import line_arrays, speed_limit
+from ..targets.horizons import ProfileSettings, ProfileState, plan_speed_limit, profile_step
+from ..targets.served import JourneyTable
+from ..train.line import line_arrays
 from ..train.plant import (
     TrainMotion,
     TrainSettings,
@@ -65,7 +60,7 @@ from ..train.plant import (
 )
 from .last_stop import LastStop, held, standing
 from .python_steps import PYTHON_STEPS, PythonController, running
-from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns, has_arrived
+from .stages import COLUMNS, SeriesColumns
 
 # The compiled steps of every controller kind by the type of its state; the kinds
 # without them share PYTHON_STEPS (their own Python step, called from compiled code).
@@ -92,27 +87,6 @@ def covers(profile, plant, controller, changes) -> bool:
     return AVAILABLE and not changes and drawable
 
 
-@functools.lru_cache(maxsize=4)
-def _horizons(profile_values: str) -> np.ndarray:
-    profile = ProfileStage(NodeValues("profile", json.loads(profile_values)))
-    plan, period = profile.context.plan, profile.period
-    # A step's horizon holds the targets at t_k .. t_k+N, exactly as RunContext.horizon
-    # computes them for a time-indexed plan: each time's target once, then windows of it.
-    targets = np.array([plan.speed(j * period, 0.0)
-                        for j in range(profile.total_steps + profile.preview)], dtype=float)
-    windows = np.lib.stride_tricks.sliding_window_view(targets, profile.preview + 1)
-    return windows[:profile.total_steps].copy()
-
-
-def horizons(profile) -> np.ndarray:
-    """Every step's horizon (steps x (N + 1)) of a time-indexed plan as a ProfileStage
-    publishes them, computed once per process and plan (read-only: shared by every
-    run of the plan)."""
-    table = _horizons(json.dumps(dict(profile.context.values), sort_keys=True))
-    table.flags.writeable = False
-    return table
-
-
 class LoopInputs(NamedTuple):
     """What every step of a compiled run reads and none changes."""
 
@@ -123,26 +97,12 @@ class LoopInputs(NamedTuple):
     train: TrainSettings       # the real train's, on its line
     max_speed: float           # m/s, past it the run has diverged
     last_stop: LastStop        # where and how long a journey's train stands before the end
-    plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
-    departure: DepartureRamp   # how that plan's target leaves the start (RunContext.departure)
-    preview: int               # the horizon entry the controller tracks
-    approach_step: float       # m/s, seed 003's stepped approach (0: off)
-    berth: float               # m, profile.berth (0: off)
-    berth_mark: float          # m, the stop it berths at (NaN: none)
+    profile: ProfileSettings   # the profile step's
     settings: Any              # the controller kind's settings NamedTuple
     limits: LimiterSettings
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
     fitness_limit: float       # the running fitness past which the run ends (inf: never)
     columns: SeriesColumns     # where each series goes in a row
-
-
-class ProfileState(NamedTuple):
-    """What the profile carries from one position to the next (ProfileStage)."""
-
-    last_position: float       # m
-    stair: float               # m/s, the stepped approach's stair (NaN: none)
-    journey: JourneyState      # a journey's section and arrival (served.observed)
-    arrived: bool              # standing in its berth once (profile.berth): for good
 
 
 class FitnessState(NamedTuple):
@@ -179,20 +139,13 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     (simulate() raises there once past its deadline)."""
     total = profile.context.steps
     # a journey's tables, else None: the loops of other runs compile without its code
-    journey = getattr(profile.context.plan, "journey", None)
-    plan = profile.context.plan.table() if profile.context.plan.position_indexed else None
-    if plan is None and journey is None:  # time-indexed; a copy: the loop's one
-        # argument type is a writable array
-        targets = horizons(profile).copy()
-        plan = plan_table((), ())
-    else:  # filled in as the run goes, LOOKAHEAD steps ahead
-        targets = np.empty((total, profile.preview + 1))
-        plan = plan_table((), ()) if plan is None else plan
+    journey = profile.journey
+    targets = profile.targets  # a time-indexed plan's given, else filled in as the run goes
     running_index, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
     rows = np.empty((total, len(COLUMNS)))
     extras = np.empty((total, len(controller.output_names)))
     with _controller_seam(controller) as (settings, controller_state):
-        inputs = _inputs(profile, plant, controller, plan, settings, running_index, limit)
+        inputs = _inputs(profile, plant, controller, settings, running_index, limit)
         loop = _first_state(profile, plant, controller, controller_state, running_index)
         chunk = FIRST_CHUNK
         while loop.step < total and not loop.ended:
@@ -218,8 +171,7 @@ def _controller_seam(stage):
         yield slot, slot
 
 
-def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index,
-            limit: float) -> LoopInputs:
+def _inputs(profile, plant, controller, settings, running_index, limit: float) -> LoopInputs:
     train = plant.train
     total = profile.context.steps
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
@@ -228,10 +180,8 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
         draws=draws, noise=float(plant.noise), quantum=float(plant.quantum),
         period=float(train.settings.period),
         train=train.settings._replace(line=line_arrays(train.line)),  # arrays: compiled code's
-        max_speed=float(plant.max_speed), last_stop=plant.last_stop, plan=plan,
-        departure=profile.context.departure,
-        preview=int(controller.preview), approach_step=float(profile.approach_step),
-        berth=float(profile.berth), berth_mark=float(profile.berth_mark),
+        max_speed=float(plant.max_speed), last_stop=plant.last_stop,
+        profile=profile.settings._replace(line=line_arrays(train.line)),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
 
@@ -239,10 +189,7 @@ def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index
 def _first_state(profile, plant, controller, controller_state, running_index) -> LoopState:
     return LoopState(
         step=0, plant=plant.train.motion,
-        profile=ProfileState(last_position=float(profile.last_position), stair=math.nan,
-                             journey=JourneyState(*getattr(profile.context.plan, "state",
-                                                           START)),
-                             arrived=bool(profile.arrived)),
+        profile=profile.state,
         controller=controller_state, last=float(controller.limiter.last),
         fitness=FitnessState(float(running_index.value), float(running_index.last_t),
                              float(running_index.last_w)),
@@ -275,53 +222,6 @@ if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
             settings, state, target, measured, horizon, last, limits)
 
 
-@jitable
-def _plan_horizon(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyState,
-                  step: int, position: float, horizon) -> None:
-    """RunContext.horizon of a position-indexed plan, into `horizon`: the plan's
-    targets of steps step .. step + N along the planned trajectory from `position`
-    (Heun's method, one step per period)."""
-    h = inputs.period
-    horizon[0] = _target(inputs, journey, state, step * h, position)
-    for i in range(1, len(horizon)):
-        t, v = (step + i) * h, horizon[i - 1]
-        ahead = _target(inputs, journey, state, t, position + h * v)
-        position += 0.5 * h * (v + ahead)
-        horizon[i] = _target(inputs, journey, state, t, position)
-
-
-@jitable
-def _target(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyState, t: float,
-            position: float) -> float:
-    """A position-indexed plan's target: a journey's in its state, else the table's."""
-    if journey is not None:  # pruned while compiling a run that is not a journey
-        return journey_speed(journey, state, t, position)
-    return departing(inputs.departure, t, table_speed(inputs.plan, position))
-
-
-@jitable
-def _approach(step_size: float, stair: float, target: float, speed: float):
-    """ProfileStage.approach on the stair (NaN: none): (target, stair)."""
-    if step_size <= 0.0 or target - speed <= step_size:
-        return target, math.nan
-    if stair != stair or abs(stair - speed) < step_size / 4:
-        stair = speed + step_size
-    return min(stair, target), stair
-
-
-@jitable
-def _speed_limit(inputs: LoopInputs, journey: JourneyTable | None, position: float) -> float:
-    """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
-    if journey is not None:
-        return journey_limit(journey, position)
-    if inputs.plan.limits_speed:
-        return table_limit(inputs.plan, position)
-    line = inputs.train.line
-    if line.limits_end > line.tunnels_end:
-        return speed_limit(line, position)
-    return math.inf
-
-
 def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopState,
                   stop: int, targets, rows, extras) -> LoopState:
     """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
@@ -333,11 +233,9 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
     ended = False
     while k < stop and not ended:
         measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
-        if inputs.plan.grid.shape[1] or journey is not None:  # position-indexed: the
-            # horizons for this position
-            profile = _publish_horizons(inputs, journey, profile, k, plant.position, targets)
+        profile = profile_step(inputs.profile, journey, profile, k, plant.position, targets)
         horizon = targets[k]
-        reference = horizon[inputs.preview]
+        reference = horizon[inputs.profile.preview]
         if k == 0:
             controller = controller_start(inputs.settings, controller, reference, measured)
         u, outputs, controller = controller_step(inputs.settings, controller, reference,
@@ -360,31 +258,6 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
     return LoopState(k, plant, profile, controller, last, fitness, stood, ended)
 
 
-@jitable
-def _publish_horizons(inputs: LoopInputs, journey: JourneyTable | None, profile: ProfileState,
-                      k: int, position: float, targets) -> ProfileState:
-    """ProfileStage.on_position for a position-indexed plan: the horizons of steps 0 .. 2
-    at step 0, of step k + 2 from the extrapolated position after, into `targets`."""
-    travel = position - profile.last_position if k else 0.0
-    speed = travel / inputs.period
-    stair, state = profile.stair, profile.journey
-    if journey is not None:
-        state = observed(journey, state, k * inputs.period, position, speed)
-    arrived = profile.arrived or has_arrived(k, travel, position, inputs.berth_mark,
-                                             inputs.berth)
-    first = 0 if k == 0 else k + LOOKAHEAD
-    for step in range(first, k + LOOKAHEAD + 1):
-        if step < len(targets):
-            if arrived:
-                targets[step, :] = 0.0
-            else:
-                _plan_horizon(inputs, journey, state, step,
-                              position + LOOKAHEAD * travel if k else position, targets[step])
-            targets[step, 0], stair = _approach(inputs.approach_step, stair,
-                                                targets[step, 0], speed)
-    return ProfileState(position, stair, state, arrived)
-
-
 @jitable(inline=True)
 def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: TrainMotion,
             target: float, measured: float, command: float) -> None:
@@ -399,7 +272,8 @@ def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant
     row[column.force] = plant.force
     row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b, train.davis_c)
     row[column.line_resistance] = line_resistance
-    row[column.speed_limit], row[column.command] = _speed_limit(inputs, journey, x), command
+    row[column.speed_limit] = plan_speed_limit(inputs.profile, journey, x)
+    row[column.command] = command
 
 
 _steps = compiled(_steps_source)
