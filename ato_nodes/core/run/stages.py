@@ -16,9 +16,12 @@ the plan (the run context's preview): exact for time-indexed targets, along
 the planned trajectory for position-indexed ones.
 
 Each stage is built when its node starts, from exactly the values the node
-declares (schema.NodeValues) and the run context; the ROS nodes run one stage
-each and pass the values as float64 messages, bit for bit; `simulate()` makes
-the same calls in one process, so both give identical numbers.
+declares (schema.NodeValues) and the run context, and holds the settings and state
+of its step functions (the train's, the profile's, the controller kind's); the ROS
+nodes call one stage each, a step at a time, and pass the values as float64
+messages, bit for bit; `simulate()` runs the same step functions in the one loop of
+core/run/fast_loop.py, so both give identical numbers (tests/test_stages.py drives
+the stages as the nodes do).
 """
 
 from __future__ import annotations
@@ -40,7 +43,8 @@ from ..control.limiter import CommandLimiter
 from ..targets.horizons import (LOOKAHEAD, PROFILE_START, plan_speed_limit,
                                 profile_step)
 from ..train.line import Line, line_of
-from ..train.plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
+from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
+                           sensor_reading, train_outputs)
 from .last_stop import held, last_stop, standing
 
 # The series of a run, one value per step, in the order of simulate()'s rows.
@@ -155,8 +159,7 @@ class PlantStage:
     @property
     def diverged(self) -> bool:
         """Speed not finite or beyond plant.max_speed: a run that can only get worse."""
-        speed = self.train.state.speed
-        return not (abs(speed) <= self.max_speed)  # also true for NaN
+        return diverged(self.train.motion.speed, self.max_speed)
 
     @property
     def arrived(self) -> bool:
@@ -170,10 +173,12 @@ class PlantStage:
         return sensor_reading(speed, draw, self.noise, self.quantum)
 
     def outputs(self) -> PlantOutputs:
-        s, p, train = self.train.state, self.params, self.train
-        return PlantOutputs(s.position, self.measure(s.speed), s.speed, train.acceleration(),
-                            p.disturbance(s.time), s.force, p.resistance(s.speed),
-                            train.line_resistance())
+        motion = self.train.motion
+        acceleration, disturbance, resistance, line_resistance = train_outputs(
+            self.train.settings, motion)
+        return PlantOutputs(motion.position, self.measure(motion.speed), motion.speed,
+                            acceleration, disturbance, motion.force, resistance,
+                            line_resistance)
 
     def apply(self, command: float) -> None:
         state = self.train.state  # step k's, as its outputs gave it
@@ -188,8 +193,9 @@ class ControllerStage:
     Live parameters (the controller kind's `live_parameters`): changes put in
     `pending` take effect at the next step boundary, before the next step is
     computed; `applied` lists them as (step, changes), step being the first one
-    computed with them. The node fills `pending` from `ros2 param set`, simulate()
-    from a run's recorded changes, so both give the same numbers."""
+    computed with them. The node fills `pending` from `ros2 param set`; simulate()'s
+    loop (core/run/fast_loop.py) calls `retune` at the step of each of a run's recorded
+    changes and goes on with the new settings, so both give the same numbers."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
         self.values = values

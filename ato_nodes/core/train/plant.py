@@ -312,18 +312,24 @@ def train_step(settings: TrainSettings, motion: TrainMotion, command: float) -> 
 
 
 @jitable(inline=True)
-def train_line_resistance(settings: TrainSettings, motion: TrainMotion) -> float:
-    """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
-    return belt_resistance(settings.line, motion.position, settings.constants.length)
+def train_outputs(settings: TrainSettings, motion: TrainMotion
+                  ) -> tuple[float, float, float, float]:
+    """What the train shows now (its state at t_k) beside its motion: (true acceleration
+    under the command acting, disturbance phi, basic resistance w0, the belt's gradient,
+    curve and tunnel resistance), m/s^2 and N/kN."""
+    c = settings.constants
+    line_resistance = belt_resistance(settings.line, motion.position, c.length)
+    acceleration = rates(motion.time, motion.speed, motion.lag, motion.acting, motion.powered,
+                         line_resistance, c)[0]
+    return (acceleration, disturbance(motion.time, c.disturbance_amplitude,
+                                      c.disturbance_frequency, c.disturbance_phase),
+            basic_resistance(motion.speed, c.davis_a, c.davis_b, c.davis_c), line_resistance)
 
 
-@jitable(inline=True)
-def train_acceleration(settings: TrainSettings, motion: TrainMotion,
-                       line_resistance: float) -> float:
-    """True acceleration now under the command now acting, the belt's `line_resistance`
-    (train_line_resistance) given."""
-    return rates(motion.time, motion.speed, motion.lag, motion.acting, motion.powered,
-                 line_resistance, settings.constants)[0]
+@jitable
+def diverged(speed: float, max_speed: float) -> bool:
+    """Speed not finite or beyond `max_speed`: a run that can only get worse."""
+    return not (abs(speed) <= max_speed)  # also true for NaN
 
 
 class PointMassTrain:
@@ -379,11 +385,11 @@ class PointMassTrain:
 
     def line_resistance(self) -> float:
         """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
-        return train_line_resistance(self.settings, self.motion)
+        return train_outputs(self.settings, self.motion)[3]
 
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""
-        return train_acceleration(self.settings, self.motion, self.line_resistance())
+        return train_outputs(self.settings, self.motion)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
