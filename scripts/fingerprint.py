@@ -179,7 +179,10 @@ def main() -> None:
             elif name not in reference:
                 print(f"{name}: not in the saved set", flush=True)
             else:
-                differing += not compared(name, result[name], reference[name])
+                saved = reference[name]
+                if args.stack:  # a bag's times are its stamps: t is not hashed (see above)
+                    saved = {series: digest for series, digest in saved.items() if series != "t"}
+                differing += not compared(name, result[name], saved)
     if reference is not None:
         saved = sum(name in reference for name in result)
         print(f"{saved - differing} of the {saved} saved scenarios identical")
