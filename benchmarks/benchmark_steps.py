@@ -6,8 +6,8 @@ figures, asserts nothing.
 
 Each run is cut to --seconds of simulated time (the whole run where shorter), run once
 to warm up (loading the compiled loop, building the plan), then timed --repeats times in
-the same process; the median per step is printed, with whether the run took the
-compiled loop. --python times the Python loop (simulate(compiled=False)), the reference.
+the same process; the median per step is printed, with whether the run was compiled.
+--python times the same loop run as Python (simulate(compiled=False)).
 """
 
 from __future__ import annotations
@@ -19,18 +19,8 @@ import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, prepare, scenario_names
-from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run import fast_loop
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.run.stages import ControllerStage, PlantStage, ProfileStage
-
-
-def compiled_run(values: dict) -> bool:
-    """Whether simulate() runs `values` compiled."""
-    stages = (ProfileStage(NodeValues("profile", values)),
-              PlantStage(NodeValues("plant", values)),
-              ControllerStage(NodeValues("controller", values)))
-    return fast_loop.covers(*stages, None)
 
 
 def per_step(values: dict, repeats: int, compiled: bool) -> tuple[float, int]:
@@ -61,7 +51,7 @@ def main() -> None:
         _cli.fail(str(exc))
     print(f"{'scenario':24s} {'us/step':>9s}  steps  loop")
     for name, values in runs.items():
-        compiled = not args.python and compiled_run(values)
+        compiled = not args.python and fast_loop.AVAILABLE
         seconds, steps = per_step(values, args.repeats, not args.python)
         print(f"{name:24s} {seconds * 1e6:9.2f} {steps:6d}  {'compiled' if compiled else 'Python'}",
               flush=True)

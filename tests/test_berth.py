@@ -8,7 +8,8 @@ from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.core.run.stages import ProfileStage, has_arrived
+from ato_nodes.core.run.stages import ProfileStage
+from ato_nodes.core.targets.horizons import has_arrived
 
 # A crush-laden metro train with a fast actuator and the on-board estimator: it stops
 # 4.7 cm short of the mark at 167.1 s, on time, and creeps there for 4 s without a berth.

@@ -1,5 +1,6 @@
-"""The compiled loop (core/run/fast_loop.py) against the Python loop, bit for bit, and
-against itself run in chunks of steps."""
+"""The loop of core/run/fast_loop.py compiled against the same function run as Python
+(numba's own faithfulness: the loop is one text), and against itself run in chunks of
+steps. tests/test_stages.py drives the nodes' stages against it."""
 
 import itertools
 from types import SimpleNamespace
@@ -45,22 +46,17 @@ VARIANTS = [
 ]
 
 
-def stages(values):
-    from ato_nodes.core.run.stages import ControllerStage, PlantStage, ProfileStage
-    from ato_nodes.core.config.schema import NodeValues
-    return (ProfileStage(NodeValues("profile", values)), PlantStage(NodeValues("plant", values)),
-            ControllerStage(NodeValues("controller", values)), None)
-
-
 def python_run(monkeypatch, values, prune=None):
     return simulate(values, prune=prune, compiled=False)
+
+
+SHORT = "run.duration=30"  # the loop is one text: a short run shows numba's faithfulness
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario,overrides", VARIANTS)
 def test_the_compiled_loop_gives_the_python_loops_bits(monkeypatch, scenario, overrides):
-    values = apply_overrides(load_scenario(scenario), ["run.duration=300", *overrides])
-    assert fast_loop.covers(*stages(values))
+    values = apply_overrides(load_scenario(scenario), [SHORT, *overrides])
     compiled, python = simulate(values), python_run(monkeypatch, values)
     assert compiled.keys() == python.keys()
     for name in python:
@@ -99,7 +95,7 @@ def chunked_run(monkeypatch, values, first_chunk, prune=None):
 @pytest.mark.parametrize("scenario,overrides", VARIANTS)
 def test_a_run_in_one_step_chunks_gives_the_bits_of_a_run_in_one_call(monkeypatch, scenario,
                                                                        overrides):
-    values = apply_overrides(load_scenario(scenario), ["run.duration=300", *overrides])
+    values = apply_overrides(load_scenario(scenario), [SHORT, *overrides])
     whole, chunked = (chunked_run(monkeypatch, values, first) for first in (10**9, 1))
     assert len(whole["t"]) == steps(values)
     for name in whole:
@@ -120,13 +116,7 @@ def test_pruned_and_diverging_runs_end_at_the_same_step_in_chunks(monkeypatch):
     assert np.array_equal(whole["speed"], chunked["speed"], equal_nan=True)
 
 
-# Every shipped scenario whose run the compiled loop covers: all of them.
-COVERED = sorted(name for name in scenario_names()
-                 if fast_loop.covers(*stages(load_scenario(name))))
-
-
-def test_the_compiled_loop_covers_every_shipped_scenario():
-    assert COVERED == sorted(scenario_names())
+COVERED = sorted(scenario_names())
 
 
 @pytest.mark.parametrize("overrides", [["gpc.prediction=mechanistic"],
@@ -147,9 +137,9 @@ def test_a_kind_without_compiled_steps_gives_the_python_loops_bits(monkeypatch, 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", COVERED)
-def test_every_covered_shipped_scenario_gives_the_python_loops_bits(monkeypatch, scenario):
+def test_every_shipped_scenario_gives_the_python_loops_bits(monkeypatch, scenario):
     values = load_scenario(scenario)
-    values = apply_overrides(values, {"run.duration": min(300.0, values["run.duration"])})
+    values = apply_overrides(values, {"run.duration": min(30.0, values["run.duration"])})
     compiled, python = simulate(values), python_run(monkeypatch, values)
     assert compiled.keys() == python.keys()
     for name in python:
@@ -176,8 +166,8 @@ def test_every_run_of_a_kind_calls_one_compiled_signature():
                         in VARIANTS if "estimator.enabled=true" in overrides}
     assert estimating_kinds  # each a signature of its own: off, the estimator's settings
     # and state are None and the kind's loop compiles without its code
-    assert len(fast_loop._steps.signatures) == len(set(fast_loop.STEPS_BY_STATE)) + len(
-        journey_kinds) + len(estimating_kinds)
+    assert len(fast_loop._steps.signatures) == len(fast_loop.compiled_kinds()) + 1 + len(
+        journey_kinds) + len(estimating_kinds)  # + 1: the kinds without compiled steps
 
 
 def test_warming_takes_any_run_a_tuning_may_start_from():
@@ -208,11 +198,47 @@ def test_the_compiled_loop_checks_the_deadline_between_its_chunks(monkeypatch):
         simulate(load_scenario("seed000"), deadline=4.5)
 
 
-def test_runs_it_does_not_cover_take_the_python_loop():
-    stepped = apply_overrides(load_scenario("seed000"), ["profile.approach_step=0.5"])
-    assert not fast_loop.covers(*stages(stepped))  # time-indexed, with the stepped approach
-    profile, plant, controller, _ = stages(load_scenario("seed000"))
-    assert not fast_loop.covers(profile, plant, controller, {10: {"adrc.mu1": 700.0}})
+@pytest.mark.parametrize("overrides,changes", [
+    (["profile.approach_step=0.5"], None),  # time-indexed, with the stepped approach
+    ([], {10: {"adrc.mu1": 700.0}, 40: {"adrc.mu2": 90.0}}),  # live gains
+    (["controller.kind=gpc", "gpc.prediction=mechanistic", "gpc.horizon=2",  # a Python step
+      "controller.preview=2"],
+     None)])
+def test_the_runs_the_python_loop_once_took_alone_run_compiled(monkeypatch, overrides,
+                                                                changes):
+    """With numba present no run leaves the compiled loop (there is no fallback: a run it
+    could not take fails, numba's typing error, instead of running as Python)."""
+    values = apply_overrides(load_scenario("seed000"), ["run.duration=10", *overrides])
+
+    def uncompiled(*arguments):
+        raise AssertionError("a compiled run went to the Python loop")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(fast_loop, "_steps_source", uncompiled)
+        compiled = simulate(values, changes=changes)
+    python = simulate(values, changes=changes, compiled=False)
+    for name in python:
+        assert np.array_equal(compiled[name], python[name], equal_nan=True), name
+
+
+def test_a_kind_registered_after_import_joins_the_dispatch(monkeypatch):
+    """The steps are found by the type of the kind's state in the registry as it is when
+    asked (compiled code asks while compiling): an outside plug-in's kind joins."""
+    from types import SimpleNamespace
+    from typing import NamedTuple
+
+    from ato_nodes.core.config.components import CONTROLLERS
+    from ato_nodes.core.control.stepped import ControllerSteps
+
+    class LateState(NamedTuple):
+        count: int = 0
+
+    late = ControllerSteps(lambda *arguments: arguments[1], lambda *arguments: None, LateState)
+    monkeypatch.setitem(CONTROLLERS.components, "late_kind",
+                        SimpleNamespace(kind="late_kind", steps=late))
+    assert fast_loop.steps_of(LateState) is late
+    assert "late_kind" in fast_loop.compiled_kinds()
+    assert fast_loop.controller_start(None, LateState(), 1.0, 0.0) == LateState()
 
 
 @pytest.mark.parametrize("scenario", ["seed003-maglev", "seed002-hsr", "seed001-excitation"])

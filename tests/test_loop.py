@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ato_nodes.core.run import loop
+from ato_nodes.core.run import fast_loop, loop
 from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.loop import simulate
@@ -102,10 +102,13 @@ def test_only_a_kinds_own_float_parameters_are_live():
         stage.retune({"controller.preview": 3})
 
 
-def test_the_python_loop_checks_the_deadline_before_every_step(monkeypatch):
-    """A clock that advances one second per reading: the run passes its deadline at
-    the sixth step (a step at 10000 RK4 sub-steps takes ~0.03 s, 1024 of them 30 s)."""
+def test_the_python_loop_checks_the_deadline_between_its_chunks(monkeypatch):
+    """A clock that advances one second per reading, chunks of one step: the run passes
+    its deadline at the sixth check, before step 5 (a chunk aims at CHUNK_SECONDS of
+    wall time, a step at 10000 RK4 sub-steps takes ~0.03 s as Python)."""
     clock = itertools.count()
     monkeypatch.setattr(loop, "time", SimpleNamespace(monotonic=lambda: next(clock)))
+    monkeypatch.setattr(fast_loop, "FIRST_CHUNK", 1)
+    monkeypatch.setattr(fast_loop, "CHUNK_SECONDS", 0.0)
     with pytest.raises(TimeoutError, match="deadline at step 5$"):
         simulate(run_of("seed001-crh380al"), deadline=4.5, compiled=False)

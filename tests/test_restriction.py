@@ -12,12 +12,10 @@ import numpy as np
 import pytest
 
 from ato_nodes.bags.bagio import read_run
-from ato_nodes.core.base import kernels
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
 from ato_nodes.core.config.schema import defaults
-from ato_nodes.core.run import fast_loop
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.targets.restriction import NAME
@@ -25,7 +23,6 @@ from ato_nodes.core.targets.served import replans, section_table
 from ato_nodes.core.targets.timetable import load_timetable
 from ato_nodes.core.train.line import Section, with_speed_restrictions
 from commands import ROOT, invocation, run_stack
-from test_fast_loop import stages
 
 SCENARIO = "seed004-metro-line"
 START, END, SPEED = 4000.0, 4600.0, 8.33  # 30 km/h between Riverside and Central
@@ -110,7 +107,6 @@ def test_the_late_arrival_is_caught_up_after_it_compiled_as_in_python(timetable)
     central, university = timetable.stops[3:5]
     reached = f"run.duration={university.arrival + 75:g}"  # at University, kept late too
     values = metro(RESTRICTION, held, reached)
-    assert fast_loop.covers(*stages(values)) or not kernels.AVAILABLE
     compiled, python = simulate(values), simulate(values, compiled=False)
     for name in python:
         assert np.array_equal(compiled[name], python[name], equal_nan=True), name

@@ -13,7 +13,8 @@ from ato_nodes.core.control.stepped import SteppedController
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.train.line import parse_line
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.run.stages import PlantStage, ProfileStage
+from ato_nodes.core.run.stages import PlantStage
+from ato_nodes.core.targets.horizons import approach
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_names, train_preset
 from ato_nodes.core.config.schema import defaults
@@ -212,14 +213,13 @@ def test_the_ato_curve_meets_the_planned_run_time_with_the_lowest_cruise_speed()
 
 
 def test_the_stepped_approach_holds_a_stair_one_step_above_the_speed():
-    values = {**defaults(), "profile.kind": "step", "profile.step.speed": 20.0,
-              "profile.approach_step": 2.0, "run.period": 1.0}
-    stage = ProfileStage(values)
-    assert stage.approach(20.0, 5.0) == 7.0
-    assert stage.approach(20.0, 6.0) == 7.0    # not reached yet: the stair holds
-    assert stage.approach(20.0, 6.8) == 8.8    # within a quarter step: the next stair
-    assert stage.approach(20.0, 19.0) == 20.0  # close: the target itself
-    assert stage.approach(3.0, 10.0) == 3.0    # braking targets are never softened
+    stair, published = math.nan, []
+    for target, speed in ((20.0, 5.0), (20.0, 6.0), (20.0, 6.8), (20.0, 19.0), (3.0, 10.0)):
+        value, stair = approach(2.0, stair, target, speed)
+        published.append(value)
+    # not reached yet: the stair holds; within a quarter step: the next stair; close: the
+    # target itself; braking targets are never softened
+    assert published == [7.0, 7.0, 8.8, 20.0, 3.0]
 
 
 def test_the_command_limiter_bands_modes_limits_rate_and_saturates():

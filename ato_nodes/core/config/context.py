@@ -16,9 +16,14 @@ import functools
 import math
 
 from ..base.errors import ScenarioError
-from ..targets.profiles import NO_RAMP, DepartureRamp, departing, departure_ramp, feasible_plan
+import numpy as np
+
+from ..targets.horizons import ProfileSettings, plan_horizon, plan_speed_limit
+from ..targets.profiles import (NO_RAMP, DepartureRamp, departing, departure_ramp,
+                                feasible_plan, plan_table)
+from ..targets.served import START
 from ..train.line import Line, line_of
-from ..train.plant import TrainParameters
+from ..train.plant import OPEN_TRACK, TrainParameters
 from .components import PROFILES
 from .schema import steps
 
@@ -92,26 +97,41 @@ class RunContext:
                                 f"{values['profile.kind']}")
         return feasible_plan(plan, self.train, share, jerk, self.period, self.steps)
 
+    @functools.cached_property
+    def profile_settings(self) -> ProfileSettings:
+        """The profile step's settings (core/targets/horizons.py; the line's limits as
+        tuples: Python reads them fast); ScenarioError (one line) for a plan it cannot read:
+        a position-indexed plan without its PlanTable, a time-indexed one with limits."""
+        values, plan = self.values, self.plan
+        kind = values["profile.kind"]
+        table = plan.table() if plan.position_indexed else None
+        if plan.position_indexed and table is None and not hasattr(plan, "journey"):
+            raise ScenarioError(f"profile.kind {kind}: a position-indexed plan gives the "
+                                f"table its targets are read from (Plan.table())")
+        if not plan.position_indexed and plan.limits_speed:
+            raise ScenarioError(f"profile.kind {kind}: a time-indexed plan's own speed limits "
+                                f"are not read (the line's apply): its limits_speed is False")
+        return ProfileSettings(
+            float(self.period), int(values["controller.preview"]), bool(plan.position_indexed),
+            plan_table((), ()) if table is None else table, self.departure,
+            self.line.tables if self.line is not None else OPEN_TRACK,
+            float(values["profile.approach_step"]), float(values["profile.berth"]),
+            float(self.berth_mark))
+
     def speed_limit(self, position: float) -> float:
         """The limit that applies with the head at `position`, m/s (inf without a line):
         the plan's own belt limit where it has one (the ATO curve's tail rule)."""
-        if self.plan.limits_speed:
-            return self.plan.limit(position)
-        return self.line.speed_limit(position) if self.line is not None else math.inf
+        return float(plan_speed_limit(self.profile_settings, getattr(self.plan, "journey", None),
+                                      position))
 
     def horizon(self, step: int, position: float, count: int) -> list[float]:
         """The plan's targets of steps step .. step + count, from `position` at step:
         exact for time-indexed plans; for position-indexed plans along the planned
-        trajectory ds/dt = v(s) from `position` (Heun's method, one step per period)."""
-        plan, h, ramp = self.plan, self.period, self.departure
+        trajectory ds/dt = v(s) from `position` (horizons.plan_horizon)."""
+        plan, h = self.plan, self.period
         if not plan.position_indexed:  # the papers' setting, every step of every run
             return [plan.speed((step + i) * h, position) for i in range(count + 1)]
-        # past the departure ramp (or without one) the plan's own speed, every step kept cheap
-        target = self.target if step * h < ramp.delay + ramp.rise else plan.speed
-        speeds = [target(step * h, position)]
-        for i in range(1, count + 1):
-            t, v = (step + i) * h, speeds[-1]
-            ahead = target(t, position + h * v)
-            position += 0.5 * h * (v + ahead)
-            speeds.append(target(t, position))
-        return speeds
+        horizon = np.empty(count + 1)
+        plan_horizon(self.profile_settings, getattr(plan, "journey", None),
+                     getattr(plan, "state", START), step, position, horizon)
+        return horizon.tolist()

@@ -1,41 +1,43 @@
-"""The lockstep loop compiled (numba), for the runs that tuning and studies repeat.
+"""The lockstep loop, written once: compiled (numba) when numba is installed, else, or
+when simulate(compiled=False) asks, the same function run as Python (numba's py_func).
 
-simulate() hands a run here when numba is installed and the run is of the kind a
-compiled loop covers: any controller kind (compiled when its registry entry names its
-ControllerSteps, core/control/stepped.py; else its own Python step called from the
-compiled loop, core/run/python_steps.py), a time-indexed target (its horizons are
-computed once per plan) or a position-indexed one with a PlanTable (the ATO curve,
-a strategy, a position table: their horizons along the planned trajectory, step by
-step), the point-mass train on the open track or on a line (gradients, curves,
-tunnels, limits, neutral sections as LineTables arrays), dead time, lag, envelopes,
-the noisy, quantised speed sensor and seed 003's stepped approach. Anything else
-(live gain changes, a time-indexed target with the stepped approach or the plan's own
-speed limits; none shipped) runs the Python loop. The step is the one core/run/stages.py
-describes, in the same order, and every formula is the Python path's own jitable
-function (core/base/kernels.py) reading the same NamedTuples by name;
-tests/test_fast_loop.py checks that both paths give the same bits for every shipped
-scenario the loop covers.
+Step k runs the order core/run/stages.py describes, each stage by its own step
+function over its settings and state NamedTuples: the train's (core/train/plant.py
+train_step), the profile's (core/targets/horizons.py profile_step), the controller
+kind's (core/control/stepped.py ControllerSteps; a kind without them calls its own
+Python step, core/run/python_steps.py), the running fitness's (core/scoring/indices.py
+running_step) and the last stop's (core/run/last_stop.py). The nodes' stages hold the
+same states and call the same functions one step at a time, so the stack, the
+compiled loop and the Python loop give the same bits (tests/test_stages.py).
+
+Any run takes it: any controller kind, time-indexed targets (their horizons computed
+once per plan), position-indexed ones with a PlanTable (the ATO curve, a strategy, a
+position table: their horizons along the planned trajectory, step by step) or a
+journey's tables, the point-mass train on the open track or on a line, dead time, lag,
+envelopes, the noisy, quantised speed sensor, the stepped approach and live gain
+changes: a step-indexed schedule of the controller's settings, the loop's chunks ending
+at each change (ControllerStage.retune builds the new settings and carries the state).
+A plan it cannot read is refused when its run context is built (RunContext.
+profile_settings), in every runner alike.
 
 The controller kind is chosen by the type of its state: controller_start() and
-controller_step() below resolve, while compiling, to the kind's own functions, so
-one loop serves every kind, compiled once per kind (and once for all the kinds
-without compiled steps; once more per kind for journeys, whose tables are an argument of
-their own, None in other runs, so that their loops compile without a journey's code; once
-more per kind with the on-board estimator on, whose settings and state are None in the
-kind's when it is off, core/control/estimation.py) and cached on disk (numba keys its
-cache by the argument types; loop.warm() compiles them all).
+controller_step() below resolve, while compiling, to the kind's own functions, looked up
+in the registry then (so a kind registered after import joins), so one loop serves every
+kind, compiled once per kind (and once for all the kinds without compiled steps; once
+more per kind for journeys, whose tables are an argument of their own, None in other
+runs, so that their loops compile without a journey's code; once more per kind with the
+on-board estimator on, whose settings and state are None in the kind's when it is off,
+core/control/estimation.py) and cached on disk (numba keys its cache by the argument
+types; loop.warm() compiles them all).
 
-A run is computed in chunks of steps, each one call of the compiled loop lasting
-about CHUNK_SECONDS, so that simulate() can check its deadline between them (a
-step at 10000 RK4 sub-steps takes ~1 ms); everything a step changes goes from one
-chunk to the next in a LoopState, by name, and the chunks give the bits of one
-uninterrupted call.
+A run is computed in chunks of steps, each one call of the loop lasting about
+CHUNK_SECONDS, so that simulate() can check its deadline between them (a step at 10000
+RK4 sub-steps takes ~1 ms compiled); everything a step changes goes from one chunk to
+the next in a LoopState, by name, and the chunks give the bits of one uninterrupted call.
 """
 
 from __future__ import annotations
 
-import functools
-import json
 import math
 import time
 from contextlib import contextmanager
@@ -45,32 +47,34 @@ import numpy as np
 
 from ..base.kernels import AVAILABLE, compiled, jitable, overload
 from ..config.components import CONTROLLERS
-from ..config.schema import NodeValues
 from ..control.limiter import LimiterSettings
-from ..scoring.indices import RunningIndex, running_add
-from ..targets.profiles import (DepartureRamp, PlanTable, departing, plan_table, table_limit,
-                                table_speed)
-from ..targets.served import (START, JourneyState, JourneyTable, journey_limit,
-                              journey_speed, observed)
-from ..train.line import LineTables, belt_resistance, in_neutral_section, line_arrays, speed_limit
-from ..train.plant import (
-    TrainConstants,
-    achievable,
-    basic_resistance,
-    disturbance,
-    rates,
-    rk4_substep,
-    sensor_reading,
-)
+from ..control.stepped import ControllerSteps
+from ..scoring.indices import RunningIndex, RunningState, running_step
+from ..targets.horizons import ProfileSettings, ProfileState, plan_speed_limit, profile_step
+from ..targets.served import JourneyTable
+from ..train.line import line_arrays
+from ..train.plant import TrainMotion, TrainSettings, diverged, sensor_reading, train_outputs, \
+    train_step
 from .last_stop import LastStop, held, standing
-from .python_steps import PYTHON_STEPS, PythonController, running
-from .stages import COLUMNS, LOOKAHEAD, ProfileStage, SeriesColumns, has_arrived
+from .python_steps import PYTHON_STEPS, RUNNING, PythonController, running
+from .stages import COLUMNS, SeriesColumns
 
-# The compiled steps of every controller kind by the type of its state; the kinds
-# without them share PYTHON_STEPS (their own Python step, called from compiled code).
-STEPS_BY_STATE = {component.steps.state_type: component.steps
-                  for component in CONTROLLERS.components.values() if component.steps}
-STEPS_BY_STATE[PythonController] = PYTHON_STEPS
+
+def steps_of(state_type: type) -> ControllerSteps:
+    """The ControllerSteps of the kind whose state is `state_type`, from the registry as
+    it is now (a kind registered after import included); the kinds without compiled
+    steps share PYTHON_STEPS."""
+    if state_type is PythonController:
+        return PYTHON_STEPS
+    steps = _STEPS.get(state_type)
+    if steps is None:
+        _STEPS.update({component.steps.state_type: component.steps
+                       for component in CONTROLLERS.components.values() if component.steps})
+        steps = _STEPS[state_type]
+    return steps
+
+
+_STEPS: dict[type, ControllerSteps] = {}  # steps_of's, by the type of their state
 
 
 def compiled_kinds() -> list[str]:
@@ -81,57 +85,18 @@ def compiled_kinds() -> list[str]:
     return sorted(kinds.values())
 
 
-def covers(profile, plant, controller, changes) -> bool:
-    """Whether the compiled loop runs this run (stages built by simulate())."""
-    plan = profile.context.plan
-    if plan.position_indexed:  # a table, or a journey's tables
-        drawable = plan.table() is not None or hasattr(plan, "journey")
-    else:  # its horizons are computed once, without the stepped approach
-        drawable = profile.approach_step <= 0.0 and not plan.limits_speed
-    return AVAILABLE and not changes and drawable
-
-
-@functools.lru_cache(maxsize=4)
-def _horizons(profile_values: str) -> np.ndarray:
-    profile = ProfileStage(NodeValues("profile", json.loads(profile_values)))
-    plan, period = profile.context.plan, profile.period
-    # A step's horizon holds the targets at t_k .. t_k+N, exactly as RunContext.horizon
-    # computes them for a time-indexed plan: each time's target once, then windows of it.
-    targets = np.array([plan.speed(j * period, 0.0)
-                        for j in range(profile.total_steps + profile.preview)], dtype=float)
-    windows = np.lib.stride_tricks.sliding_window_view(targets, profile.preview + 1)
-    return windows[:profile.total_steps].copy()
-
-
-def horizons(profile) -> np.ndarray:
-    """Every step's horizon (steps x (N + 1)) of a time-indexed plan as a ProfileStage
-    publishes them, computed once per process and plan (read-only: shared by every
-    run of the plan)."""
-    table = _horizons(json.dumps(dict(profile.context.values), sort_keys=True))
-    table.flags.writeable = False
-    return table
-
-
 class LoopInputs(NamedTuple):
-    """What every step of a compiled run reads and none changes."""
+    """What every step of a run reads and none changes but at a live change of gains
+    (`settings`, between two chunks)."""
 
     draws: np.ndarray          # the speed sensor's normal draws, one per step
     noise: float               # plant.speed_noise
     quantum: float             # plant.speed_quantum
     period: float              # s
-    substeps: int              # RK4 sub-steps per period
-    train: TrainConstants      # the real train's
-    pantograph_offset: float   # m behind the head
-    lagged: bool               # the force follows the command through the actuator lag
+    train: TrainSettings       # the real train's, on its line
     max_speed: float           # m/s, past it the run has diverged
     last_stop: LastStop        # where and how long a journey's train stands before the end
-    line: LineTables           # arrays (empty: the open track)
-    plan: PlanTable            # a position-indexed plan's (empty positions: time-indexed)
-    departure: DepartureRamp   # how that plan's target leaves the start (RunContext.departure)
-    preview: int               # the horizon entry the controller tracks
-    approach_step: float       # m/s, seed 003's stepped approach (0: off)
-    berth: float               # m, profile.berth (0: off)
-    berth_mark: float          # m, the stop it berths at (NaN: none)
+    profile: ProfileSettings   # the profile step's
     settings: Any              # the controller kind's settings NamedTuple
     limits: LimiterSettings
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
@@ -139,96 +104,61 @@ class LoopInputs(NamedTuple):
     columns: SeriesColumns     # where each series goes in a row
 
 
-class PlantState(NamedTuple):
-    """What the train carries from one period to the next (PointMassTrain)."""
-
-    steps: int                 # periods run
-    time: float                # s, the plant's clock
-    position: float            # m
-    speed: float               # m/s, true
-    force: float               # N/kN applied
-    lag: float                 # the lag's output before the envelope (lag_state)
-    acting: float              # the command that acted over the last period
-    powered: bool              # traction power over the last sub-step
-    delayed: np.ndarray        # commands inside the dead time (a ring, oldest at `oldest`)
-    oldest: int
-
-
-class ProfileState(NamedTuple):
-    """What the profile carries from one position to the next (ProfileStage)."""
-
-    last_position: float       # m
-    stair: float               # m/s, the stepped approach's stair (NaN: none)
-    journey: JourneyState      # a journey's section and arrival (served.observed)
-    arrived: bool              # standing in its berth once (profile.berth): for good
-
-
-class FitnessState(NamedTuple):
-    """A RunningIndex's value, last_t and last_w."""
-
-    value: float
-    last_t: float
-    last_w: float
-
-
 class LoopState(NamedTuple):
     """Everything a step changes, carried from one chunk of steps to the next: a run
     computed in chunks gives the bits of one computed in a single call."""
 
     step: int                  # the next step k
-    plant: PlantState
+    plant: TrainMotion
     profile: ProfileState
     controller: Any            # the controller kind's state NamedTuple
     last: float                # the limiter's last command
-    fitness: FitnessState
+    fitness: RunningState
     stood: int                 # samples the train has stood at its last stop (PlantStage's)
     ended: bool                # diverged, pruned or arrived: no step follows
 
 
-FIRST_CHUNK = 64  # steps computed by a run's first call of the compiled loop
+FIRST_CHUNK = 64  # steps computed by a run's first call of the loop
 CHUNK_SECONDS = 0.05  # wall time each later call aims at: the deadline is checked between calls
 
 
 def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
-        check: Callable[[int], None]):
-    """The run, compiled: (rows (steps x len(SERIES)), the controller's outputs
-    (steps x outputs), the horizons). It runs in chunks of steps, each a call of the
-    compiled loop lasting about CHUNK_SECONDS; `check(step)` is called before each
-    (simulate() raises there once past its deadline)."""
-    total = profile.context.steps
-    # a journey's tables, else None: the loops of other runs compile without its code
-    journey = getattr(profile.context.plan, "journey", None)
-    plan = profile.context.plan.table() if profile.context.plan.position_indexed else None
-    if plan is None and journey is None:  # time-indexed; a copy: the loop's one
-        # argument type is a writable array
-        targets = horizons(profile).copy()
-        plan = plan_table((), ())
-    else:  # filled in as the run goes, LOOKAHEAD steps ahead
-        targets = np.empty((total, profile.preview + 1))
-        plan = plan_table((), ()) if plan is None else plan
+        check: Callable[[int], None], changes: dict[int, dict[str, float]] | None = None,
+        compiled: bool = True):
+    """The run of the three stages (built by simulate(), used up by it): (rows (steps x
+    len(SERIES)), the controller's outputs (steps x outputs), the horizons), compiled or
+    as Python. It runs in chunks of steps, each a call of the loop lasting about
+    CHUNK_SECONDS and ending before each step of `changes` (a live change of gains);
+    `check(step)` is called before each (simulate() raises there once past its
+    deadline)."""
+    total, targets = profile.context.steps, profile.targets
+    steps = _steps if compiled and AVAILABLE else _steps_source
+    schedule = sorted((step, change) for step, change in (changes or {}).items()
+                      if 0 <= step < total)
     running_index, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
     rows = np.empty((total, len(COLUMNS)))
     extras = np.empty((total, len(controller.output_names)))
     with _controller_seam(controller) as (settings, controller_state):
-        inputs = _inputs(profile, plant, controller, plan, settings, running_index, limit)
+        inputs = _inputs(profile, plant, controller, settings, running_index, limit, compiled)
         loop = _first_state(profile, plant, controller, controller_state, running_index)
         chunk = FIRST_CHUNK
         while loop.step < total and not loop.ended:
             check(loop.step)
+            if schedule and schedule[0][0] == loop.step:
+                inputs, loop = _retuned(controller, inputs, loop, schedule.pop(0)[1])
+            stop = min(total, loop.step + chunk, schedule[0][0] if schedule else total)
             started = time.perf_counter()
-            loop = _steps(inputs, journey, loop, min(total, loop.step + chunk), targets, rows,
-                          extras)
+            loop = steps(inputs, profile.journey, loop, stop, targets, rows, extras)
             elapsed = time.perf_counter() - started
             chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
-    running_index.value, running_index.last_t, running_index.last_w = loop.fitness
+    running_index.state = RunningState(*map(float, loop.fitness))
     return rows[:loop.step], extras[:loop.step], targets[:loop.step]
 
 
 @contextmanager
 def _controller_seam(stage):
-    """(settings, state) the compiled loop steps the stage's controller with: a kind's
-    compiled steps read its own; any other kind is called in Python
-    (core/run/python_steps.py)."""
+    """(settings, state) the loop steps the stage's controller with: a kind's steps read
+    its own; any other kind is called in Python (core/run/python_steps.py)."""
     if stage.component.steps is not None:
         yield stage.controller.settings, stage.controller.state
         return
@@ -236,217 +166,129 @@ def _controller_seam(stage):
         yield slot, slot
 
 
-def _inputs(profile, plant, controller, plan: PlanTable, settings, running_index,
-            limit: float) -> LoopInputs:
-    train = plant.train
-    total = profile.context.steps
+def _retuned(stage, inputs: LoopInputs, loop: LoopState, change: dict[str, float]
+             ) -> tuple[LoopInputs, LoopState]:
+    """The inputs and state after a live change of gains before step loop.step:
+    ControllerStage.retune rebuilds the controller from its state now; a kind's steps
+    then go on with the new settings, a Python controller is the rebuilt one."""
+    if stage.component.steps is None:
+        stage.retune(change)
+        RUNNING[loop.controller.slot] = stage.controller
+        return inputs, loop
+    stage.controller.state = loop.controller
+    stage.retune(change)
+    return (inputs._replace(settings=stage.controller.settings),
+            loop._replace(controller=stage.controller.state))
+
+
+def _inputs(profile, plant, controller, settings, running_index, limit: float,
+            compiled: bool) -> LoopInputs:
+    train, total = plant.train, profile.context.steps
     # the sensor's draws, as PlantStage.measure takes them (one per step, the same stream)
     draws = plant.rng.standard_normal(total) if plant.noise > 0.0 else np.zeros(total)
+    # compiled code reads a line as one array (Python as tuples: faster there)
+    line = line_arrays(train.line) if compiled else train.settings.line
     return LoopInputs(
         draws=draws, noise=float(plant.noise), quantum=float(plant.quantum),
-        period=float(train.period), substeps=int(train.substeps), train=train.constants,
-        pantograph_offset=float(train.p.pantograph_offset), lagged=bool(train.lagged),
+        period=float(train.settings.period), train=train.settings._replace(line=line),
         max_speed=float(plant.max_speed), last_stop=plant.last_stop,
-        line=line_arrays(train.line), plan=plan, departure=profile.context.departure,
-        preview=int(controller.preview), approach_step=float(profile.approach_step),
-        berth=float(profile.berth), berth_mark=float(profile.berth_mark),
+        profile=profile.settings._replace(line=line),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
 
 
 def _first_state(profile, plant, controller, controller_state, running_index) -> LoopState:
-    train, state = plant.train, plant.train.state
     return LoopState(
-        step=0,
-        plant=PlantState(
-            steps=int(train.steps), time=float(state.time), position=float(state.position),
-            speed=float(state.speed), force=float(state.force), lag=float(train.lag_state),
-            acting=float(train.acting), powered=bool(train.powered),
-            delayed=np.array(train.delayed, dtype=float), oldest=0),
-        profile=ProfileState(last_position=float(profile.last_position), stair=math.nan,
-                             journey=JourneyState(*getattr(profile.context.plan, "state",
-                                                           START)),
-                             arrived=bool(profile.arrived)),
-        controller=controller_state, last=float(controller.limiter.last),
-        fitness=FitnessState(float(running_index.value), float(running_index.last_t),
-                             float(running_index.last_w)),
+        step=0, plant=plant.train.motion, profile=profile.state, controller=controller_state,
+        last=float(controller.limiter.last), fitness=running_index.state,
         stood=int(plant.stood), ended=False)
 
 
 def controller_start(settings, state, target: float, measured: float):
     """The kind's ControllerSteps.start, chosen by the type of `state`."""
-    return STEPS_BY_STATE[type(state)].start(settings, state, target, measured)
+    return steps_of(type(state)).start(settings, state, target, measured)
 
 
 def controller_step(settings, state, target: float, measured: float, horizon, last: float,
                     limits: LimiterSettings):
     """The kind's ControllerSteps.step, chosen by the type of `state`."""
-    return STEPS_BY_STATE[type(state)].step(settings, state, target, measured, horizon, last,
-                                            limits)
+    return steps_of(type(state)).step(settings, state, target, measured, horizon, last, limits)
+
+
+def as_read(horizon):
+    """A horizon as the controllers read it: in Python a list of floats (numpy's scalars
+    differ from floats in places: a bool's subtraction), in compiled code the array."""
+    return horizon.tolist()
 
 
 if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
     @overload(controller_start)
     def _compiled_start(settings, state, target, measured):
-        start = STEPS_BY_STATE[state.instance_class].start
+        start = steps_of(state.instance_class).start
         return lambda settings, state, target, measured: start(settings, state, target,
                                                                 measured)
 
     @overload(controller_step)
     def _compiled_step(settings, state, target, measured, horizon, last, limits):
-        step = STEPS_BY_STATE[state.instance_class].step
+        step = steps_of(state.instance_class).step
         return lambda settings, state, target, measured, horizon, last, limits: step(
             settings, state, target, measured, horizon, last, limits)
 
-
-@jitable
-def _plan_horizon(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyState,
-                  step: int, position: float, horizon) -> None:
-    """RunContext.horizon of a position-indexed plan, into `horizon`: the plan's
-    targets of steps step .. step + N along the planned trajectory from `position`
-    (Heun's method, one step per period)."""
-    h = inputs.period
-    horizon[0] = _target(inputs, journey, state, step * h, position)
-    for i in range(1, len(horizon)):
-        t, v = (step + i) * h, horizon[i - 1]
-        ahead = _target(inputs, journey, state, t, position + h * v)
-        position += 0.5 * h * (v + ahead)
-        horizon[i] = _target(inputs, journey, state, t, position)
-
-
-@jitable
-def _target(inputs: LoopInputs, journey: JourneyTable | None, state: JourneyState, t: float,
-            position: float) -> float:
-    """A position-indexed plan's target: a journey's in its state, else the table's."""
-    if journey is not None:  # pruned while compiling a run that is not a journey
-        return journey_speed(journey, state, t, position)
-    return departing(inputs.departure, t, table_speed(inputs.plan, position))
-
-
-@jitable
-def _approach(step_size: float, stair: float, target: float, speed: float):
-    """ProfileStage.approach on the stair (NaN: none): (target, stair)."""
-    if step_size <= 0.0 or target - speed <= step_size:
-        return target, math.nan
-    if stair != stair or abs(stair - speed) < step_size / 4:
-        stair = speed + step_size
-    return min(stair, target), stair
-
-
-@jitable
-def _speed_limit(inputs: LoopInputs, journey: JourneyTable | None, position: float) -> float:
-    """RunContext.speed_limit: the plan's own limits, else the line's, else none."""
-    if journey is not None:
-        return journey_limit(journey, position)
-    if inputs.plan.limits_speed:
-        return table_limit(inputs.plan, position)
-    if inputs.line.limits_end > inputs.line.tunnels_end:
-        return speed_limit(inputs.line, position)
-    return math.inf
+    @overload(as_read)
+    def _compiled_as_read(horizon):
+        return lambda horizon: horizon
 
 
 def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopState,
                   stop: int, targets, rows, extras) -> LoopState:
-    """simulate()'s loop for the runs `covers` accepts, from step loop.step up to `stop`
-    (or the step the run ends at); the state after. `targets` holds every step's
-    horizon: given (time-indexed plans) or filled in LOOKAHEAD steps ahead."""
+    """The loop from step loop.step up to `stop` (or the step the run ends at); the state
+    after. `targets` holds every step's horizon: given (time-indexed plans) or filled in
+    LOOKAHEAD steps ahead by the profile's step."""
     k, plant, profile, controller, last, fitness, stood = (loop.step, loop.plant, loop.profile,
                                                            loop.controller, loop.last,
                                                            loop.fitness, loop.stood)
     ended = False
     while k < stop and not ended:
-        measured = sensor_reading(plant.speed, inputs.draws[k], inputs.noise, inputs.quantum)
-        if inputs.plan.grid.shape[1] or journey is not None:  # position-indexed: the
-            # horizons for this position
-            profile = _publish_horizons(inputs, journey, profile, k, plant.position, targets)
+        measured = float(sensor_reading(plant.speed, inputs.draws[k], inputs.noise,
+                                        inputs.quantum))
+        profile = profile_step(inputs.profile, journey, profile, k, plant.position, targets)
         horizon = targets[k]
-        reference = horizon[inputs.preview]
+        reference = float(horizon[inputs.profile.preview])
         if k == 0:
             controller = controller_start(inputs.settings, controller, reference, measured)
         u, outputs, controller = controller_step(inputs.settings, controller, reference,
-                                                 measured, horizon, last, inputs.limits)
+                                                 measured, as_read(horizon), last, inputs.limits)
         last = u
         _record(inputs, journey, rows[k], k, plant, horizon[0], measured, u)
         for i in range(len(outputs)):
             extras[k, i] = outputs[i]
         speed = plant.speed
         stood = standing(inputs.last_stop, stood, plant.position, speed)  # PlantStage.apply
-        plant = _plant_step(inputs, plant, u)
-        if not (abs(plant.speed) <= inputs.max_speed):  # PlantStage.diverged
+        plant = train_step(inputs.train, plant, u)
+        if diverged(plant.speed, inputs.max_speed):
             ended = True
         else:
-            fitness = FitnessState(*running_add(
-                inputs.fitness_kind, fitness.value, fitness.last_t, fitness.last_w,
-                k * inputs.period, horizon[0] - speed))
+            fitness = running_step(inputs.fitness_kind, fitness, k * inputs.period,
+                                   horizon[0] - speed)
             ended = fitness.value > inputs.fitness_limit or held(inputs.last_stop, stood)
         k += 1
     return LoopState(k, plant, profile, controller, last, fitness, stood, ended)
 
 
-@jitable
-def _publish_horizons(inputs: LoopInputs, journey: JourneyTable | None, profile: ProfileState,
-                      k: int, position: float, targets) -> ProfileState:
-    """ProfileStage.on_position for a position-indexed plan: the horizons of steps 0 .. 2
-    at step 0, of step k + 2 from the extrapolated position after, into `targets`."""
-    travel = position - profile.last_position if k else 0.0
-    speed = travel / inputs.period
-    stair, state = profile.stair, profile.journey
-    if journey is not None:
-        state = observed(journey, state, k * inputs.period, position, speed)
-    arrived = profile.arrived or has_arrived(k, travel, position, inputs.berth_mark,
-                                             inputs.berth)
-    first = 0 if k == 0 else k + LOOKAHEAD
-    for step in range(first, k + LOOKAHEAD + 1):
-        if step < len(targets):
-            if arrived:
-                targets[step, :] = 0.0
-            else:
-                _plan_horizon(inputs, journey, state, step,
-                              position + LOOKAHEAD * travel if k else position, targets[step])
-            targets[step, 0], stair = _approach(inputs.approach_step, stair,
-                                                targets[step, 0], speed)
-    return ProfileState(position, stair, state, arrived)
-
-
 @jitable(inline=True)
-def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: PlantState,
+def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: TrainMotion,
             target: float, measured: float, command: float) -> None:
     """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command)."""
-    train, column, x, v = inputs.train, inputs.columns, plant.position, plant.speed
-    line_resistance = belt_resistance(inputs.line, x, train.length)
-    row[column.t], row[column.target], row[column.position] = k * inputs.period, target, x
-    row[column.measured_speed], row[column.speed] = measured, v
-    row[column.acceleration] = rates(plant.time, v, plant.lag, plant.acting, plant.powered,
-                                     line_resistance, train)[0]
-    row[column.disturbance] = disturbance(plant.time, train.disturbance_amplitude,
-                                          train.disturbance_frequency, train.disturbance_phase)
-    row[column.force] = plant.force
-    row[column.resistance] = basic_resistance(v, train.davis_a, train.davis_b, train.davis_c)
+    column = inputs.columns
+    acceleration, disturbance, resistance, line_resistance = train_outputs(inputs.train, plant)
+    row[column.t], row[column.target], row[column.position] = (k * inputs.period, target,
+                                                               plant.position)
+    row[column.measured_speed], row[column.speed] = measured, plant.speed
+    row[column.acceleration], row[column.disturbance] = acceleration, disturbance
+    row[column.force], row[column.resistance] = plant.force, resistance
     row[column.line_resistance] = line_resistance
-    row[column.speed_limit], row[column.command] = _speed_limit(inputs, journey, x), command
-
-
-@jitable(inline=True)
-def _plant_step(inputs: LoopInputs, plant: PlantState, command: float) -> PlantState:
-    """PointMassTrain.step: the command through the dead time, RK4 over the period."""
-    train, line = inputs.train, inputs.line
-    delayed, oldest = plant.delayed, plant.oldest
-    if len(delayed):
-        command, delayed[oldest] = delayed[oldest], command
-        oldest = (oldest + 1) % len(delayed)
-    sub = inputs.period / inputs.substeps
-    x, v, lag = plant.position, plant.speed, plant.lag
-    for i in range(inputs.substeps):
-        powered = not in_neutral_section(line, x - inputs.pantograph_offset)
-        x, v, lag = rk4_substep(plant.time + i * sub, x, v, lag, sub, command, powered, train,
-                                line)
-    powered = not in_neutral_section(line, x - inputs.pantograph_offset)  # as the plant's
-    steps = plant.steps + 1
-    force = achievable(lag if inputs.lagged else command, v, train.limited, train.envelope)
-    if not powered and force > 0.0:
-        force = 0.0
-    return PlantState(steps, steps * inputs.period, x, v, force, lag, command, powered, delayed,
-                      oldest)
+    row[column.speed_limit] = plan_speed_limit(inputs.profile, journey, plant.position)
+    row[column.command] = command
 
 
 _steps = compiled(_steps_source)

@@ -14,7 +14,7 @@ Step k's state (position and speed at t_k, the k-th recorded sample) is counted 
 the step is applied; the run ends after the step whose state makes the train's
 standing hold + 1 samples long, that is, with its last sample the hold (rounded to
 whole periods) after the first standing one. The same functions count in the plant
-stage (the node and simulate()) and in the compiled loop, and count again from a
+stage (the node) and in the loop (simulate(), compiled or not), and count again from a
 run's series (`planned_steps`: how many steps a recorded run was to make), so all
 of them end at the same step. run.duration stays the longest a run may last.
 """

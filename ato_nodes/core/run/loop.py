@@ -1,6 +1,6 @@
-"""The lockstep loop in one process: simulate() makes the calls of the ROS nodes'
-steps (core/run/stages.py gives the order) on their three stages, so both give identical
-numbers; the runs core/run/fast_loop.py covers run compiled, to the same bits.
+"""The lockstep loop in one process: simulate() builds the ROS nodes' three stages and
+runs their steps in the one loop of core/run/fast_loop.py (core/run/stages.py gives the
+order), compiled or as Python, so the nodes and both give identical numbers.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 from ..config.components import CONTROLLERS
 from ..config.scenario import apply_overrides, load_scenario, scenario_names
 from ..control import lssvm
-from ..config.schema import SPEC_BY_NAME, NodeValues, steps
+from ..config.schema import SPEC_BY_NAME, NodeValues
 from ..scoring.indices import RunningIndex
 from ..train.line import line_of
 from . import fast_loop
@@ -28,41 +28,20 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
     ends early, as it does in the stack, and so does a journey whose train has stood
     run.last_stop_hold at its last stop (PlantStage.arrived). Past `deadline`
-    (time.monotonic()) it raises TimeoutError (checked before every step, or chunk of
-    compiled steps, each a small part of a second). prune (running, limit): a tuner's pruning,
-    `running` takes every step's (t, target - true speed) and the run ends once its
-    value passes `limit`. changes {step: {name: value}}: live controller parameters
-    changed before that step, as a run's bag records them (bagio.Run.parameter_changes).
-    The runs core/run/fast_loop.py covers run compiled (when numba is installed), to the
-    same bits; compiled=False runs the Python loop, the reference, whatever the run."""
-    period = values["run.period"]
+    (time.monotonic()) it raises TimeoutError (checked between chunks of steps, each a
+    small part of a second). prune (running, limit): a tuner's pruning, `running` takes
+    every step's (t, target - true speed) and the run ends once its value passes
+    `limit`. changes {step: {name: value}}: live controller parameters changed before
+    that step, as a run's bag records them (bagio.Run.parameter_changes). The loop of
+    core/run/fast_loop.py runs compiled when numba is installed; compiled=False runs the
+    same function as Python, to the same bits."""
     line = line_of(values)
     profile = ProfileStage(NodeValues("profile", values), line)
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)
-    if compiled and fast_loop.covers(profile, plant, controller, changes):
-        rows, extras, horizons = fast_loop.run(profile, plant, controller, prune,
-                                               lambda step: _check_deadline(deadline, step))
-        return _series(rows, extras, horizons, controller.output_names)
-    rows, extras, horizons = [], [], []
-    for k in range(steps(values)):
-        _check_deadline(deadline, k)  # a step takes up to ~0.03 s (10000 RK4 sub-steps)
-        out = plant.outputs()
-        controller.horizons.extend(profile.on_position(out.position))
-        horizon = controller.horizons[0]
-        controller.speeds.append(out.measured_speed)
-        if changes and k in changes:
-            controller.pending = dict(changes[k])
-        (c,) = controller.run_ready_steps()
-        plant.apply(c.u)
-        rows.append((k * period, horizon[0], out.position, out.measured_speed, out.speed,
-                     out.acceleration, out.disturbance, out.force, out.resistance,
-                     out.line_resistance, profile.speed_limit(out.position), c.u))
-        extras.append(c.extras)
-        horizons.append(horizon)
-        if plant.diverged or (prune is not None and prune[0].add(
-                k * period, horizon[0] - out.speed) > prune[1]) or plant.arrived:
-            break
+    rows, extras, horizons = fast_loop.run(profile, plant, controller, prune,
+                                           lambda step: _check_deadline(deadline, step),
+                                           changes, compiled)
     return _series(rows, extras, horizons, controller.output_names)
 
 

@@ -1,8 +1,8 @@
-"""Controllers without compiled steps, inside the compiled loop: the loop calls the
+"""Controllers without compiled steps, inside the loop (compiled, or as Python): the loop calls the
 controller's own Python start and step (numba's object mode, ~2 us a call), so the
 plant, the line, the plan's horizons and the scoring run compiled around it while
-the controller computes what it computes in the Python loop and in its node: the
-same object, given the same numbers, so the same bits (tests/test_fast_loop.py).
+the controller computes what it computes in its node: the same object, given the same
+numbers, so the same bits (tests/test_stages.py).
 
 The compiled loop is handed a PythonController (the controller's slot in RUNNING)
 as the kind's settings and state; every such kind shares its one compiled signature.
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -24,6 +24,13 @@ from ..control.stepped import ControllerSteps
 class PythonController(NamedTuple):
     slot: int  # the controller's key in RUNNING
 
+
+def _as_python(**types):
+    """Without numba: the controller's call is Python anyway."""
+    return nullcontext()
+
+
+_objmode = objmode if objmode is not None else _as_python
 
 RUNNING: dict[int, Any] = {}  # the controllers of the runs in progress, by slot
 _slots = itertools.count()
@@ -53,7 +60,7 @@ def _step(slot: int, target: float, measured: float, horizon: np.ndarray
 @jitable
 def python_start(settings: PythonController, state: PythonController, target: float,
                  measured: float) -> PythonController:
-    with objmode():
+    with _objmode():
         _start(state.slot, target, measured)
     return state
 
@@ -62,7 +69,7 @@ def python_start(settings: PythonController, state: PythonController, target: fl
 def python_step(settings: PythonController, state: PythonController, target: float,
                 measured: float, horizon, last: float, limits):
     """The controller's step; it applies its own limiter (`last`, `limits` unread)."""
-    with objmode(u="float64", outputs="float64[:]"):
+    with _objmode(u="float64", outputs="float64[:]"):
         u, outputs = _step(state.slot, target, measured, horizon)
     return u, outputs, state
 

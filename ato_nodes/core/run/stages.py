@@ -16,14 +16,19 @@ the plan (the run context's preview): exact for time-indexed targets, along
 the planned trajectory for position-indexed ones.
 
 Each stage is built when its node starts, from exactly the values the node
-declares (schema.NodeValues) and the run context; the ROS nodes run one stage
-each and pass the values as float64 messages, bit for bit; `simulate()` makes
-the same calls in one process, so both give identical numbers.
+declares (schema.NodeValues) and the run context, and holds the settings and state
+of its step functions (the train's, the profile's, the controller kind's); the ROS
+nodes call one stage each, a step at a time, and pass the values as float64
+messages, bit for bit; `simulate()` runs the same step functions in the one loop of
+core/run/fast_loop.py, so both give identical numbers (tests/test_stages.py drives
+the stages as the nodes do).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import json
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -31,17 +36,16 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..base.errors import ScenarioError
-from ..base.kernels import jitable
 from ..config.components import CONTROLLERS
 from ..config.context import RunContext
 from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
+from ..targets.horizons import (LOOKAHEAD, PROFILE_START, plan_speed_limit,
+                                profile_step)
 from ..train.line import Line, line_of
-from ..train.plant import PointMassTrain, TrainParameters, TrainState, sensor_reading
+from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
+                           sensor_reading, train_outputs)
 from .last_stop import held, last_stop, standing
-
-LOOKAHEAD = 2  # steps the profile runs ahead of the plant
-
 
 # The series of a run, one value per step, in the order of simulate()'s rows.
 SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
@@ -51,74 +55,68 @@ SeriesColumns = NamedTuple("SeriesColumns", [(name, int) for name in SERIES])
 COLUMNS = SeriesColumns(*range(len(SERIES)))
 
 
-@jitable
-def has_arrived(k: int, travel: float, position: float, mark: float, berth: float) -> bool:
-    """Whether the train, `travel` m over the step before step `k`, stands still within
-    `berth` of the stop `mark` (NaN: none): profile.berth."""
-    return k > 0 and travel == 0.0 and abs(mark - position) < berth
-
-
 class ProfileStage:
     """Target horizons (LOOKAHEAD steps ahead) and the speed limit from each step's
-    position."""
+    position: a holder of the profile step's settings and state
+    (core/targets/horizons.py) and of the horizons (steps x (N + 1); a time-indexed
+    plan's computed once per plan)."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
         self.context = RunContext(values, line)
-        _ = self.context.plan  # built (and cached) now: a bad table or line fails at start-up
+        # built now: a bad table, plan or line fails at start-up (the berth where it cannot
+        # apply too)
+        self.settings = self.context.profile_settings
         self.period = values["run.period"]
         self.total_steps = steps(values)
-        self.preview = values["controller.preview"]
+        self.journey = getattr(self.context.plan, "journey", None)
+        self.state = PROFILE_START
+        self.targets = (np.empty((self.total_steps, self.settings.preview + 1))
+                        if self.settings.position_indexed else time_horizons(self.context).copy())
         self.received = 0
-        self.last_position = 0.0
-        self.approach_step = values["profile.approach_step"]
-        self.berth = values["profile.berth"]
-        self.berth_mark = self.context.berth_mark  # refused now where it cannot apply
-        self.arrived = False  # standing in its berth once: for good, whatever creeps after
-        self.stair: float | None = None
+
+    @property
+    def approach_step(self) -> float:
+        return self.settings.approach_step
+
+    @property
+    def berth_mark(self) -> float:
+        return self.settings.berth_mark
 
     def on_position(self, position: float) -> list[list[float]]:
-        """Position s_k of step k in; the horizons to publish now out, in step order.
-        A horizon's first entry is its step's target (with seed 003's stepped
-        approach), the rest the plan."""
+        """Position s_k of step k in; the horizons to publish now out, in step order
+        (horizons.profile_step)."""
         k = self.received
         self.received += 1
-        travel = position - self.last_position if k else 0.0  # over the last step
-        if k == 0:
-            wanted = [(step, position) for step in range(LOOKAHEAD + 1)]
-        else:
-            wanted = [(k + LOOKAHEAD, position + LOOKAHEAD * travel)]
-        speed = travel / self.period
-        self.last_position = position
-        observe = getattr(self.context.plan, "observe", None)
-        if observe is not None:  # a journey: its section and when the train stood at its end
-            observe(k * self.period, position, speed)
-        self.arrived = arrived = self.arrived or has_arrived(k, travel, position,
-                                                             self.berth_mark, self.berth)
-        horizons = []
-        for step, predicted in wanted:
-            if step < self.total_steps:
-                horizon = ([0.0] * (self.preview + 1) if arrived
-                           else self.context.horizon(step, predicted, self.preview))
-                horizon[0] = self.approach(horizon[0], speed)
-                horizons.append(horizon)
-        return horizons
-
-    def approach(self, target: float, speed: float) -> float:
-        """Seed 003's stepped approach: while the target is more than one step above
-        the speed, the published target is a stair one step above the speed, held
-        until the train is within a quarter step of it. Only upwards: a target below
-        the speed is a braking curve protecting a limit or the stop, never softened."""
-        step = self.approach_step
-        if step <= 0.0 or target - speed <= step:
-            self.stair = None
-            return target
-        if self.stair is None or abs(self.stair - speed) < step / 4:
-            self.stair = speed + step
-        return min(self.stair, target)  # a stair held while the target fell stays under it
+        self.state = profile_step(self.settings, self.journey, self.state, k, position,
+                                  self.targets)
+        if self.journey is not None:  # the plan's state and re-plans, for the node to say
+            self.context.plan.moved(k * self.period, self.state.journey)
+        first = 0 if k == 0 else k + LOOKAHEAD
+        return self.targets[first:k + LOOKAHEAD + 1].tolist()
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies at step k's position, m/s (inf without a line)."""
-        return self.context.speed_limit(position)
+        return float(plan_speed_limit(self.settings, self.journey, position))
+
+
+@functools.lru_cache(maxsize=4)
+def _time_horizons(profile_values: str) -> np.ndarray:
+    context = RunContext(NodeValues("profile", json.loads(profile_values)))
+    plan, period, preview = context.plan, context.period, context.values["controller.preview"]
+    # A step's horizon holds the targets at t_k .. t_k+N, exactly as RunContext.horizon
+    # computes them for a time-indexed plan: each time's target once, then windows of it.
+    targets = np.array([plan.speed(j * period, 0.0) for j in range(context.steps + preview)],
+                       dtype=float)
+    windows = np.lib.stride_tricks.sliding_window_view(targets, preview + 1)
+    return windows[:context.steps].copy()
+
+
+def time_horizons(context: RunContext) -> np.ndarray:
+    """Every step's horizon (steps x (N + 1)) of a time-indexed plan, computed once per
+    process and plan (read-only: shared by every run of the plan)."""
+    table = _time_horizons(json.dumps(dict(context.values), sort_keys=True))
+    table.flags.writeable = False
+    return table
 
 
 @dataclass(slots=True)
@@ -161,8 +159,7 @@ class PlantStage:
     @property
     def diverged(self) -> bool:
         """Speed not finite or beyond plant.max_speed: a run that can only get worse."""
-        speed = self.train.state.speed
-        return not (abs(speed) <= self.max_speed)  # also true for NaN
+        return diverged(self.train.motion.speed, self.max_speed)
 
     @property
     def arrived(self) -> bool:
@@ -176,10 +173,12 @@ class PlantStage:
         return sensor_reading(speed, draw, self.noise, self.quantum)
 
     def outputs(self) -> PlantOutputs:
-        s, p, train = self.train.state, self.params, self.train
-        return PlantOutputs(s.position, self.measure(s.speed), s.speed, train.acceleration(),
-                            p.disturbance(s.time), s.force, p.resistance(s.speed),
-                            train.line_resistance())
+        motion = self.train.motion
+        acceleration, disturbance, resistance, line_resistance = train_outputs(
+            self.train.settings, motion)
+        return PlantOutputs(motion.position, self.measure(motion.speed), motion.speed,
+                            acceleration, disturbance, motion.force, resistance,
+                            line_resistance)
 
     def apply(self, command: float) -> None:
         state = self.train.state  # step k's, as its outputs gave it
@@ -194,8 +193,9 @@ class ControllerStage:
     Live parameters (the controller kind's `live_parameters`): changes put in
     `pending` take effect at the next step boundary, before the next step is
     computed; `applied` lists them as (step, changes), step being the first one
-    computed with them. The node fills `pending` from `ros2 param set`, simulate()
-    from a run's recorded changes, so both give the same numbers."""
+    computed with them. The node fills `pending` from `ros2 param set`; simulate()'s
+    loop (core/run/fast_loop.py) calls `retune` at the step of each of a run's recorded
+    changes and goes on with the new settings, so both give the same numbers."""
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
         self.values = values

@@ -7,6 +7,7 @@ e = target - true speed, in m/s; `*_kmh` fields are the same in km/h.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -79,6 +80,23 @@ def running_add(kind: int, value: float, last_t: float, last_w: float, t: float,
     return value, t, weighted
 
 
+class RunningState(NamedTuple):
+    """A RunningIndex's value so far and its last sample (last_t NaN before the first)."""
+
+    value: float
+    last_t: float
+    last_w: float
+
+
+RUNNING_START = RunningState(0.0, math.nan, 0.0)
+
+
+@jitable
+def running_step(kind: int, state: RunningState, t: float, error: float) -> RunningState:
+    """The state after adding the sample (t, error) (running_add)."""
+    return RunningState(*running_add(kind, state.value, state.last_t, state.last_w, t, error))
+
+
 class RunningIndex:
     """ITAE, IAE or max abs(e) (m/s) of a run so far, one sample at a time, by the same
     trapezoid rule as tracking_indices: each only grows along a run, so a run whose
@@ -92,10 +110,20 @@ class RunningIndex:
             raise ValueError(f"{name} does not only grow along a run")
         self.name = name
         self.kind = self.MONOTONE.index(name)
-        self.value = 0.0
-        self.last_t, self.last_w = math.nan, 0.0
+        self.state = RUNNING_START
+
+    @property
+    def value(self) -> float:
+        return self.state.value
+
+    @property
+    def last_t(self) -> float:
+        return self.state.last_t
+
+    @property
+    def last_w(self) -> float:
+        return self.state.last_w
 
     def add(self, t: float, error: float) -> float:
-        self.value, self.last_t, self.last_w = running_add(self.kind, self.value, self.last_t,
-                                                           self.last_w, t, error)
+        self.state = running_step(self.kind, self.state, t, error)
         return self.value

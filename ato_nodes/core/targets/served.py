@@ -259,7 +259,11 @@ class JourneyPlan(Plan):
 
     def observe(self, t: float, position: float, speed: float) -> None:
         """Step k's time, position and speed over the last step in (see `observed`)."""
-        before, self.state = self.state, observed(self.journey, self.state, t, position, speed)
+        self.moved(t, observed(self.journey, self.state, t, position, speed))
+
+    def moved(self, t: float, state: JourneyState) -> None:
+        """The state `observed` gave at t; a re-plan made when the train left late."""
+        before, self.state = self.state, state
         if self.state.section != before.section and self.state.level > 0:  # left late
             self.replans.append(self._replan(t, lateness(self.journey, before)))
 

@@ -28,9 +28,10 @@ period, the command held constant over the period (zero-order hold).
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 from typing import NamedTuple
+
+import numpy as np
 
 from ..base.kernels import jitable
 from .line import Line, LineTables, belt_resistance, in_neutral_section, line_tables
@@ -242,61 +243,158 @@ class TrainState:
     time: float = 0.0          # s
 
 
+class TrainSettings(NamedTuple):
+    """What a train's step reads and none changes (train_step)."""
+
+    period: float              # s, one step
+    substeps: int              # RK4 sub-steps per period
+    constants: TrainConstants  # the real train's
+    pantograph_offset: float   # m behind the head
+    lagged: bool               # the force follows the command through the actuator lag
+    line: LineTables           # arrays (OPEN_TRACK: none)
+
+
+class TrainMotion(NamedTuple):
+    """What the train carries from one period to the next (train_step)."""
+
+    steps: int                 # periods run
+    time: float                # s, the train's clock
+    position: float            # m
+    speed: float               # m/s, true
+    force: float               # N/kN applied
+    lag: float                 # the lag's output before the envelope
+    acting: float              # the command that acted over the last period (after the delay)
+    powered: bool              # the pantograph outside every neutral section, at the end
+    delayed: np.ndarray        # commands inside the dead time (a ring, the oldest at `oldest`)
+    oldest: int
+
+
+def train_start(params: TrainParameters, period: float, substeps: int, state: TrainState,
+                line: Line | None) -> tuple[TrainSettings, TrainMotion]:
+    """The settings and first motion of a train starting in `state` on `line` (None: the
+    open track), standing behind a dead time of zero commands."""
+    settings = TrainSettings(float(period), int(substeps), params.constants(),
+                             float(params.pantograph_offset), bool(params.actuator_lag > 0.0),
+                             line.tables if line is not None else OPEN_TRACK)
+    motion = TrainMotion(
+        steps=round(state.time / period), time=float(state.time),
+        position=float(state.position), speed=float(state.speed), force=float(state.force),
+        lag=float(state.force), acting=0.0, powered=True,
+        delayed=np.zeros(round(params.dead_time / period)), oldest=0)
+    return settings, motion
+
+
+@jitable(inline=True)
+def train_step(settings: TrainSettings, motion: TrainMotion, command: float) -> TrainMotion:
+    """One period: the command through the dead time, classic RK4 on (s, v, G) over
+    `substeps` equal sub-steps, the command held."""
+    constants, line = settings.constants, settings.line
+    delayed, oldest = motion.delayed, motion.oldest
+    if len(delayed):  # a float, not a numpy scalar, in Python
+        command, delayed[oldest] = float(delayed[oldest]), command
+        oldest = (oldest + 1) % len(delayed)
+    h = settings.period / settings.substeps
+    x, v, lag = motion.position, motion.speed, motion.lag
+    for i in range(settings.substeps):
+        powered = not in_neutral_section(line, x - settings.pantograph_offset)
+        x, v, lag = rk4_substep(motion.time + i * h, x, v, lag, h, command, powered, constants,
+                                line)
+    # the force and acceleration at the step's end are those where the pantograph is
+    # then: a train that has just entered a section has lost its traction already
+    powered = not in_neutral_section(line, x - settings.pantograph_offset)
+    steps = motion.steps + 1
+    force = achievable(lag if settings.lagged else command, v, constants.limited,
+                       constants.envelope)
+    if not powered and force > 0.0:
+        force = 0.0
+    return TrainMotion(steps, steps * settings.period, x, v, force, lag, command, powered,
+                       delayed, oldest)
+
+
+@jitable(inline=True)
+def train_outputs(settings: TrainSettings, motion: TrainMotion
+                  ) -> tuple[float, float, float, float]:
+    """What the train shows now (its state at t_k) beside its motion: (true acceleration
+    under the command acting, disturbance phi, basic resistance w0, the belt's gradient,
+    curve and tunnel resistance), m/s^2 and N/kN."""
+    c = settings.constants
+    line_resistance = belt_resistance(settings.line, motion.position, c.length)
+    acceleration = rates(motion.time, motion.speed, motion.lag, motion.acting, motion.powered,
+                         line_resistance, c)[0]
+    return (acceleration, disturbance(motion.time, c.disturbance_amplitude,
+                                      c.disturbance_frequency, c.disturbance_phase),
+            basic_resistance(motion.speed, c.davis_a, c.davis_b, c.davis_c), line_resistance)
+
+
+@jitable
+def diverged(speed: float, max_speed: float) -> bool:
+    """Speed not finite or beyond `max_speed`: a run that can only get worse."""
+    return not (abs(speed) <= max_speed)  # also true for NaN
+
+
 class PointMassTrain:
-    """Integrates the train over one control period per call."""
+    """Integrates the train over one control period per call: a holder of its
+    TrainSettings and TrainMotion, stepped by train_step."""
 
     def __init__(self, params: TrainParameters, period: float, substeps: int = 1,
                  state: TrainState | None = None, line: Line | None = None):
         self.p = params
-        self.period = period
-        self.substeps = substeps
         self.line = line
-        self.state = state or TrainState()
-        self.steps = round(self.state.time / period)
-        self.lagged = params.actuator_lag > 0.0
-        self.limited = params.limited
-        # Commands waiting out the dead time; the oldest acts next.
-        self.delayed = deque([0.0] * round(params.dead_time / period))
-        self.acting = 0.0  # the command that acted over the last period (after the delay)
-        self.powered = True  # whether the pantograph is outside every neutral section
-        self.lag_state = self.state.force  # the lag's output before the envelope
-        self.constants = params.constants()
-        self.tables = line.tables if line is not None else OPEN_TRACK
+        self.settings, self.motion = train_start(params, period, substeps,
+                                                 state or TrainState(), line)
+
+    @property
+    def period(self) -> float:
+        return self.settings.period
+
+    @property
+    def state(self) -> TrainState:
+        m = self.motion
+        return TrainState(m.position, m.speed, m.force, m.time)
+
+    @state.setter
+    def state(self, state: TrainState) -> None:
+        self.motion = self.motion._replace(time=state.time, position=state.position,
+                                           speed=state.speed, force=state.force)
+
+    @property
+    def acting(self) -> float:
+        return self.motion.acting
+
+    @acting.setter
+    def acting(self, command: float) -> None:
+        self.motion = self.motion._replace(acting=command)
+
+    @property
+    def lag_state(self) -> float:
+        """The lag's output before the envelope."""
+        return self.motion.lag
+
+    @lag_state.setter
+    def lag_state(self, lag: float) -> None:
+        self.motion = self.motion._replace(lag=lag)
+
+    @property
+    def delayed(self) -> np.ndarray:
+        """The commands inside the dead time, the oldest (acting next) first."""
+        return np.roll(self.motion.delayed, -self.motion.oldest)
+
+    @delayed.setter
+    def delayed(self, commands) -> None:
+        self.motion = self.motion._replace(delayed=np.array(commands, dtype=float), oldest=0)
 
     def line_resistance(self) -> float:
         """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
-        return belt_resistance(self.tables, self.state.position, self.p.length)
+        return train_outputs(self.settings, self.motion)[3]
 
     def acceleration(self) -> float:
         """True acceleration at the current state under the command now acting."""
-        s = self.state
-        return rates(s.time, s.speed, self.lag_state, self.acting, self.powered,
-                     self.line_resistance(), self.constants)[0]
+        return train_outputs(self.settings, self.motion)[0]
 
     def step(self, command: float) -> TrainState:
         """Classic RK4 on (s, v, F), `substeps` equal steps, command held."""
-        if self.delayed:
-            self.delayed.append(command)
-            command = self.delayed.popleft()
-        s, tables, constants = self.state, self.tables, self.constants
-        h = self.period / self.substeps
-        start = s.time
-        x, v, f = s.position, s.speed, self.lag_state
-        for i in range(self.substeps):
-            powered = not in_neutral_section(tables, x - self.p.pantograph_offset)
-            x, v, f = rk4_substep(start + i * h, x, v, f, h, command, powered, constants,
-                                  tables)
-        # the force and acceleration at the step's end are those where the pantograph is
-        # then: a train that has just entered a section has lost its traction already
-        powered = not in_neutral_section(tables, x - self.p.pantograph_offset)
-        self.acting, self.lag_state, self.powered = command, f, powered
-        self.steps += 1
-        s.time, s.position, s.speed = self.steps * self.period, x, v
-        s.force = achievable(f if self.lagged else command, v, self.limited,
-                             constants.envelope)
-        if not powered and s.force > 0.0:
-            s.force = 0.0
-        return s
+        self.motion = train_step(self.settings, self.motion, command)
+        return self.state
 
 
 @jitable

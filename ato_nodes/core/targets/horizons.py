@@ -1,0 +1,137 @@
+"""The profile's step, ROS-free: from each step's position, the target horizons it
+publishes (LOOKAHEAD steps ahead), the journey's state, the berth, seed 003's stepped
+approach and the speed limit. Plain functions of NamedTuples (settings: what a run
+fixes; state: what a step changes), so the profile node's stage and the lockstep loop,
+compiled or not (core/run/fast_loop.py), call the same text.
+
+A step's horizon holds the plan's targets of steps k .. k + N (N = controller.preview):
+for a time-indexed plan computed once per plan (every run of the plan shares them), for a
+position-indexed one along the planned trajectory ds/dt = v(s) from the position
+extrapolated to t_k (Heun's method, one step per period). The horizon of step k + 2 is
+published at step k, from s_k + 2 (s_k - s_k-1) (error ~ a (2 dt)^2, centimetres).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from ..base.kernels import jitable
+from ..train.line import LineTables, speed_limit
+from .profiles import DepartureRamp, PlanTable, departing, table_limit, table_speed
+from .served import START, JourneyState, JourneyTable, journey_limit, journey_speed, observed
+
+LOOKAHEAD = 2  # steps the profile runs ahead of the plant
+
+
+class ProfileSettings(NamedTuple):
+    """What the profile's step reads and none changes."""
+
+    period: float              # s
+    preview: int               # N: a horizon holds N + 1 targets
+    position_indexed: bool     # horizons from each position (else given once per plan)
+    plan: PlanTable            # a position-indexed plan's (empty: time-indexed, a journey)
+    departure: DepartureRamp   # how that plan's target leaves the start
+    line: LineTables           # the line's limits (where the plan has none of its own)
+    approach_step: float       # m/s, seed 003's stepped approach (0: off)
+    berth: float               # m, profile.berth (0: off)
+    berth_mark: float          # m, the stop it berths at (NaN: none)
+
+
+class ProfileState(NamedTuple):
+    """What the profile carries from one position to the next."""
+
+    last_position: float       # m
+    stair: float               # m/s, the stepped approach's stair (NaN: none)
+    journey: JourneyState      # a journey's section and arrival (served.observed)
+    arrived: bool              # standing in its berth once (profile.berth): for good
+
+
+PROFILE_START = ProfileState(0.0, math.nan, START, False)
+
+
+@jitable
+def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state: ProfileState,
+                 k: int, position: float, targets) -> ProfileState:
+    """Position s_k of step k in: the horizons to publish now written into `targets`
+    (steps x (N + 1): rows 0 .. 2 at k = 0, row k + 2 after; a time-indexed plan's rows
+    hold its horizons already), each row's first entry under the stepped approach; the
+    state after. Arrived in its berth, the horizons are zero, for good."""
+    travel = position - state.last_position if k else 0.0  # over the last step
+    speed = travel / settings.period
+    stair, journey_state = state.stair, state.journey
+    if journey is not None:  # its section and when the train stood at its end
+        journey_state = observed(journey, journey_state, k * settings.period, position, speed)
+    arrived = state.arrived or has_arrived(k, travel, position, settings.berth_mark,
+                                           settings.berth)
+    first = 0 if k == 0 else k + LOOKAHEAD
+    for step in range(first, k + LOOKAHEAD + 1):
+        if step < len(targets):
+            if arrived:
+                targets[step, :] = 0.0
+            elif settings.position_indexed:
+                plan_horizon(settings, journey, journey_state, step,
+                             position + LOOKAHEAD * travel if k else position, targets[step])
+            targets[step, 0], stair = approach(settings.approach_step, stair,
+                                               targets[step, 0], speed)
+    return ProfileState(position, stair, journey_state, arrived)
+
+
+@jitable
+def has_arrived(k: int, travel: float, position: float, mark: float, berth: float) -> bool:
+    """Whether the train, `travel` m over the step before step `k`, stands still within
+    `berth` of the stop `mark` (NaN: none): profile.berth."""
+    return k > 0 and travel == 0.0 and abs(mark - position) < berth
+
+
+@jitable
+def plan_horizon(settings: ProfileSettings, journey: JourneyTable | None, state: JourneyState,
+                 step: int, position: float, horizon) -> None:
+    """A position-indexed plan's targets of steps step .. step + N into `horizon`, along
+    the planned trajectory from `position` at `step` (Heun's method, one step per
+    period)."""
+    h = settings.period
+    horizon[0] = plan_target(settings, journey, state, step * h, position)
+    for i in range(1, len(horizon)):
+        t, v = (step + i) * h, horizon[i - 1]
+        ahead = plan_target(settings, journey, state, t, position + h * v)
+        position += 0.5 * h * (v + ahead)
+        horizon[i] = plan_target(settings, journey, state, t, position)
+
+
+@jitable
+def plan_target(settings: ProfileSettings, journey: JourneyTable | None, state: JourneyState,
+                t: float, position: float) -> float:
+    """A position-indexed plan's target: a journey's in its state, else the table's under
+    the departure ramp."""
+    if journey is not None:  # pruned while compiling a run that is not a journey
+        return journey_speed(journey, state, t, position)
+    return departing(settings.departure, t, table_speed(settings.plan, position))
+
+
+@jitable
+def approach(step_size: float, stair: float, target: float, speed: float):
+    """Seed 003's stepped approach, (target, stair) (NaN: no stair): while the target is
+    more than one step above the speed, the published target is a stair one step above
+    the speed, held until the train is within a quarter step of it. Only upwards: a
+    target below the speed is a braking curve protecting a limit or the stop, never
+    softened; a stair held while the target fell stays under it."""
+    if step_size <= 0.0 or target - speed <= step_size:
+        return target, math.nan
+    if stair != stair or abs(stair - speed) < step_size / 4:
+        stair = speed + step_size
+    return min(stair, target), stair
+
+
+@jitable
+def plan_speed_limit(settings: ProfileSettings, journey: JourneyTable | None,
+                     position: float) -> float:
+    """The limit with the head at `position`, m/s: the plan's own (a journey's, the ATO
+    curve's tail rule) where it has them, else the line's, else none (inf)."""
+    if journey is not None:
+        return journey_limit(journey, position)
+    if settings.plan.limits_speed:
+        return table_limit(settings.plan, position)
+    if settings.line.limits_end > settings.line.tunnels_end:
+        return speed_limit(settings.line, position)
+    return math.inf
