@@ -71,8 +71,9 @@ class Plan(Protocol):
 
     def table(self) -> Any:
         """A position-indexed plan as the table compiled code reads (a PlanTable of
-        core/targets/profiles.py), or None: its runs take the Python loop. Time-indexed
-        plans need none (their targets are computed once per plan)."""
+        core/targets/profiles.py), or None: a position-indexed plan without one is refused
+        (RunContext.profile_settings). Time-indexed plans need none (their targets are
+        computed once per plan)."""
         return None
 
 
