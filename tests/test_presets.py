@@ -51,10 +51,10 @@ def test_the_ato_scenarios_and_journeys_take_the_product_from_the_presets():
         values, _ = resolved(name)
         assert values["train.load_weighing"] and values["controller.holding_target"] == 0.02
     gpc, _ = resolved("seed001-crh380al-ato")  # the GPC in place of the preset's ADRC:
-    assert gpc["controller.kind"] == "gpc" and not gpc["ladrc.feedforward"]  # its defaults
+    assert gpc["controller.kind"] == "gpc" and gpc["ladrc.feedforward"] == "none"  # defaults
     for name in ("seed000-ato", "seed000-realistic-ato"):  # the paper's plant: the controller
         values, _ = resolved(name)
-        assert values["ladrc.feedforward"] and not values["train.load_weighing"]
+        assert values["ladrc.feedforward"] == "target" and not values["train.load_weighing"]
 
 
 def test_one_product_decision_is_one_edit(tmp_path, monkeypatch):

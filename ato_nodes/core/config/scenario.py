@@ -18,6 +18,7 @@ import yaml
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import config_dir, resolve_file
+from ..base.spec import ParamSpec
 from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
@@ -32,6 +33,7 @@ from .schema import (
     SPECS,
     NodeValues,
     defaults,
+    retired,
     shared,
     unused,
 )
@@ -42,6 +44,19 @@ def _unknown(name: str, where: str) -> ScenarioError:
     close = difflib.get_close_matches(name, SPEC_BY_NAME, n=1)
     hint = f" (did you mean {close[0]}?)" if close else ""
     return ScenarioError(f"{where}: unknown parameter {name!r}{hint}")
+
+
+def _spec(name: str, value: Any, where: str) -> ParamSpec:
+    """The spec of a parameter a file, --set or an override gives as `value`: a retired one
+    (an old switch) is refused naming what to give instead, an unknown one naming the
+    closest known."""
+    line = retired(name, value)
+    if line:
+        raise ScenarioError(f"{where}: {line}")
+    spec = SPEC_BY_NAME.get(name)
+    if spec is None:
+        raise _unknown(name, where)
+    return spec
 
 
 def scenario_names() -> list[str]:
@@ -142,9 +157,7 @@ def _given_values(path: Path, document: dict) -> dict[str, Any]:
         if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
             raise ScenarioError(f"{path}: {node} needs a 'ros__parameters:' mapping")
         for name, value in _flatten(section["ros__parameters"]).items():
-            spec = SPEC_BY_NAME.get(name)
-            if spec is None:
-                raise _unknown(name, str(path))
+            spec = _spec(name, value, str(path))
             if node != "/**" and node not in spec.nodes:
                 raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, "
                                     f"not {node}")
@@ -225,13 +238,11 @@ def parse_override(text: str) -> tuple[str, Any]:
     name = name.strip()
     if not sep or not name:
         raise ScenarioError(f"--set expects name=value, got {text!r}")
-    spec = SPEC_BY_NAME.get(name)
-    if spec is None:
-        raise _unknown(name, "--set")
     try:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
+    spec = _spec(name, value, "--set")
     if spec.value_type is str and value is not None and not isinstance(value, str):
         value = raw.strip()
     elif spec.value_type is float and isinstance(value, str):  # YAML 1.1 reads 1e-9 as text
@@ -266,10 +277,7 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
-            spec = SPEC_BY_NAME.get(name)
-            if spec is None:
-                raise _unknown(name, "override")
-            checked[name] = spec.check(value, "override")
+            checked[name] = _spec(name, value, "override").check(value, "override")
         overrides, where = checked, ""
     else:
         overrides = dict(parse_override(text) for text in overrides)  # the last one wins
