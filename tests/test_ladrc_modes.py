@@ -2,8 +2,12 @@
 step reads; a combination that cannot work and an old switch refused in one line, before
 anything starts, in the stack and in-process alike."""
 
-import pytest
+import json
 
+import pytest
+import yaml
+
+from ato_nodes.bagio import PARAMETERS_KEY, read_parameters
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import load_scenario, prepare
 from ato_nodes.core.config.schema import defaults
@@ -103,3 +107,22 @@ def test_values_built_by_hand_are_refused_by_simulate_in_one_line():
         with pytest.raises(ScenarioError, match=line) as refused:
             simulate({**run, "run.duration": 1.0})
         assert "\n" not in str(refused.value)
+
+
+@pytest.mark.parametrize("switches, modes", [
+    ((False, False, False, False), ("none", "none")),
+    ((True, True, False, False), ("target", "speed")),
+    ((True, True, True, False), ("plan", "speed")),
+    ((True, True, False, True), ("target", "position"))])
+def test_a_bag_recorded_with_the_old_switches_reads_as_its_modes(switches, modes, tmp_path):
+    old = dict(zip(("ladrc.feedforward", "ladrc.delay_aware", "ladrc.plan_feedforward",
+                    "ladrc.predicted_target"), switches, strict=True))
+    kept = {**{name: value for name, value in load_scenario(METRO).items()
+               if not name.startswith("ladrc.") or name in ("ladrc.omega_o", "ladrc.b0")},
+            **old}
+    (tmp_path / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": {
+        "custom_data": {PARAMETERS_KEY: json.dumps(kept)}}}))
+    values = read_parameters(tmp_path)
+    assert (values["ladrc.feedforward"], values["ladrc.prediction"]) == modes
+    assert not set(old) - {"ladrc.feedforward"} & set(values)
+    assert values["ladrc.omega_o"] == kept["ladrc.omega_o"]

@@ -14,7 +14,7 @@ from typing import Any
 
 from ..base.errors import ScenarioError
 from ..base.spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, TextForm, param
-from ..control.adrc import RETIRED_SWITCHES, retired_switch
+from ..control.adrc import RETIRED_SWITCHES, retired_switch, switches_as_modes
 from ..control.estimation import PARAMETERS as ESTIMATOR_PARAMETERS
 from ..control.limiter import LIMITER_PARAMETERS
 from ..scoring.indices import RunningIndex
@@ -194,6 +194,12 @@ def retired(name: str, value: Any) -> str | None:
 
 
 RETIRED_NAMES = frozenset(RETIRED_SWITCHES) - set(SPEC_BY_NAME)  # gone from the schema
+
+
+def upgraded(values: dict[str, Any]) -> dict[str, Any]:
+    """A run's values as an older version recorded them (a bag's), with what took the
+    place of the parameters retired since (the linear ADRC's switches: its modes)."""
+    return switches_as_modes(values)
 
 
 def defaults() -> dict[str, Any]:

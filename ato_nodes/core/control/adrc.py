@@ -365,6 +365,23 @@ def retired_switch(name: str, value) -> str | None:
             f"{', '.join(modes)} ({on} for true; the papers' none is the default)")
 
 
+def switches_as_modes(values: dict) -> dict:
+    """A run's `values` as recorded before the modes (a bag's: the old switches, true or
+    false) with the modes they mean in their place; other values as they are."""
+    if not isinstance(values.get("ladrc.feedforward"), bool):
+        return values
+    values = dict(values)
+    for mode, (switch, more), modes in (
+            ("ladrc.feedforward", ("ladrc.feedforward", "ladrc.plan_feedforward"),
+             FEEDFORWARD_MODES),
+            ("ladrc.prediction", ("ladrc.delay_aware", "ladrc.predicted_target"),
+             PREDICTION_MODES)):
+        on = (bool(values.pop(switch, False)), bool(values.pop(more, False)))
+        values[mode] = next(name for name, switches in modes.items() if switches == (
+            on[0], on[0] and on[1]))
+    return values
+
+
 LINEAR_ADRC_PARAMETERS = (
     param("ladrc.omega_o", 20.0, "linear ADRC observer bandwidth, rad/s", "controller",
           1e-6, 1e6),
