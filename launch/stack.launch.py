@@ -9,8 +9,8 @@ reading, where a journey's last stop begins for its end:
 core/config/scenario.DERIVED_PARAMETERS) on top, so both give the same run. A scenario
 that builds on another or on a preset (`base:`, which ROS 2 parameter files do not know)
 is given to the nodes resolved, as run_stack.py gives every scenario: a file of the same
-name in a new temporary folder. `out` is the
-bag directory to create (default bags/<scenario>-launch). The run ends when the
+name in a new temporary folder. `out` is the bag directory to create (default
+bags/<scenario>-launch). The run ends when the
 supervisor ends it: every node exits on its 'shutdown' and the launch ends with the last
 of them (a node still running STOP_GRACE s after the supervisor, or one that fails, shuts
 the launch down, as run_stack.py does). The ROS domain is the environment's
