@@ -6,8 +6,11 @@
 (its `/**` and own sections) and completes it as `scripts/run_stack.py` does (train
 preset, relative paths), and gets the values the scenario derives (the load weighing's
 reading, where a journey's last stop begins for its end:
-core/config/scenario.DERIVED_PARAMETERS) on top, so both give the same run. `out` is the
-bag directory to create (default bags/<scenario>-launch). The run ends when the
+core/config/scenario.DERIVED_PARAMETERS) on top, so both give the same run. A scenario
+that builds on another or on a preset (`base:`, which ROS 2 parameter files do not know)
+is given to the nodes resolved, as run_stack.py gives every scenario: a file of the same
+name in a new temporary folder. `out` is the bag directory to create (default
+bags/<scenario>-launch). The run ends when the
 supervisor ends it: every node exits on its 'shutdown' and the launch ends with the last
 of them (a node still running STOP_GRACE s after the supervisor, or one that fails, shuts
 the launch down, as run_stack.py does). The ROS domain is the environment's
@@ -15,8 +18,10 @@ the launch down, as run_stack.py does). The ROS domain is the environment's
 the same run.
 """
 
+import tempfile
 from pathlib import Path
 
+import yaml
 from launch import LaunchDescription
 from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
                             RegisterEventHandler, TimerAction)
@@ -25,7 +30,9 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from ato_nodes.core.config.scenario import DERIVED_PARAMETERS, prepare, resolve_scenario
+from ato_nodes.core.base import yamlfile
+from ato_nodes.core.config.scenario import (DERIVED_PARAMETERS, prepare, resolve_scenario,
+                                            ros_parameter_file)
 from ato_nodes.core.config.schema import NODES, SPEC_BY_NAME
 from ato_nodes.launcher.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
@@ -37,6 +44,10 @@ def nodes(context):
     report = LaunchConfiguration("report").perform(context)
     run_parameters = {"recorder.output": str(Path(out).resolve()), "supervisor.report": report}
     values = prepare(str(path))  # the derived values, which a node cannot derive itself
+    if "base" in yamlfile.load(path, "scenario"):  # rcl refuses a file with a `base:`
+        resolved = Path(tempfile.mkdtemp(prefix="ato_nodes-launch-")) / path.name
+        resolved.write_text(yaml.safe_dump(ros_parameter_file(values), sort_keys=False))
+        path = resolved
     derived = {name: values[name] for name in DERIVED_PARAMETERS}
     launched = [Node(package="ato_nodes", executable=role, name=role, output="screen",
                      parameters=[str(path), {

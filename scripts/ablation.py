@@ -7,9 +7,9 @@ turn, and built up one addition at a time from none.
         --reference seed004-metro-tuned --out bags/ablation-metro
 
 The additions (docs/tracking.md), each undone by the overrides beside it:
-  feedforward         ladrc.feedforward=false (planned acceleration, known resistance)
+  feedforward         ladrc.feedforward=none (planned acceleration, known resistance)
   preview             controller.preview=0 (and with it the prediction horizon)
-  delay-aware         ladrc.delay_aware=false (observer input, Smith predictor)
+  delay-aware         ladrc.prediction=none (observer input, Smith predictor)
   feasible curve      profile.envelope_share=0
   rounded curve       profile.jerk=0
   departure and berth profile.ato.start_speed=0.3, profile.departure_jerk=0,
@@ -35,9 +35,9 @@ from ato_nodes.studies.runner import (Variant, check_counts, numeric, prepare_va
                                       write_outputs)
 
 ADDITIONS = (
-    ("feedforward", ["ladrc.feedforward=false"]),
+    ("feedforward", ["ladrc.feedforward=none"]),
     ("preview", ["controller.preview=0"]),
-    ("delay-aware", ["ladrc.delay_aware=false"]),
+    ("delay-aware", ["ladrc.prediction=none"]),
     ("feasible curve", ["profile.envelope_share=0"]),
     ("rounded curve", ["profile.jerk=0"]),
     ("departure and berth", ["profile.ato.start_speed=0.3", "profile.departure_jerk=0",

@@ -6,8 +6,8 @@ import pytest
 
 from ato_nodes.core.control.estimation import on_board_estimator
 from ato_nodes.core.control.adrc import (HanADRCGains, LinearADRCGains, eso_update, fal,
-                                         fal_gain, fhan, han_adrc, linear_adrc_of, nlsef,
-                                         target_past_preview, td_update)
+                                         fal_gain, fhan, han_adrc, linear_adrc_gains,
+                                         linear_adrc_of, nlsef, target_past_preview, td_update)
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.core.control.limiter import CommandLimiter
 from ato_nodes.core.config.schema import defaults
@@ -186,7 +186,7 @@ class TestNLSEF:
 
 def paper_gains(**gains) -> LinearADRCGains:
     """The linear ADRC's schema defaults (every addition off) with `gains`."""
-    return settings(LinearADRCGains, "ladrc", defaults())._replace(**gains)
+    return linear_adrc_gains(defaults())._replace(**gains)
 
 
 class TestLinearADRC:

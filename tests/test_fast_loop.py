@@ -36,7 +36,7 @@ VARIANTS = [
     # a journey's dwell and departure with the standstill-aware observer
     ("seed004-metro-line", ["ladrc.standstill=true"]),
     # two stops of a heavy train with a fast actuator, tracking where it will be
-    ("seed004-metro-line", ["ladrc.predicted_target=true", "plant.lag_factor=0.75",
+    ("seed004-metro-line", ["ladrc.prediction=position", "plant.lag_factor=0.75",
                             "plant.mass_factor=1.21"]),
     # a train stopped short standing in its berth (tests/test_berth.py)
     ("seed004-metro-ato", [*CREEPING, "profile.berth=0.1"]),

@@ -220,7 +220,7 @@ def test_a_huge_strategy_file_is_refused_by_its_size_before_it_is_read(tmp_path)
 LADRC_PLAN = ("controller.kind=linear_adrc", "controller.holding_target=0.02",
               "controller.preview=10", "profile.strategy.start_speed=0.1",
               "ladrc.omega_o=5", "ladrc.omega_c=1", "ladrc.b0=0.008829",
-              "ladrc.feedforward=true", "ladrc.delay_aware=true")
+              "ladrc.prediction=speed")
 
 
 def test_the_linear_adrc_reads_the_plans_force_by_stage_and_brakes_on_past_the_stop(
@@ -272,16 +272,18 @@ def test_a_coasting_command_leads_into_a_coming_traction_stage_only_when_behind(
 def test_the_plans_force_keeps_the_tracked_strategys_coasting_and_modes(tmp_path):
     line_path, path, result = shipped_like_strategy(tmp_path)
     runs_of = {}
-    for plan in ("false", "true"):
-        values = strategy_run(line_path, path, *LADRC_PLAN, f"ladrc.plan_feedforward={plan}")
-        runs_of[plan] = score_series(simulate(values), values)
+    for feedforward in ("target", "plan"):
+        values = strategy_run(line_path, path, *LADRC_PLAN, f"ladrc.feedforward={feedforward}")
+        runs_of[feedforward] = score_series(simulate(values), values)
     planned = _switch_count(result.forces, SWITCH_THRESHOLD)
-    assert runs_of["true"]["switch_count"] <= min(planned + 2, runs_of["false"]["switch_count"])
+    assert runs_of["plan"]["switch_count"] <= min(planned + 2, runs_of["target"]["switch_count"])
 
 
 def test_the_plans_force_needs_a_plan_with_forces():
-    with pytest.raises(ScenarioError, match="needs ladrc.feedforward and a plan with forces"):
-        apply_overrides(load_scenario("hsr-neutral-ato"), ["ladrc.plan_feedforward=true"])
+    with pytest.raises(ScenarioError, match="^parameters: ladrc.feedforward plan needs a plan "
+                                            "with forces .profile.kind strategy., not "
+                                            "profile.kind ato$"):
+        apply_overrides(load_scenario("hsr-neutral-ato"), ["ladrc.feedforward=plan"])
 
 
 def test_a_plan_at_an_envelope_share_keeps_the_rest_in_reserve():

@@ -99,7 +99,7 @@ def nominal_run(**sets):
 
 def test_feedforward_leaves_the_observer_only_what_the_model_does_not_know():
     with_model, _ = nominal_run()
-    without, _ = nominal_run(**{"ladrc.feedforward": "false"})
+    without, _ = nominal_run(**{"ladrc.feedforward": "none"})
     moving = with_model["speed"] > 5.0
     # On the nominal train the model explains the resistance and grades: the observer's
     # disturbance estimate is mostly sensor noise; without it, it carries them all.
@@ -109,7 +109,7 @@ def test_feedforward_leaves_the_observer_only_what_the_model_does_not_know():
 
 def test_the_delay_aware_observer_and_preview_cut_the_metro_error():
     _, aware = nominal_run()
-    _, blind = nominal_run(**{"ladrc.delay_aware": "false"})
+    _, blind = nominal_run(**{"ladrc.prediction": "none"})
     _, no_preview = nominal_run(**{"controller.preview": "0"})
     assert aware["max_abs_error_kmh"] < 1.0
     assert blind["max_abs_error_kmh"] > 2 * aware["max_abs_error_kmh"]
@@ -240,17 +240,17 @@ def test_a_train_ahead_of_its_stopping_curve_brakes_for_where_it_will_be():
         "run.duration=300", "plant.lag_factor=0.75", "plant.mass_factor=1.21",
         "ladrc.standstill=true"])
     past = stop_errors(values)
-    nearer = stop_errors(apply_overrides(values, ["ladrc.predicted_target=true"]))
+    nearer = stop_errors(apply_overrides(values, ["ladrc.prediction=position"]))
     assert len(past) == len(nearer) == 2 and min(past) > 0.03
     assert all(abs(new) < 0.5 * old for new, old in zip(nearer, past, strict=True))
 
 
-def test_the_predicted_target_needs_a_position_indexed_plan_and_the_prediction():
-    for overrides in (["ladrc.delay_aware=false"], ["profile.kind=step", "profile.berth=0",
-                                                          "profile.departure_jerk=0"]):
-        with pytest.raises(ScenarioError, match="ladrc.predicted_target needs"):
-            apply_overrides(load_scenario("seed004-metro-ato"),
-                            ["ladrc.predicted_target=true", *overrides])
+def test_the_predicted_target_needs_a_position_indexed_plan():
+    with pytest.raises(ScenarioError, match="^parameters: ladrc.prediction position needs a "
+                                            "position-indexed plan, not profile.kind step$"):
+        apply_overrides(load_scenario("seed004-metro-ato"), [
+            "ladrc.prediction=position", "profile.kind=step", "profile.berth=0",
+            "profile.departure_jerk=0"])
 
 
 def test_the_holding_brake_takes_a_target_below_the_holding_target():
@@ -279,7 +279,7 @@ def test_the_ablation_script_undoes_each_addition_and_builds_them_up(tmp_path):
     assert runs["without preview"]["itae"] == itae("controller.preview=0")
     assert runs["without tuned gains"]["itae"] == itae("ladrc.omega_c=1.0")
     assert runs["+ feedforward"]["itae"] == itae(
-        "controller.preview=0", "ladrc.delay_aware=false", "profile.envelope_share=0",
+        "controller.preview=0", "ladrc.prediction=none", "profile.envelope_share=0",
         "profile.jerk=0", "profile.ato.start_speed=0.3", "profile.departure_jerk=0",
         "controller.holding_target=0", "ladrc.omega_c=1.0")
     assert len(runs) == 1 + 7 + 1 + 6 + 1  # all, without each, none, cumulative, reference

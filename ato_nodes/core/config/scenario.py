@@ -18,6 +18,7 @@ import yaml
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import config_dir, resolve_file
+from ..base.spec import ParamSpec
 from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
@@ -32,6 +33,7 @@ from .schema import (
     SPECS,
     NodeValues,
     defaults,
+    retired,
     shared,
     unused,
 )
@@ -44,8 +46,27 @@ def _unknown(name: str, where: str) -> ScenarioError:
     return ScenarioError(f"{where}: unknown parameter {name!r}{hint}")
 
 
+def _spec(name: str, value: Any, where: str) -> ParamSpec:
+    """The spec of a parameter a file, --set or an override gives as `value`: a retired one
+    (an old switch) is refused naming what to give instead, an unknown one naming the
+    closest known."""
+    line = retired(name, value)
+    if line:
+        raise ScenarioError(f"{where}: {line}")
+    spec = SPEC_BY_NAME.get(name)
+    if spec is None:
+        raise _unknown(name, where)
+    return spec
+
+
 def scenario_names() -> list[str]:
     return sorted(p.stem for p in (config_dir() / "scenarios").glob("*.yaml"))
+
+
+def preset_names() -> list[str]:
+    """The shipped presets (msg_config/presets/NAME.yaml): parts of scenarios that
+    scenarios build on (`base: NAME`), not runs of their own."""
+    return sorted(p.stem for p in (config_dir() / "presets").glob("*.yaml"))
 
 
 def resolve_scenario(name_or_file: str) -> Path:
@@ -76,28 +97,32 @@ def prepare(scenario: str, overrides: list[str] | dict[str, Any] = ()) -> dict[s
 
 def load_scenario(name_or_file: str) -> dict[str, Any]:
     """All parameters of a scenario: defaults overlaid with the file's values, checked.
-    A file with a top-level `base: SCENARIO` (a name, or a file relative to this one)
-    holds only what differs from that scenario (tune.py's best.yaml)."""
+    A file with a top-level `base: BASE` (a preset's name, msg_config/presets/; a
+    scenario's; or a file relative to this one) holds only what differs from BASE, which
+    may have a base of its own (tune.py's best.yaml on a scenario built on a preset)."""
     return validate(*_loaded(name_or_file))
 
 
-def _loaded(name_or_file: str) -> tuple[dict[str, Any], str]:
-    """The scenario's values, each checked, and where they come from (for validate())."""
+def _loaded(name_or_file: str, chain: tuple[Path, ...] = ()) -> tuple[dict[str, Any], str]:
+    """The scenario's values, each checked, and where they come from (for validate());
+    `chain`: the files that build on it, each on the next (a base met twice is refused)."""
     path = resolve_scenario(name_or_file)
+    if path.resolve() in chain:
+        names = " -> ".join(str(link) for link in (*chain, path.resolve()))
+        raise ScenarioError(f"{chain[0]}: its bases go round in a circle: {names}")
     document = yamlfile.load(path, "scenario")
     if not isinstance(document, dict):
         raise ScenarioError(f"{path}: expected a ROS 2 parameter file (node: ros__parameters: ...)")
     document = dict(document)
     base = document.pop("base", None)
     if base is not None and not isinstance(base, str):
-        raise ScenarioError(f"{path}: base must be a scenario name or file, not {base!r}")
+        raise ScenarioError(f"{path}: base must be a preset, a scenario or a file, not {base!r}")
     given = _given_values(path, document)
     if base is None:
         values = complete(given, [path.parent], str(path))
         check_not_derived(given, values, str(path))
         return values, str(path)
-    relative = path.parent / base
-    base_values, _ = _loaded(str(relative) if relative.suffix in (".yaml", ".yml") else base)
+    base_values, _ = _loaded(str(resolve_base(base, path)), (*chain, path.resolve()))
     for name in FILE_PARAMETERS:
         if given.get(name):
             given[name] = resolve_file(given[name], [path.parent])
@@ -105,6 +130,21 @@ def _loaded(name_or_file: str) -> tuple[dict[str, Any], str]:
         return _overridden(base_values, given), str(path)
     except ScenarioError as exc:
         raise ScenarioError(f"{path}: {exc}") from None
+
+
+def resolve_base(base: str, path: Path) -> Path:
+    """The file a scenario file (`path`) names as its `base`: a file relative to it (a
+    .yaml name), a shipped preset or a shipped scenario."""
+    relative = path.parent / base
+    if relative.suffix in (".yaml", ".yml"):
+        return resolve_scenario(str(relative))
+    preset = config_dir() / "presets" / f"{base}.yaml"
+    if preset.is_file():
+        return preset
+    if (config_dir() / "scenarios" / f"{base}.yaml").is_file():
+        return resolve_scenario(base)
+    raise ScenarioError(f"{path}: unknown base {base!r}; presets: {', '.join(preset_names())}; "
+                        f"scenarios: {', '.join(scenario_names())}")
 
 
 def _given_values(path: Path, document: dict) -> dict[str, Any]:
@@ -117,9 +157,7 @@ def _given_values(path: Path, document: dict) -> dict[str, Any]:
         if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
             raise ScenarioError(f"{path}: {node} needs a 'ros__parameters:' mapping")
         for name, value in _flatten(section["ros__parameters"]).items():
-            spec = SPEC_BY_NAME.get(name)
-            if spec is None:
-                raise _unknown(name, str(path))
+            spec = _spec(name, value, str(path))
             if node != "/**" and node not in spec.nodes:
                 raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, "
                                     f"not {node}")
@@ -200,13 +238,11 @@ def parse_override(text: str) -> tuple[str, Any]:
     name = name.strip()
     if not sep or not name:
         raise ScenarioError(f"--set expects name=value, got {text!r}")
-    spec = SPEC_BY_NAME.get(name)
-    if spec is None:
-        raise _unknown(name, "--set")
     try:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
+    spec = _spec(name, value, "--set")
     if spec.value_type is str and value is not None and not isinstance(value, str):
         value = raw.strip()
     elif spec.value_type is float and isinstance(value, str):  # YAML 1.1 reads 1e-9 as text
@@ -241,10 +277,7 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
-            spec = SPEC_BY_NAME.get(name)
-            if spec is None:
-                raise _unknown(name, "override")
-            checked[name] = spec.check(value, "override")
+            checked[name] = _spec(name, value, "override").check(value, "override")
         overrides, where = checked, ""
     else:
         overrides = dict(parse_override(text) for text in overrides)  # the last one wins
@@ -258,6 +291,9 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
         merged.update(train_preset(overrides["plant.train"]))
         merged.update(overrides)
+    # another kind's parameters (a base's settings of the controller the scenario replaces)
+    # go back to their defaults: a run holds only defaults for the kinds it does not use
+    merged.update({name: SPEC_BY_NAME[name].default for name in unused(merged)})
     return merged
 
 

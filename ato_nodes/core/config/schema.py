@@ -14,6 +14,7 @@ from typing import Any
 
 from ..base.errors import ScenarioError
 from ..base.spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, TextForm, param
+from ..control.adrc import RETIRED_SWITCHES, retired_switch, switches_as_modes
 from ..control.estimation import PARAMETERS as ESTIMATOR_PARAMETERS
 from ..control.limiter import LIMITER_PARAMETERS
 from ..scoring.indices import RunningIndex
@@ -186,6 +187,21 @@ FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "
                    "profile.journey.timetable")
 
 
+def retired(name: str, value: Any) -> str | None:
+    """The line for a parameter retired from the schema given as `value` (the linear ADRC's
+    old switches, now modes): what to give instead; None for anything else."""
+    return retired_switch(name, value)
+
+
+RETIRED_NAMES = frozenset(RETIRED_SWITCHES) - set(SPEC_BY_NAME)  # gone from the schema
+
+
+def upgraded(values: dict[str, Any]) -> dict[str, Any]:
+    """A run's values as an older version recorded them (a bag's), with what took the
+    place of the parameters retired since (the linear ADRC's switches: its modes)."""
+    return switches_as_modes(values)
+
+
 def defaults() -> dict[str, Any]:
     return {spec.name: spec.default for spec in SPECS}
 
@@ -214,6 +230,8 @@ class NodeValues(dict):
     error, in the node and in simulate() alike."""
 
     def __init__(self, node: str, values: dict[str, Any]):
+        for name in RETIRED_NAMES & values.keys():  # values written for an older schema
+            raise ScenarioError(f"{node}: {retired(name, values[name])}")
         super().__init__({spec.name: values[spec.name] for spec in for_node(node, values)})
         self.node = node
         self.unused = unused(values)

@@ -333,6 +333,55 @@ DISCRETE_ADRC_STEPS = ControllerSteps(discrete_adrc_start, discrete_adrc_step,
                                       DiscreteADRCState)
 
 
+# The linear ADRC's modes as the switches its step reads (LinearADRCGains), each mode
+# holding the one before it: ladrc.feedforward as (feedforward, plan_feedforward),
+# ladrc.prediction as (delay_aware, predicted_target).
+FEEDFORWARD_MODES = {"none": (False, False), "target": (True, False), "plan": (True, True)}
+PREDICTION_MODES = {"none": (False, False), "speed": (True, False), "position": (True, True)}
+# The switches the modes replaced: (the mode that took its place, its value for true).
+RETIRED_SWITCHES = {
+    "ladrc.feedforward": ("ladrc.feedforward", "target"),
+    "ladrc.plan_feedforward": ("ladrc.feedforward", "plan"),
+    "ladrc.delay_aware": ("ladrc.prediction", "speed"),
+    "ladrc.predicted_target": ("ladrc.prediction", "position"),
+}
+PLAN_BAND = param("ladrc.plan_band", 0.5 / 3.6, "linear ADRC with ladrc.feedforward plan: how "
+                  "far the speed may be off the target before the command leaves the plan's "
+                  "side, m/s", "controller", 0.0, 100.0)
+
+
+def retired_switch(name: str, value) -> str | None:
+    """What a file or --set that gives an old switch of the linear ADRC (`name`: `value`)
+    is told: the mode to give instead (one line); None for anything else."""
+    if name not in RETIRED_SWITCHES or (name == "ladrc.feedforward" and not (
+            isinstance(value, bool) or value in ("true", "false"))):
+        return None
+    mode, on = RETIRED_SWITCHES[name]
+    said = str(value).lower()
+    if said == "true":
+        return f"{name}: true is an old switch of the linear ADRC: give {mode}: {on}"
+    modes = FEEDFORWARD_MODES if mode == "ladrc.feedforward" else PREDICTION_MODES
+    return (f"{name}: {said} is an old switch of the linear ADRC: give {mode}: one of "
+            f"{', '.join(modes)} ({on} for true; the papers' none is the default)")
+
+
+def switches_as_modes(values: dict) -> dict:
+    """A run's `values` as recorded before the modes (a bag's: the old switches, true or
+    false) with the modes they mean in their place; other values as they are."""
+    if not isinstance(values.get("ladrc.feedforward"), bool):
+        return values
+    values = dict(values)
+    for mode, (switch, more), modes in (
+            ("ladrc.feedforward", ("ladrc.feedforward", "ladrc.plan_feedforward"),
+             FEEDFORWARD_MODES),
+            ("ladrc.prediction", ("ladrc.delay_aware", "ladrc.predicted_target"),
+             PREDICTION_MODES)):
+        on = (bool(values.pop(switch, False)), bool(values.pop(more, False)))
+        values[mode] = next(name for name, switches in modes.items() if switches == (
+            on[0], on[0] and on[1]))
+    return values
+
+
 LINEAR_ADRC_PARAMETERS = (
     param("ladrc.omega_o", 20.0, "linear ADRC observer bandwidth, rad/s", "controller",
           1e-6, 1e6),
@@ -340,24 +389,28 @@ LINEAR_ADRC_PARAMETERS = (
           1e-6, 1e6),
     param("ladrc.b0", 0.0098 / 1.11, "linear ADRC input gain, m/s^2 per N/kN", "controller",
           1e-9, 1e9),
-    param("ladrc.feedforward", False, "linear ADRC: add the plan's acceleration at the tracked "
-          "target (needs controller.preview >= 1) and the nominal train's basic and line "
-          "resistance (at the dead-reckoned position) to the law, and tell the observer the "
-          "resistance, so it estimates only what the model does not know", "controller"),
-    param("ladrc.delay_aware", False, "linear ADRC: feed the observer the force the nominal "
-          "actuator applies (dead time, lag, envelope, neutral sections) instead of the "
-          "command, and act on the speed predicted controller.preview steps ahead from the "
-          "commands already sent (a Smith predictor)", "controller"),
-    param("ladrc.plan_feedforward", False, "linear ADRC with ladrc.feedforward and a plan that "
-          "has forces (profile.kind strategy): the feedforward is the force the plan holds "
-          "where the tracked target is (not its acceleration and resistance), and the command "
-          "stays on that force's side: no braking where the plan drives or cruises, no "
-          "traction where it brakes, none at all where it coasts, unless the (predicted) "
-          "speed is more than ladrc.plan_band off the target", "controller"),
-    param("ladrc.plan_band", 0.5 / 3.6, "linear ADRC with ladrc.plan_feedforward: how far the "
-          "speed may be off the target before the command leaves the plan's side, m/s",
-          "controller", 0.0, 100.0),
-    param("ladrc.plan_lead", 0.0, "linear ADRC with ladrc.plan_feedforward: how early the "
+    param("ladrc.feedforward", "none", "linear ADRC's feedforward: none (the papers' "
+          "setting); target: the plan's acceleration at the tracked target (needs "
+          "controller.preview >= 1) and the nominal train's basic and line resistance (at the "
+          "dead-reckoned position) added to the law, the resistance told to the observer, so "
+          "it estimates only what the model does not know; plan: with a plan that has forces "
+          "(profile.kind strategy), the force the plan holds where the tracked target is in "
+          "place of that acceleration, and the command kept on that force's side: no braking "
+          "where the plan drives or cruises, no traction where it brakes, none at all where it "
+          "coasts, unless the (predicted) speed is more than ladrc.plan_band off the target",
+          "controller", choices=tuple(FEEDFORWARD_MODES)),
+    param("ladrc.prediction", "none", "linear ADRC's prediction over the actuator's delay: "
+          "none (the papers' setting: the observer is fed the command, the law acts on its "
+          "speed); speed: the observer is fed the force the nominal actuator applies (dead "
+          "time, lag, envelope, neutral sections) and the law acts on the speed predicted "
+          "controller.preview steps ahead from the commands already sent (a Smith "
+          "predictor); position: as speed, and with a position-indexed plan a train predicted "
+          "past where the plan will be controller.preview steps ahead tracks the plan's speed "
+          "there (the preview extended on its last slope down), not r_k+N: ahead of its "
+          "curve, it brakes for the curve it will meet (the last metres of a stop)",
+          "controller", choices=tuple(PREDICTION_MODES)),
+    PLAN_BAND,
+    param("ladrc.plan_lead", 0.0, "linear ADRC with ladrc.feedforward plan: how early the "
           "command may take the side of the plan's next traction stage, s at the measured "
           "speed: a coasting train more than half ladrc.plan_band behind its target starts "
           "ramping before the stage does, so the ramp and lag do not open a gap (0: at the "
@@ -375,19 +428,13 @@ LINEAR_ADRC_PARAMETERS = (
           "nothing is left to estimate: the observer holds its disturbance estimate, "
           "which otherwise winds up over a dwell against the holding brake and keeps the "
           "train braked for seconds after its departure", "controller"),
-    param("ladrc.predicted_target", False, "linear ADRC with ladrc.delay_aware and a "
-          "position-indexed plan: a train predicted to be past where the plan will be "
-          "controller.preview steps ahead tracks the plan's speed there (the preview "
-          "extended on its last slope down), not the plan's r_k+N: ahead of its curve, it "
-          "brakes for the curve it will meet. Matters where the curve is steep in "
-          "distance: the last metres of a stop",
-          "controller"),
 )
 
 
 class LinearADRCGains(NamedTuple):
     """Bandwidth parametrisation (ladrc.*): observer bandwidth omega_o, controller omega_c;
-    the two model-based additions, off in the papers' settings."""
+    the model-based additions, off in the papers' settings, as switches (linear_adrc_gains()
+    reads them from the modes ladrc.feedforward and ladrc.prediction)."""
 
     omega_o: float
     omega_c: float
@@ -642,18 +689,44 @@ def _linear_adrc(gains: LinearADRCGains, limiter: CommandLimiter,
         LinearADRCState(0.0, 0.0, 0.0, 0.0, start, estimated))
 
 
+def _switches(values, name: str, modes: dict[str, tuple[bool, bool]]) -> tuple[bool, bool]:
+    """The switches of the mode `values` give `name` (a run's values built by hand, not
+    through the schema's check, may hold anything: one line then)."""
+    mode = values[name]
+    if mode not in modes:
+        raise ScenarioError(retired_switch(name, mode) or f"{name} must be one of "
+                            f"{', '.join(modes)}; got {mode!r}")
+    return modes[mode]
+
+
+def linear_adrc_gains(values) -> LinearADRCGains:
+    """The linear ADRC's gains and switches from its parameters (ladrc.*, the modes
+    ladrc.feedforward and ladrc.prediction as their switches); ScenarioError (one line)
+    for a plan setting without the plan's feedforward, which would change nothing."""
+    feedforward, plan_feedforward = _switches(values, "ladrc.feedforward", FEEDFORWARD_MODES)
+    delay_aware, predicted_target = _switches(values, "ladrc.prediction", PREDICTION_MODES)
+    if not plan_feedforward:
+        for name, off in (("ladrc.plan_band", PLAN_BAND.default), ("ladrc.plan_lead", 0.0)):
+            if values[name] != off:
+                raise ScenarioError(f"{name} applies to ladrc.feedforward plan, not "
+                                    f"{values['ladrc.feedforward']}")
+    return LinearADRCGains(
+        values["ladrc.omega_o"], values["ladrc.omega_c"], values["ladrc.b0"], feedforward,
+        delay_aware, plan_feedforward, values["ladrc.plan_band"], values["ladrc.plan_lead"],
+        values["ladrc.neutral_cut"], values["ladrc.standstill"], predicted_target)
+
+
 def linear_adrc(values, context, limiter: CommandLimiter) -> SteppedController:
-    gains = settings(LinearADRCGains, "ladrc", values)
+    gains = linear_adrc_gains(values)
     plan = plan_forces()
     if gains.plan_feedforward:
-        if not gains.feedforward or not hasattr(context.plan, "forces"):
-            raise ScenarioError("ladrc.plan_feedforward needs ladrc.feedforward and a plan "
-                                f"with forces (profile.kind strategy), not "
-                                f"{values['profile.kind']}")
+        if not hasattr(context.plan, "forces"):
+            raise ScenarioError("ladrc.feedforward plan needs a plan with forces (profile.kind "
+                                f"strategy), not profile.kind {values['profile.kind']}")
         plan = plan_forces(context.plan)
-    if gains.predicted_target and not (gains.delay_aware and context.plan.position_indexed):
-        raise ScenarioError("ladrc.predicted_target needs ladrc.delay_aware and a "
-                            f"position-indexed plan, not profile.kind {values['profile.kind']}")
+    if gains.predicted_target and not context.plan.position_indexed:
+        raise ScenarioError("ladrc.prediction position needs a position-indexed plan, not "
+                            f"profile.kind {values['profile.kind']}")
     nominal = nominal_train(context.train, context.period, values["plant.initial_position"],
                             context.line)  # the estimator's model shares its line tables
     return _linear_adrc(gains, limiter, nominal, on_board_estimator(
