@@ -7,7 +7,7 @@ import json
 import pytest
 import yaml
 
-from ato_nodes.bagio import PARAMETERS_KEY, read_parameters
+from ato_nodes.bags.bagio import PARAMETERS_KEY, read_parameters
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import load_scenario, prepare
 from ato_nodes.core.config.schema import defaults
