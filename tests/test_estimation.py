@@ -168,6 +168,7 @@ def test_the_estimated_model_is_the_nominal_one_at_the_prior_of_a_nominal_train(
     assert estimated_mass_factor(heavy)[0] == pytest.approx(1.3)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 def test_the_compiled_estimator_gives_the_python_bits():
     values, series = metro_run("plant.mass_factor=1.3", "plant.resistance_factor=1.0")
@@ -189,6 +190,7 @@ def test_off_a_controller_reports_the_departure_estimates_throughout():
     assert np.all(series["resistance_scale"] == 1.0)
 
 
+@pytest.mark.slow
 def test_on_the_linear_adrc_learns_the_resistance_and_its_observer_explains_less():
     """A 20 % heavier running resistance: with the estimate in its model, the linear
     ADRC's observer is left less unexplained acceleration (z2) to estimate."""

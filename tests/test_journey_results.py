@@ -92,6 +92,7 @@ def test_a_cut_journeys_stop_indices_are_none_not_the_distance_to_the_line_end(c
                                       if key not in STOP_INDICES}
 
 
+@pytest.mark.slow
 def test_summary_json_score_bag_json_and_indices_json_hold_the_same_rows(cut, tmp_path,
                                                                           monkeypatch, capsys):
     bag = cut[0]
