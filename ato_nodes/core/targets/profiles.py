@@ -526,7 +526,7 @@ class AtoCurve(Plan):
         share of the envelope's force gives against the resistance, whichever is lower
         (forward then backward pass)."""
         x = self.positions
-        line_resistance = np.array([self.line.additional_resistance(p, train_length) for p in x])
+        line_resistance = self.line.additional_resistances(x, train_length)
         on = ~self.line.in_neutral_sections(x - train.pantograph_offset, self.neutral_runout)
         self.cells = Cells(on, line_resistance,
                            np.flatnonzero(~on & np.concatenate(([True], on[:-1]))), train, share)
