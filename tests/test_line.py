@@ -3,9 +3,11 @@
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from ato_nodes.core.train.line import CURVE_CONSTANT, TUNNEL_CONSTANT, load_line
+from ato_nodes.core.train.line import (CURVE_CONSTANT, TUNNEL_CONSTANT, _belt_resistances,
+                                      load_line)
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
 from commands import invocation
@@ -55,6 +57,18 @@ def test_resistance_varies_linearly_while_straddling_a_change(tmp_path):
     assert values[0] == pytest.approx(10.0) and values[-1] == pytest.approx(-5.0)
     steps = [b - a for a, b in zip(values, values[1:], strict=False)]
     assert steps == pytest.approx([-3.75] * 4)  # (-5 - 10) / 100 m * 25 m
+
+
+@pytest.mark.parametrize("length", [0.0, 0.1, 100.0, 2000.0])
+def test_resistances_at_once_are_those_point_by_point_bit_for_bit(tmp_path, length):
+    """additional_resistances (compiled when numba is installed) gives each head exactly
+    what additional_resistance gives it: the same operations in the same order."""
+    line = load_line(write(tmp_path, GOOD))
+    heads = np.concatenate((np.arange(-50.0, 1100.0, 0.3), [400.0, 500.0, 600.0, 900.0]))
+    one_by_one = np.array([line.additional_resistance(head, length) for head in heads])
+    at_once = line.additional_resistances(heads, length)
+    assert at_once.tobytes() == one_by_one.tobytes()
+    assert _belt_resistances(line.tables, heads, length).tobytes() == one_by_one.tobytes()
 
 
 @pytest.mark.parametrize("change, problem", [

@@ -1,8 +1,11 @@
 """Target curves: seed 000's eq. 25 and tables."""
 
+import numpy as np
 import pytest
 
 from ato_nodes.core.config.context import RunContext
+from ato_nodes.core.config.scenario import load_scenario
+from ato_nodes.core.targets import profiles
 from ato_nodes.core.targets.profiles import StepProfile, TableProfile
 from ato_nodes.core.base.units import KMH
 from ato_nodes.core.config.schema import defaults
@@ -64,3 +67,26 @@ def test_bad_tables_are_rejected_with_a_reason(tmp_path, text, problem):
     table.write_text(text)
     with pytest.raises(ValueError, match=problem):
         TableProfile.from_csv(table)
+
+
+@pytest.mark.parametrize("scenario", ["seed004-metro-ato", "hsr-neutral-ato"])
+def test_the_feasibility_passes_compiled_or_not_agree_bit_for_bit(scenario):
+    """The ATO curve's forward and backward passes (compiled when numba is installed) give
+    what the same functions run as Python give, on a real line with its resistance."""
+    curve = RunContext(load_scenario(scenario)).plan
+    cells, train = curve.cells, curve.cells.train
+    x = curve.positions
+    results = []
+    for forward, backward in ((profiles.forward_pass, profiles.backward_pass),
+                              (profiles._forward_pass, profiles._backward_pass)):
+        squared = curve.caps ** 2
+        squared[0] = curve.start_speed ** 2
+        forward(squared, 0, x, cells.powered, cells.line_resistance, train.envelope,
+                train.davis_a, train.davis_b, train.davis_c, train.xi, cells.share,
+                curve.acceleration, curve.power_speed, curve.start_speed ** 2, True)
+        stopping = curve.stopping(x[-1] - x) ** 2
+        backward(squared, x, stopping, cells.line_resistance, train.envelope, train.davis_a,
+                 train.davis_b, train.davis_c, train.xi, cells.share, curve.deceleration)
+        results.append(squared.tobytes())
+    assert results[0] == results[1]
+    assert np.sqrt(np.frombuffer(results[0])).tobytes() == curve.feasible.tobytes()

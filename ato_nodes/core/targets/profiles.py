@@ -526,7 +526,7 @@ class AtoCurve(Plan):
         share of the envelope's force gives against the resistance, whichever is lower
         (forward then backward pass)."""
         x = self.positions
-        line_resistance = np.array([self.line.additional_resistance(p, train_length) for p in x])
+        line_resistance = self.line.additional_resistances(x, train_length)
         on = ~self.line.in_neutral_sections(x - train.pantograph_offset, self.neutral_runout)
         self.cells = Cells(on, line_resistance,
                            np.flatnonzero(~on & np.concatenate(([True], on[:-1]))), train, share)
@@ -534,13 +534,8 @@ class AtoCurve(Plan):
         squared[0] = self.start_speed ** 2
         self._forward_from(squared, 0, to_end=True)
         stopping = self.stopping(x[-1] - x) ** 2 if self.stop_jerk > 0.0 else squared
-        v2 = squared[-1] = 0.0
-        for i in range(len(x) - 2, -1, -1):
-            v = math.sqrt(v2)
-            rate = min(self.deceleration,
-                       train.xi * train.net_braking(v, share, line_resistance[i]))
-            v2 = min(v2 + 2.0 * max(rate, 0.0) * (x[i + 1] - x[i]), squared[i], stopping[i])
-            squared[i] = v2
+        backward_pass(squared, x, stopping, line_resistance, train.envelope, train.davis_a,
+                      train.davis_b, train.davis_c, train.xi, share, self.deceleration)
         return np.sqrt(squared)
 
     def _rounded(self, speeds: np.ndarray) -> np.ndarray:
@@ -679,6 +674,26 @@ def _forward_pass(squared, first, x, powered, line_resistance, envelope, davis_a
 
 
 forward_pass = compiled(_forward_pass) or _forward_pass
+
+
+def _backward_pass(squared, x, stopping, line_resistance, envelope, davis_a, davis_b, davis_c,
+                   xi, share, deceleration) -> None:
+    """The backward pass of AtoCurve._feasible, in place on squared speeds: 0 at the last
+    cell, each cell before it the lowest of its own value, `stopping` there and what the
+    lower of the planned deceleration and the share of the brake envelope helped by the
+    resistance (train.net_braking's terms) gives from the next. Compiled when numba is
+    installed (it steps through every cell of the line)."""
+    v2 = squared[len(x) - 1] = 0.0
+    for i in range(len(x) - 2, -1, -1):
+        v = math.sqrt(v2)
+        braking = basic_resistance(v, davis_a, davis_b, davis_c) + line_resistance[i] \
+            - share * force_limits(v, envelope)[0]
+        rate = min(deceleration, xi * braking)
+        v2 = min(v2 + 2.0 * max(rate, 0.0) * (x[i + 1] - x[i]), squared[i], stopping[i])
+        squared[i] = v2
+
+
+backward_pass = compiled(_backward_pass) or _backward_pass
 
 
 LATE_NOTICE = 0.05  # s an on-time curve may miss the planned time by without a notice

@@ -29,7 +29,7 @@ import yaml
 
 from ..base import yamlfile
 from ..base.errors import ScenarioError
-from ..base.kernels import jitable
+from ..base.kernels import compiled, jitable
 
 MAX_LENGTH = 2.0e6         # m: longer than any line; bounds what the ATO curve allocates
 CURVE_CONSTANT = 600.0     # A of w_r = A / R, N/kN m
@@ -86,6 +86,19 @@ class Line:
     def additional_resistance(self, head: float, train_length: float) -> float:
         """Gradient + curve + tunnel specific resistance of the mass belt, N/kN."""
         return belt_resistance(self.tables, head, train_length)
+
+    def additional_resistances(self, heads: np.ndarray, train_length: float) -> np.ndarray:
+        """additional_resistance at each of `heads` (m), N/kN: one compiled call for the
+        whole array when numba is installed (the ATO curve asks it at every cell)."""
+        heads = np.asarray(heads, dtype=float)
+        if belt_resistances is _belt_resistances:
+            return _belt_resistances(self.tables, heads, train_length)
+        return belt_resistances(self.arrays, heads, train_length)
+
+    @functools.cached_property
+    def arrays(self) -> LineTables:
+        """The sections as compiled code reads them (see line_arrays)."""
+        return line_arrays(self)
 
     @functools.cached_property
     def tables(self) -> LineTables:
@@ -222,6 +235,16 @@ def _belt_sum(tables: LineTables, head: float, train_length: float) -> float:
         first = end
     return total
 
+
+def _belt_resistances(tables: LineTables, heads: np.ndarray, train_length: float) -> np.ndarray:
+    """belt_resistance at each of `heads`, in order (the same operations per head)."""
+    resistances = np.empty(len(heads))
+    for i in range(len(heads)):
+        resistances[i] = belt_resistance(tables, heads[i], train_length)
+    return resistances
+
+
+belt_resistances = compiled(_belt_resistances) or _belt_resistances
 
 # ---------------------------------------------------------------- loading ----
 
