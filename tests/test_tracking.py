@@ -56,8 +56,7 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
                 blind_prediction = nominal_predict(blind, blind_state, speeds[-1], 0.0, train.xi,
                                                    ahead, u, True, 1.0)
                 future = PointMassTrain(train, PERIOD, 4, TrainState(speed=0.0))
-                future.state = replace(plant.state)
-                future.lag_state, future.delayed = plant.lag_state, plant.delayed.copy()
+                future.motion = plant.motion._replace(delayed=plant.motion.delayed.copy())
                 for _ in range(ahead):
                     future.step(u)
                 worst = max(worst, abs(predicted.speed - future.state.speed))

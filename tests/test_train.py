@@ -72,7 +72,7 @@ def test_plant_acceleration_uses_the_belt_resistance_of_the_line():
         train = PointMassTrain(params, 0.1, 1, TrainState(position=head, speed=10.0), track)
         expected = params.xi * (20.0 - params.resistance(10.0)
                                 - track.additional_resistance(head, params.length))
-        train.acting = 20.0
+        train.motion = train.motion._replace(acting=20.0)
         assert train.acceleration() == pytest.approx(expected)
     assert track.additional_resistance(550.0, 118.0) == pytest.approx(
         (10.0 * 68.0 - 5.0 * 50.0) / 118.0)

@@ -352,37 +352,6 @@ class PointMassTrain:
         m = self.motion
         return TrainState(m.position, m.speed, m.force, m.time)
 
-    @state.setter
-    def state(self, state: TrainState) -> None:
-        self.motion = self.motion._replace(time=state.time, position=state.position,
-                                           speed=state.speed, force=state.force)
-
-    @property
-    def acting(self) -> float:
-        return self.motion.acting
-
-    @acting.setter
-    def acting(self, command: float) -> None:
-        self.motion = self.motion._replace(acting=command)
-
-    @property
-    def lag_state(self) -> float:
-        """The lag's output before the envelope."""
-        return self.motion.lag
-
-    @lag_state.setter
-    def lag_state(self, lag: float) -> None:
-        self.motion = self.motion._replace(lag=lag)
-
-    @property
-    def delayed(self) -> np.ndarray:
-        """The commands inside the dead time, the oldest (acting next) first."""
-        return np.roll(self.motion.delayed, -self.motion.oldest)
-
-    @delayed.setter
-    def delayed(self, commands) -> None:
-        self.motion = self.motion._replace(delayed=np.array(commands, dtype=float), oldest=0)
-
     def line_resistance(self) -> float:
         """Additional (gradient, curve, tunnel) resistance of the belt now, N/kN."""
         return train_outputs(self.settings, self.motion)[3]
