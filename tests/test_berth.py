@@ -32,7 +32,7 @@ def test_the_profile_publishes_a_zero_target_once_the_train_stands_in_its_berth(
     # the stage's first steps, near the mark: no departure ramp holding them at 0
     values = prepare("seed004-metro-ato", ["profile.berth=0.1", "profile.departure_jerk=0"])
     stage = ProfileStage(NodeValues("profile", values))
-    mark = stage.berth_mark
+    mark = stage.settings.berth_mark
     stage.on_position(mark - 0.07)
     moving = stage.on_position(mark - 0.06)  # still moving into the berth: the plan's
     assert moving[0][0] > 0.0

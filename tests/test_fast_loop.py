@@ -72,8 +72,7 @@ def test_pruning_ends_the_compiled_run_where_the_python_run_ends(monkeypatch, fi
     compiled, python = RunningIndex(fitness), RunningIndex(fitness)
     steps = len(simulate(values, prune=(compiled, limit))["t"])
     assert steps == len(python_run(monkeypatch, values, (python, limit))["t"]) < 12000
-    assert np.array_equal([compiled.value, compiled.last_t, compiled.last_w],
-                          [python.value, python.last_t, python.last_w], equal_nan=True)
+    assert np.array_equal(compiled.state, python.state, equal_nan=True)
 
 
 def test_a_diverging_run_ends_at_the_same_step(monkeypatch):
@@ -108,7 +107,7 @@ def test_pruned_and_diverging_runs_end_at_the_same_step_in_chunks(monkeypatch):
     for first in (10**9, 7):
         running = RunningIndex("itae")
         steps = len(chunked_run(monkeypatch, values, first, (running, 5000.0))["t"])
-        ends.append((steps, running.value, running.last_t, running.last_w))
+        ends.append((steps, *running.state))
     assert ends[0] == ends[1] and ends[0][0] < 12000
     diverging = apply_overrides(load_scenario("seed000"), ["run.duration=300", "adrc.b0=0.001"])
     whole, chunked = (chunked_run(monkeypatch, diverging, first) for first in (10**9, 3))

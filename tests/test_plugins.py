@@ -138,4 +138,4 @@ def test_the_profile_sends_each_step_its_horizon_and_stairs_only_the_first_entry
     assert [len(horizon) for horizon in stage.on_position(100.0)] == [4, 4, 4]
     later = stage.on_position(100.0)[0]  # standing 100 m in: a stair one step above 0
     planned = stage.context.horizon(3, 100.0, 3)
-    assert later[0] == stage.approach_step < planned[0] and later[1:] == planned[1:]
+    assert later[0] == stage.settings.approach_step < planned[0] and later[1:] == planned[1:]

@@ -74,14 +74,6 @@ class ProfileStage:
                         if self.settings.position_indexed else time_horizons(self.context).copy())
         self.received = 0
 
-    @property
-    def approach_step(self) -> float:
-        return self.settings.approach_step
-
-    @property
-    def berth_mark(self) -> float:
-        return self.settings.berth_mark
-
     def on_position(self, position: float) -> list[list[float]]:
         """Position s_k of step k in; the horizons to publish now out, in step order
         (horizons.profile_step)."""

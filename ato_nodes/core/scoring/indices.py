@@ -116,14 +116,6 @@ class RunningIndex:
     def value(self) -> float:
         return self.state.value
 
-    @property
-    def last_t(self) -> float:
-        return self.state.last_t
-
-    @property
-    def last_w(self) -> float:
-        return self.state.last_w
-
     def add(self, t: float, error: float) -> float:
         self.state = running_step(self.kind, self.state, t, error)
         return self.value
