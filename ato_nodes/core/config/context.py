@@ -129,7 +129,7 @@ class RunContext:
         exact for time-indexed plans; for position-indexed plans along the planned
         trajectory ds/dt = v(s) from `position` (horizons.plan_horizon)."""
         plan, h = self.plan, self.period
-        if not plan.position_indexed:  # the papers' setting, every step of every run
+        if not plan.position_indexed:
             return [plan.speed((step + i) * h, position) for i in range(count + 1)]
         horizon = np.empty(count + 1)
         plan_horizon(self.profile_settings, getattr(plan, "journey", None),

@@ -40,8 +40,7 @@ from ..config.components import CONTROLLERS
 from ..config.context import RunContext
 from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
-from ..targets.horizons import (LOOKAHEAD, PROFILE_START, plan_speed_limit,
-                                profile_step)
+from ..targets.horizons import (LOOKAHEAD, PROFILE_START, profile_step)
 from ..train.line import Line, line_of
 from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
                            sensor_reading, train_outputs)
@@ -88,7 +87,7 @@ class ProfileStage:
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies at step k's position, m/s (inf without a line)."""
-        return float(plan_speed_limit(self.settings, self.journey, position))
+        return self.context.speed_limit(position)
 
 
 @functools.lru_cache(maxsize=4)
