@@ -2,16 +2,13 @@
 
     ros2 launch ato_nodes stack.launch.py scenario:=seed004-metro out:=bags/metro
 
-`scenario` is a shipped scenario's name or a scenario file; every node reads that file
-(its `/**` and own sections) and completes it as `scripts/run_stack.py` does (train
-preset, relative paths), and gets the values the scenario derives (the load weighing's
-reading, where a journey's last stop begins for its end:
-core/config/scenario.DERIVED_PARAMETERS) on top, so both give the same run. A scenario
-that builds on another or on a preset (`base:`, which ROS 2 parameter files do not know)
-is given to the nodes resolved, as run_stack.py gives every scenario: a file of the same
-name in a new temporary folder. `out` is the bag directory to create (default
-bags/<scenario>-launch). The run ends when the
-supervisor ends it: every node exits on its 'shutdown' and the launch ends with the last
+`scenario` is a shipped scenario's name or a scenario file; the nodes are given it
+resolved, as `scripts/run_stack.py` gives it (its base, `base:`, which ROS 2 parameter
+files do not know; the train preset; the values the scenario derives, the load weighing's
+reading and where a journey's last stop begins: core/config/scenario.DERIVED_PARAMETERS),
+a parameter file of the same name in a new temporary folder, so both give the same run.
+`out` is the bag directory to create (default bags/<scenario>-launch). The run ends when
+the supervisor ends it: every node exits on its 'shutdown' and the launch ends with the last
 of them (a node still running STOP_GRACE s after the supervisor, or one that fails, shuts
 the launch down, as run_stack.py does). The ROS domain is the environment's
 (ROS_DOMAIN_ID). Without a ROS install, `python scripts/run_stack.py --scenario NAME` is
@@ -30,10 +27,8 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from ato_nodes.core.base import yamlfile
-from ato_nodes.core.config.scenario import (DERIVED_PARAMETERS, prepare, resolve_scenario,
-                                            ros_parameter_file)
-from ato_nodes.core.config.schema import NODES, SPEC_BY_NAME
+from ato_nodes.core.config.scenario import prepare, resolve_scenario, ros_parameter_file
+from ato_nodes.core.config.schema import NODES
 from ato_nodes.launcher.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
 
@@ -43,18 +38,14 @@ def nodes(context):
     out = LaunchConfiguration("out").perform(context) or f"bags/{path.stem}-launch"
     report = LaunchConfiguration("report").perform(context)
     run_parameters = {"recorder.output": str(Path(out).resolve()), "supervisor.report": report}
-    values = prepare(str(path))  # the derived values, which a node cannot derive itself
-    if "base" in yamlfile.load(path, "scenario"):  # rcl refuses a file with a `base:`
-        resolved = Path(tempfile.mkdtemp(prefix="ato_nodes-launch-")) / path.name
-        resolved.write_text(yaml.safe_dump(ros_parameter_file(values), sort_keys=False))
-        path = resolved
-    derived = {name: values[name] for name in DERIVED_PARAMETERS}
+    # the scenario resolved (its base, its derived values, which a node cannot derive
+    # itself) as the parameter file run_stack.py writes: rcl knows no `base:`
+    resolved = Path(tempfile.mkdtemp(prefix="ato_nodes-launch-")) / path.name
+    resolved.write_text(yaml.safe_dump(ros_parameter_file(prepare(str(path))), sort_keys=False))
     launched = [Node(package="ato_nodes", executable=role, name=role, output="screen",
-                     parameters=[str(path), {
-                         **{name: value for name, value in run_parameters.items()
-                            if name.startswith(role)},
-                         **{name: value for name, value in derived.items()
-                            if role in SPEC_BY_NAME[name].nodes}}])
+                     parameters=[str(resolved), {name: value for name, value in
+                                                 run_parameters.items()
+                                                 if name.startswith(role)}])
                 for role in NODES]
     # A Shutdown as soon as the supervisor exits would SIGINT nodes that are already
     # exiting on its 'shutdown' (launch then reports them as died, exit code -2): the
