@@ -137,10 +137,17 @@ def start_nodes_directly(parameter_file: Path, bag: Path, report: Path | None,
         lock.release()
 
 
+def failed_nodes(codes: dict[str, int], errors: dict[str, str]) -> str:
+    """Each node that exited with a status other than 0: its status and its whole stderr
+    (an assertion's repr of every node's stderr is cut before the node that failed)."""
+    return "\n".join(f"{node} exited {code}:\n{errors[node]}"
+                     for node, code in codes.items() if code != 0)
+
+
 def test_nodes_started_from_a_shipped_scenario_file_run_its_train_on_its_line(tmp_path):
     scenario = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
     codes, errors, _ = start_nodes_directly(scenario, tmp_path / "direct", tmp_path / "r.json")
-    assert set(codes.values()) == {0}, errors
+    assert set(codes.values()) == {0}, failed_nodes(codes, errors)
     launched = tmp_path / "launched"
     assert Stack(load_scenario("seed004-metro"), launched, quiet=True, timeout=120).run().ok
     direct = read_parameters(tmp_path / "direct")
@@ -155,7 +162,7 @@ def test_nodes_without_a_launcher_write_the_runs_summary_and_print_its_indices(t
     scenario = ROOT / "msg_config" / "scenarios" / "seed004-metro.yaml"
     bag = tmp_path / "direct"
     codes, errors, printed = start_nodes_directly(scenario, bag, report=None)
-    assert set(codes.values()) == {0}, errors
+    assert set(codes.values()) == {0}, failed_nodes(codes, errors)
     summary = json.loads((bag / "summary.json").read_text(), parse_constant=refuse_constant)
     indices = score_series(read_series(bag), read_parameters(bag))
     assert summary["status"] == "completed" and summary["steps"] == 2000
@@ -173,7 +180,7 @@ def test_interrupted_nodes_without_a_launcher_say_so_in_the_runs_summary(tmp_pat
     codes, errors, _ = start_nodes_directly(
         scenario, bag, report=None, interrupt_when=lambda: any(bag.glob("*.mcap")) and sum(
             path.stat().st_size for path in bag.glob("*.mcap")) > 5000)
-    assert set(codes.values()) == {0}, errors
+    assert set(codes.values()) == {0}, failed_nodes(codes, errors)
     summary = json.loads((bag / "summary.json").read_text(), parse_constant=refuse_constant)
     assert summary["status"] == "interrupted" and 0 < summary["steps"] < 2000
     assert "indices" not in summary and (bag / "metadata.yaml").exists()
