@@ -20,7 +20,8 @@ from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.targets.timetable import load_timetable
 from ato_nodes.core.train.line import Section
 from ato_nodes.results.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journey,
-                                        run_timetable, worst_stations)
+                                        run_timetable, score_run, score_with_journey,
+                                        worst_stations)
 from ato_nodes.reports.report import write_report
 from ato_nodes.core.targets.restriction import NAME as RESTRICTION
 from ato_nodes.reports.report_journey import (NO_REPLANS, REPLANS, journey_figure, journey_reports,
@@ -201,3 +202,23 @@ def test_a_journey_bag_runs_again_from_its_kept_line_and_timetable_of_one_name(j
     values["line.file"] = str(tmp_path / "elsewhere" / "metro-line.yaml")
     series, differ = resimulate(Run(journey.path, journey.series, values, {}))
     assert differ == [] and len(series["t"]) == len(journey.series["t"])
+
+
+def test_a_study_scores_a_journey_that_ends_before_the_lines_last_station_at_its_last_stop(
+        tmp_path):
+    """The line's last station is kilometres on: a study's stop indices are the
+    timetable's last stop's, as score_bag's are."""
+    line = Path(__file__).resolve().parents[1] / "msg_config" / "lines" / "metro-line.yaml"
+    (tmp_path / "short.yaml").write_text(f"""line: {line}
+train: metro-b
+load: 1.3
+stops:
+  - {{station: Westgate (synthetic), departure: 0}}
+  - {{station: Market (synthetic), arrival: 131, departure: 156}}
+  - {{station: Riverside (synthetic), arrival: 281}}
+""")
+    values = apply_overrides(load_scenario("seed004-metro-line"), [
+        f"{TIMETABLE}={tmp_path / 'short.yaml'}"])
+    indices = score_with_journey(values)
+    assert indices["stopping_error"] == indices[WORST_STOP] < 0.1
+    assert indices["stopping_error"] == score_run(simulate(values), values)["stopping_error"]

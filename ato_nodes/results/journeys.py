@@ -79,9 +79,32 @@ def score_run(series: dict[str, np.ndarray], parameters: dict | None) -> dict:
     indices are its last stop's (last_stop_indices: NaN without a stop there); one that
     cannot be scored per station (its timetable nowhere, a series missing) has NaN stop
     indices and `journey` says why."""
+    return _scored(series, parameters)[0]
+
+
+def _scored(series: dict[str, np.ndarray], parameters: dict | None
+            ) -> tuple[dict, JourneyIndices | None]:
+    """score_run's indices and the journey they were read from (None: not a journey run,
+    or one that cannot be scored per station)."""
     indices = score_series(series, parameters)
     if not is_journey(parameters):
-        return indices
+        return indices, None
+    name = Path(parameters[TIMETABLE]).name
+    stop_indices = [key for key in STOP_INDICES if key in indices]
+    try:
+        timetable = run_timetable(parameters)
+        if timetable is None:
+            raise ScenarioError(f"the timetable {name} is neither kept in the bag nor on "
+                                "this machine")
+        journey = run_journey(series, parameters, timetable)
+    except ScenarioError as exc:
+        indices.update(dict.fromkeys(stop_indices, math.nan))
+        indices["journey"] = {"timetable": name, "error": str(exc)}
+        return indices, None
+    last_stop = last_stop_indices(journey, timetable.line.planned_run_time)
+    indices.update({key: last_stop[key] for key in stop_indices})
+    indices["journey"] = {"timetable": name, **journey_record(journey)}
+    return indices, journey
     name = Path(parameters[TIMETABLE]).name
     stop_indices = [key for key in STOP_INDICES if key in indices]
     try:
@@ -116,11 +139,9 @@ def worst_stations(indices: JourneyIndices) -> dict[str, float]:
 
 
 def score_with_journey(values: dict) -> dict:
-    """score_series of the run of `values` in-process, with worst_stations for a
+    """score_run's indices of the run of `values` in-process, with worst_stations for a
     journey run (a study's worker: the series stay in its process)."""
-    series = simulate(values)
-    indices = score_series(series, values)
-    timetable = run_timetable(values)
-    if timetable is not None:
-        indices.update(worst_stations(run_journey(series, values, timetable)))
+    indices, journey = _scored(simulate(values), values)
+    if journey is not None:
+        indices.update(worst_stations(journey))
     return indices
