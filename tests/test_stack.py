@@ -280,6 +280,19 @@ def test_a_node_rejects_a_bad_parameter_alone(tmp_path, ros_domain):
     assert "controller: error:" in result.stderr and "adrc.r0" in result.stderr
 
 
+def test_a_node_given_an_old_switch_in_its_parameter_file_names_the_mode(tmp_path, ros_domain):
+    """A raw ROS parameter file of an older version: the node's one line is a scenario's."""
+    old = tmp_path / "old.yaml"
+    old.write_text("/**:\n  ros__parameters:\n    ladrc.delay_aware: true\n")
+    result = subprocess.run([sys.executable, "-m", "ato_nodes.nodes.controller", "--ros-args",
+                             "--params-file", str(old)], capture_output=True, text=True,
+                            timeout=60, cwd=ROOT, env=node_environment(ros_domain.domain_id))
+    assert result.returncode == 2
+    assert result.stderr.strip() == (
+        f"controller: error: {old}: ladrc.delay_aware: true is an old switch of the linear "
+        "ADRC: give ladrc.prediction: speed")
+
+
 def test_a_separate_process_echoes_every_topic_at_the_configured_rate(tmp_path, ros_domain):
     bag = tmp_path / "watched"
     process = start_stack("--duration", "30", "--real-time", "--out", str(bag), domain=ros_domain)

@@ -29,7 +29,7 @@ from std_msgs.msg import String
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.faults import parse_fault
-from ato_nodes.core.config.scenario import complete, train_preset
+from ato_nodes.core.config.scenario import complete, parameter_spec, train_preset
 from ato_nodes.core.config.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.base.topics import Topic, topic_map
@@ -203,10 +203,9 @@ class AtoNode(Node):
         back, so `ros2 param get` shows what the node uses. rclpy's own use_sim_time is
         set to what the node needs and, like every other, fixed for the run."""
         overrides = self._parameter_overrides
-        unknown = sorted(name for name in overrides
-                         if name not in SPEC_BY_NAME and name not in RCLPY_PARAMETERS)
-        if unknown:
-            raise ScenarioError(f"unknown parameter {unknown[0]!r}")
+        where = ", ".join(str(path) for path in parameter_files()) or "--ros-args"
+        for name in sorted(set(overrides) - set(SPEC_BY_NAME) - set(RCLPY_PARAMETERS)):
+            parameter_spec(name, overrides[name].value, where)  # refused as a scenario's
         given = {spec.name: spec.check(overrides[spec.name].value, self.role)
                  for spec in for_node(self.role) if spec.name in overrides}
         if given.get("plant.train"):

@@ -46,7 +46,7 @@ def _unknown(name: str, where: str) -> ScenarioError:
     return ScenarioError(f"{where}: unknown parameter {name!r}{hint}")
 
 
-def _spec(name: str, value: Any, where: str) -> ParamSpec:
+def parameter_spec(name: str, value: Any, where: str) -> ParamSpec:
     """The spec of a parameter a file, --set or an override gives as `value`: a retired one
     (an old switch) is refused naming what to give instead, an unknown one naming the
     closest known."""
@@ -157,7 +157,7 @@ def _given_values(path: Path, document: dict) -> dict[str, Any]:
         if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
             raise ScenarioError(f"{path}: {node} needs a 'ros__parameters:' mapping")
         for name, value in _flatten(section["ros__parameters"]).items():
-            spec = _spec(name, value, str(path))
+            spec = parameter_spec(name, value, str(path))
             if node != "/**" and node not in spec.nodes:
                 raise ScenarioError(f"{path}: {name} belongs to {', '.join(spec.nodes)}, "
                                     f"not {node}")
@@ -242,7 +242,7 @@ def parse_override(text: str) -> tuple[str, Any]:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError:
         value = raw
-    spec = _spec(name, value, "--set")
+    spec = parameter_spec(name, value, "--set")
     if spec.value_type is str and value is not None and not isinstance(value, str):
         value = raw.strip()
     elif spec.value_type is float and isinstance(value, str):  # YAML 1.1 reads 1e-9 as text
@@ -277,7 +277,7 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
-            checked[name] = _spec(name, value, "override").check(value, "override")
+            checked[name] = parameter_spec(name, value, "override").check(value, "override")
         overrides, where = checked, ""
     else:
         overrides = dict(parse_override(text) for text in overrides)  # the last one wins
