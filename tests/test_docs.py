@@ -140,3 +140,18 @@ def test_every_link_of_the_manual_and_the_notebook_resolves():
                                        and anchor not in anchors(linked)):
                 broken.append(f"{page.relative_to(ROOT)}: {target}")
     assert not broken, "; ".join(broken)
+
+
+WORK_ITEM = re.compile(r"\bissues? #?\d+", re.I)  # the project's tracker, not its content
+
+
+def test_code_scenarios_and_manual_speak_of_the_project_not_of_its_tracker():
+    """What a user reads (code, scenario and preset comments, the manual) explains itself;
+    the history of its making lives in git and the notebook."""
+    files = [*MANUAL, *(path for folder in ("ato_nodes", "scripts", "benchmarks", "launch")
+                        for path in (ROOT / folder).rglob("*.py")),
+             *(ROOT / "msg_config").rglob("*.yaml")]
+    found = [f"{path.relative_to(ROOT)}:{number}" for path in files
+             for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+             if WORK_ITEM.search(line)]
+    assert not found, "names a tracker item: " + ", ".join(found)

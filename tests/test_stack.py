@@ -293,6 +293,27 @@ def test_a_node_given_an_old_switch_in_its_parameter_file_names_the_mode(tmp_pat
         "ADRC: give ladrc.prediction: speed")
 
 
+@pytest.mark.parametrize("content, line", [
+    (None, "builds on the preset 'ato' (base:), which a ROS parameter file cannot"),
+    ("a: [\n", "malformed YAML"),
+    ("", "cannot read parameter file")], ids=["based-scenario", "malformed", "missing"])
+def test_a_parameter_file_rcl_refuses_is_one_line_and_exit_2(content, line, tmp_path,
+                                                               ros_domain):
+    """rcl reads --params-file before any node exists: its refusal is the node's one line,
+    without rcl's own record of it or a traceback."""
+    given = ROOT / "msg_config" / "scenarios" / "seed004-metro-ato.yaml"
+    if content is not None:
+        given = tmp_path / "given.yaml"
+        if content:
+            given.write_text(content)
+    result = subprocess.run([sys.executable, "-m", "ato_nodes.nodes.plant", "--ros-args",
+                             "--params-file", str(given)], capture_output=True, text=True,
+                            timeout=60, cwd=ROOT, env=node_environment(ros_domain.domain_id))
+    assert result.returncode == 2
+    assert result.stderr.startswith("plant: error: ") and result.stderr.count("\n") == 1
+    assert line in result.stderr and str(given) in result.stderr
+
+
 def test_a_separate_process_echoes_every_topic_at_the_configured_rate(tmp_path, ros_domain):
     bag = tmp_path / "watched"
     process = start_stack("--duration", "30", "--real-time", "--out", str(bag), domain=ros_domain)

@@ -11,6 +11,7 @@ import os
 import resource
 import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable
@@ -25,8 +26,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy._rclpy_pybind11 import RCLError
 from std_msgs.msg import String
 
+from ato_nodes.core.base import yamlfile
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.faults import parse_fault
 from ato_nodes.core.config.scenario import complete, parameter_spec, train_preset
@@ -577,7 +580,7 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
     still arriving and closes its bag), then the node exits. Bad parameters end the
     process with one line on stderr and exit status 2.
     """
-    rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    _init_rclpy(getattr(factory, "role", "node"))
     holder: list[AtoNode] = []
     pending: list[int] = []
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -614,6 +617,47 @@ def run_node(factory: Callable[[], AtoNode]) -> None:
     finally:
         status = _tear_down(node, status)
     sys.exit(status)
+
+
+def _init_rclpy(role: str) -> None:
+    """rclpy.init, which reads the --params-file before any node exists. A command line
+    rcl refuses ends the process with exit status 2 and one line on stderr (rcl's own
+    ERROR record of it, written to the same descriptor, is dropped)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as said:
+        os.dup2(said.fileno(), 2)
+        try:
+            rclpy.init(args=sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+        except RCLError as exc:
+            refused = exc
+        else:
+            refused = None
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        if refused is not None:
+            print(f"{role}: error: {_unreadable_arguments(refused)}", file=sys.stderr)
+            sys.exit(2)
+        said.seek(0)
+        sys.stderr.buffer.write(said.read())  # anything else rcl said while starting
+        sys.stderr.flush()
+
+
+def _unreadable_arguments(exc: RCLError) -> str:
+    """Why rcl refused the command line, in one line: a scenario that builds on a preset
+    (`base:`, which only this project's loader reads) named as such, else rcl's own
+    reason without its source locations."""
+    for path in parameter_files():
+        try:
+            document = yamlfile.load(path, "parameter file")
+        except ScenarioError as refused:
+            return str(refused)
+        if isinstance(document, dict) and "base" in document:
+            return (f"{path} builds on the preset {document['base']!r} (base:), which a ROS "
+                    "parameter file cannot: start the nodes with run_stack.py or the launch "
+                    "file, or give them a bag's params.yaml")
+    return str(exc).split(", at ")[0].removeprefix("failed to initialize rcl: ")
 
 
 def _tear_down(node: AtoNode | None, status: int) -> int:
