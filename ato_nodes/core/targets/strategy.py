@@ -448,8 +448,7 @@ def _drive(problem: Problem, curve: np.ndarray, cruise: np.ndarray, coasting: np
         positions = np.append(track.positions[:stages + 1], track.positions[stages])
         speeds, forces = np.append(speeds[:stages + 1], 0.0), np.append(forces[:stages], 0.0)
         kinds = kinds[:stages + 1]
-    chosen = [(KINDS[kind], force) for kind, force in zip(kinds.tolist(), forces.tolist(),
-                                                           strict=False)]
+    chosen = list(zip(map(KINDS.__getitem__, kinds.tolist()), forces.tolist(), strict=True))
     return Strategy(positions, speeds, forces, KIND_MODES[kinds], chosen,
                     float(energy) / 3600.0, float(elapsed), lam)
 
