@@ -423,3 +423,13 @@ def test_the_compiled_strategy_runs_are_the_python_ones_bit_for_bit(monkeypatch)
     assert compiled_plans.keys() == python_plans.keys()
     for key, plan in compiled_plans.items():
         assert plan == python_plans[key], key
+
+
+def test_a_plan_that_stops_short_replays_as_far_as_it_has_forces_only():
+    test_line = line(body="neutral_sections:\n  - {start: 9000, end: 9300}\n")
+    problem = strategy.Problem(strategy.Track.of(test_line, CRH5, 100.0), CRH5, 0.9)
+    fastest = strategy.flat_out(problem)
+    assert np.array_equal(strategy.replay(problem, fastest).speeds, fastest.speeds)
+    short = dataclasses.replace(fastest, forces=fastest.forces[:3])
+    with pytest.raises(ValueError, match="^the replayed plan stops short"):
+        strategy.replay(problem, short)

@@ -456,7 +456,7 @@ def _drive(problem: Problem, curve: np.ndarray, cruise: np.ndarray, coasting: np
 def _driven(physics: Physics, curve, cruise, coasting, planned, square):
     """(speeds at the boundaries, forces and kinds per stage, energy kJ, time s, stages
     driven) of a run from standstill: each stage's control chosen at the actual speed by
-    the switching strategy (`switched`), or the `planned` forces (if any) replayed. A train
+    the switching strategy (`_switched`), or the `planned` forces (if any) replayed. A train
     that stops short ends after the stages driven, coasting to a stand in the next, with
     an infinite time. Compiled when numba is installed."""
     stages = len(physics.cap)
