@@ -10,7 +10,9 @@ from ato_nodes.core.control.adrc import (PlanForces, next_force, on_plan_side, p
                                          planned_force)
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.scoring.operation import SWITCH_THRESHOLD, _switch_count
+from ato_nodes.core.base import kernels
 from ato_nodes.core.targets import strategy
+from ato_nodes.core.train import line as line_module
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.train.line import parse_line
@@ -368,3 +370,66 @@ def test_replan_drives_the_weighed_train_and_needs_switching_points(tmp_path):
     path.write_text("\n".join(row for row in text if not row.startswith("# switching")) + "\n")
     with pytest.raises(ScenarioError, match="switching points"):
         RunContext(apply_overrides(nominal, ["train.mass_reading=1.2"])).plan  # noqa: B018
+
+
+def python_only(monkeypatch):
+    """The strategy's compiled loops, and the line's, replaced by their Python sources."""
+    for name in ("driven", "braking_speeds", "track_columns"):
+        monkeypatch.setattr(strategy, name, getattr(strategy, f"_{name}"))
+    monkeypatch.setattr(line_module, "belt_resistances", line_module._belt_resistances)
+
+
+def columns(plan) -> list[bytes]:
+    """A plan's (Strategy's or StrategyFile's) arrays, bit for bit."""
+    return [np.asarray(column).tobytes() for column in (
+        plan.positions, plan.speeds, plan.modes, plan.forces)]
+
+
+def shipped_strategy_plans(scenarios: dict) -> dict:
+    """For each of `scenarios` (name: values of a shipped scenario with a strategy file):
+    its line's track (caps, powered stages, resistances), braking curve, flat-out, MARECO
+    and replayed runs, and its file driven again for a heavier and a much heavier train
+    (past the file's share)."""
+    plans = {}
+    for name, values in scenarios.items():
+        plan = strategy.read_strategy(values["profile.strategy.file"])
+        test_line = line_module.load_line(values["line.file"])
+        problem, planning = strategy.problems(test_line, values, 100.0, True, 0.85)
+        track, fastest = problem.track, strategy.flat_out(planning)
+        plans[name, "track"] = [track.line_resistance.tobytes(), track.cap.tobytes(),
+                                track.powered.tobytes(),
+                                strategy.SwitchingStrategy(problem).curve.tobytes()]
+        plans[name, "flat out"] = columns(fastest)
+        plans[name, "mareco"] = columns(strategy.mareco(problem, 1.05 * fastest.time))
+        plans[name, "replayed"] = columns(strategy.replay(problem, fastest))
+        if "switching" in plan.header:
+            for factor, max_share in ((1.2, values["profile.strategy.max_share"]), (1.6, 1.0)):
+                heavy = TrainParameters.from_values(
+                    apply_overrides(values, [f"plant.mass_factor={factor}"]))
+                plans[name, factor] = columns(strategy.for_train(
+                    plan, test_line, heavy, values["plant.efficiency"], max_share))
+    return plans
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="without numba every run is Python")
+def test_the_compiled_strategy_runs_are_the_python_ones_bit_for_bit(monkeypatch):
+    scenarios = {name: load_scenario(name) for name in ("seed002-hsr", "seed002-hsr-ato")}
+    assert {values["profile.kind"] for values in scenarios.values()} == {"strategy"}
+    compiled_plans = shipped_strategy_plans(scenarios)
+    python_only(monkeypatch)
+    python_plans = shipped_strategy_plans(scenarios)
+    assert strategy.driven is strategy._driven
+    assert any(len(key) == 2 and isinstance(key[1], float) for key in python_plans)
+    assert compiled_plans.keys() == python_plans.keys()
+    for key, plan in compiled_plans.items():
+        assert plan == python_plans[key], key
+
+
+def test_a_plan_that_stops_short_replays_as_far_as_it_has_forces_only():
+    test_line = line(body="neutral_sections:\n  - {start: 9000, end: 9300}\n")
+    problem = strategy.Problem(strategy.Track.of(test_line, CRH5, 100.0), CRH5, 0.9)
+    fastest = strategy.flat_out(problem)
+    assert np.array_equal(strategy.replay(problem, fastest).speeds, fastest.speeds)
+    short = dataclasses.replace(fastest, forces=fastest.forces[:3])
+    with pytest.raises(ValueError, match="^the replayed plan stops short"):
+        strategy.replay(problem, short)

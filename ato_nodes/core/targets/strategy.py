@@ -30,15 +30,16 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import NamedTuple
 
 import numpy as np
 
 from ..base import yamlfile
+from ..base.kernels import compiled, jitable
 from ..base.units import KMH
 from ..optimizers import optimize
-from ..train.line import MAX_LENGTH, Line
-from ..train.plant import TrainParameters
+from ..train.line import MAX_LENGTH, Line, in_neutral_section, speed_limit
+from ..train.plant import Envelope, TrainParameters
 
 MARGIN = 7.0 * KMH  # seed 002's speed protection: below the limit by this
 # (kind, fraction): traction and braking as fractions of the envelope at the speed
@@ -65,14 +66,11 @@ class Track:
         stages = max(1, round(line.stop_position / ds))
         ds = line.stop_position / stages
         starts = np.arange(stages) * ds
-        resistance, cap, powered = [], [], []
-        for s in starts:
-            resistance.append(line.additional_resistance(s + ds / 2, train.length))
-            belt = [max(0.0, x) for x in (s - train.length, s, s + ds / 2, s + ds)]
-            cap.append(min(line.speed_limit(min(x, line.length)) for x in belt) - margin)
-            pantograph = [x - train.pantograph_offset for x in (s, s + ds / 2, s + ds)]
-            powered.append(not any(line.in_neutral_section(x) for x in pantograph))
-        return cls(starts, ds, np.array(resistance), np.array(cap), np.array(powered))
+        tables = line.tables if track_columns is _track_columns else line.arrays
+        cap, powered = track_columns(tables, starts, ds, train.length,
+                                     train.pantograph_offset, line.length, margin)
+        return cls(starts, ds, line.additional_resistances(starts + ds / 2, train.length),
+                   cap, powered)
 
 
     @property
@@ -126,7 +124,9 @@ class Problem:
         self.track, self.train, self.efficiency = track, train, efficiency
         self.share = share
         self.xi = train.xi
-        self.weight = train.mass * train.gravity  # kN
+        self.physics = Physics(track.ds, track.line_resistance, track.cap, track.powered,
+                               train.xi, train.davis_a, train.davis_b, train.davis_c,
+                               train.envelope, share, efficiency)
 
     def forces(self, stage: int, v: np.ndarray) -> np.ndarray:
         """(controls x speeds) specific force of every control at speeds v, N/kN; NaN
@@ -150,31 +150,96 @@ class Problem:
         return np.array(rows)
 
     def limits(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p = self.train
-        speed = np.maximum(np.abs(v), 1e-6)
-        traction = np.minimum(p.max_traction_force, p.max_traction_power / speed)
-        brake = np.minimum(p.max_brake_force, p.max_brake_power / speed)
-        if self.share != 1.0:
-            traction, brake = self.share * traction, self.share * brake
-        return -brake * 1000.0 / self.weight, traction * 1000.0 / self.weight
+        return _limits(v, self.physics)
 
     def resistance(self, v: np.ndarray) -> np.ndarray:
-        p = self.train
-        return p.davis_a + p.davis_b * v + p.davis_c * v * v
+        return _resistance(v, self.physics)
 
     def energy(self, force):
         """Energy drawn over one stage under `force` (N/kN), kJ."""
-        return np.maximum(force, 0.0) * self.weight / 1000.0 * self.track.ds / self.efficiency
+        return _energy(force, self.physics)
 
     def step(self, stage: int, v: np.ndarray, force: np.ndarray) -> np.ndarray:
-        """Speed at the end of the stage from v under force (Heun on v^2/2; the
-        resistance at the predicted end speed too). 0 where the train stops short."""
-        ds, extra = self.track.ds, self.track.line_resistance[stage]
-        energy = 0.5 * v * v
-        first = self.xi * (force - self.resistance(v) - extra)
-        predicted = np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * first)))
-        second = self.xi * (force - self.resistance(predicted) - extra)
-        return np.sqrt(np.maximum(0.0, 2.0 * (energy + ds * 0.5 * (first + second))))
+        """Speed at the end of the stage from v under force (see `_step`)."""
+        return _step(self.physics, stage, v, force)
+
+
+class Physics(NamedTuple):
+    """A Problem as compiled code reads it (one tuple: compiled code pays for every array
+    it hands to a function)."""
+
+    ds: float                    # m, the stage length
+    line_resistance: np.ndarray  # N/kN per stage
+    cap: np.ndarray              # m/s per stage
+    powered: np.ndarray          # bool per stage
+    xi: float
+    davis_a: float
+    davis_b: float
+    davis_c: float
+    envelope: Envelope
+    share: float                 # of the envelopes the plan uses
+    efficiency: float
+
+
+# The formulas below take a speed or an array of speeds (the dynamic programme's grid);
+# numpy's maximum and minimum, so that both are one source.
+@jitable
+def _limits(v, physics: Physics):
+    """(brake, traction): the share of the envelopes at v as specific forces, N/kN."""
+    envelope = physics.envelope
+    speed = np.maximum(np.abs(v), 1e-6)
+    traction = np.minimum(envelope.max_traction_force, envelope.max_traction_power / speed)
+    brake = np.minimum(envelope.max_brake_force, envelope.max_brake_power / speed)
+    if physics.share != 1.0:
+        traction, brake = physics.share * traction, physics.share * brake
+    return -brake * 1000.0 / envelope.weight, traction * 1000.0 / envelope.weight
+
+
+@jitable
+def _resistance(v, physics: Physics):
+    """The basic resistance w0 at v (>= 0), N/kN."""
+    return physics.davis_a + physics.davis_b * v + physics.davis_c * v * v
+
+
+@jitable
+def _energy(force, physics: Physics):
+    """Energy drawn over one stage under `force` (N/kN), kJ."""
+    return (np.maximum(force, 0.0) * physics.envelope.weight / 1000.0 * physics.ds
+            / physics.efficiency)
+
+
+@jitable
+def _step(physics: Physics, stage: int, v, force):
+    """Speed at the end of the stage from v under force (Heun on v^2/2; the resistance at
+    the predicted end speed too). 0 where the train stops short."""
+    ds, extra = physics.ds, physics.line_resistance[stage]
+    start = 0.5 * v * v
+    first = physics.xi * (force - _resistance(v, physics) - extra)
+    predicted = np.sqrt(np.maximum(0.0, 2.0 * (start + ds * first)))
+    second = physics.xi * (force - _resistance(predicted, physics) - extra)
+    return np.sqrt(np.maximum(0.0, 2.0 * (start + ds * 0.5 * (first + second))))
+
+
+def _track_columns(tables, starts, ds, train_length, pantograph_offset, line_length, margin):
+    """(cap, powered) of the stages from `starts` (Track.of): the lowest line limit at the
+    belt's tail, the stage's start, middle and end, minus `margin`; whether the pantograph
+    is outside every neutral section at the stage's start, middle and end."""
+    cap = np.empty(len(starts))
+    powered = np.empty(len(starts), dtype=np.bool_)
+    for i in range(len(starts)):
+        s = starts[i]
+        lowest = math.inf
+        for x in (s - train_length, s, s + ds / 2, s + ds):
+            lowest = min(lowest, speed_limit(tables, min(max(0.0, x), line_length)))
+        cap[i] = lowest - margin
+        powered[i] = True
+        for x in (s, s + ds / 2, s + ds):
+            if in_neutral_section(tables, x - pantograph_offset):
+                powered[i] = False
+    return cap, powered
+
+
+track_columns = compiled(_track_columns) or _track_columns
 
 
 def _stage_costs(problem: Problem, stage: int, grid: np.ndarray):
@@ -281,22 +346,29 @@ WEIGHTS = {"energy": 1.0, "time": 1.0, "comfort": 0.2, "stop": 1.0, "protection"
 def braking_curve(problem: Problem, service: float = 1.0) -> np.ndarray:
     """Highest speed at each stage boundary from which braking at `service` x the brake
     envelope keeps under every cap ahead and stops at the mark (backwards in distance)."""
-    track = problem.track
-    stages = len(track.positions)
+    return braking_speeds(problem.physics, service)
+
+
+def _braking_speeds(physics: Physics, service: float) -> np.ndarray:
+    """braking_curve over the problem's tuple (compiled when numba is installed)."""
+    stages = len(physics.cap)
     curve = np.zeros(stages + 1)
     for stage in range(stages - 1, -1, -1):
-        after = min(curve[stage + 1], track.cap[stage])
+        after = min(curve[stage + 1], physics.cap[stage])
         # the weakest deceleration over the stage: the brake envelope at its start speed
         # (it falls with speed), the resistance at its end speed (it rises), so the
         # train can follow the curve
         start = after
         for _ in range(3):
-            brake, _ = problem.limits(np.array([start]))
-            deceleration = problem.xi * (-service * float(brake[0]) + float(
-                problem.resistance(np.array([after]))[0]) + track.line_resistance[stage])
-            start = math.sqrt(after * after + 2.0 * track.ds * max(deceleration, 1e-6))
-        curve[stage] = min(track.cap[stage], start)
+            brake = _limits(start, physics)[0]
+            deceleration = physics.xi * (-service * brake + _resistance(after, physics)
+                                         + physics.line_resistance[stage])
+            start = math.sqrt(after * after + 2.0 * physics.ds * max(deceleration, 1e-6))
+        curve[stage] = min(physics.cap[stage], start)
     return curve
+
+
+braking_speeds = compiled(_braking_speeds) or _braking_speeds
 
 
 def segments(track: Track) -> list[tuple[int, int]]:
@@ -337,78 +409,124 @@ class SwitchingStrategy:
         return lower, np.ones(self.dimension)
 
     def run(self, x: np.ndarray) -> Strategy:
-        problem, track = self.problem, self.problem.track
-        controls = {}
-        for k, (first, last) in enumerate(self.segments):
-            cruise = x[2 * k] * float(track.cap[first:last].max())
-            coast_from = first + x[2 * k + 1] * (last - first)
-            for stage in range(first, last):
-                controls[stage] = (cruise, stage >= coast_from)
-
-        def decide(stage: int, v: float) -> tuple[str, float, float]:
-            cruise, coasting = controls[stage]
-            brake, traction = (float(a[0]) for a in problem.limits(np.array([v])))
-            hold = float(problem.resistance(np.array([v]))[0]) + track.line_resistance[stage]
-            limit = min(self.curve[stage + 1], track.cap[stage])
-            if coasting:
-                kind, force = "coast", 0.0
-            elif v < min(cruise, limit):
-                kind, force = "traction", traction
-            else:
-                kind, force = "cruise", min(max(hold, brake), traction)
-            if not track.powered[stage] and force > 0:
-                kind, force = "coast", 0.0
-            following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-            if kind == "cruise" and brake <= hold <= traction:
-                following = v
-            if following > limit:  # the braking curve or a cap: brake down to it
-                kind = "brake"
-                force = max(brake, _force_for(problem, stage, v, limit))
-                following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-                if following > limit:  # correct by what the stage really gave
-                    force = max(brake, force - (following ** 2 - limit ** 2)
-                                / (2.0 * track.ds * problem.xi))
-                    following = float(problem.step(stage, np.array([v]), np.array([force]))[0])
-            return kind, force, following
-
-        result = _drive(problem, decide)
+        cruise, coasting = self.controls(x)
+        result = _drive(self.problem, self.curve, cruise, coasting, NO_PLAN)
         result.switching = np.array(x, dtype=float)
         return result
 
+    def controls(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per stage: the cruise speed (m/s) and whether it is past the coasting point."""
+        cap = self.problem.track.cap
+        cruise, coasting = np.empty(len(cap)), np.zeros(len(cap), dtype=bool)
+        for k, (first, last) in enumerate(self.segments):
+            cruise[first:last] = x[2 * k] * float(cap[first:last].max())
+            coasting[first:last] = np.arange(first, last) >= first + x[2 * k + 1] * (last - first)
+        return cruise, coasting
 
-def _drive(problem: Problem, decide: Callable[[int, float], tuple[str, float, float]],
-           lam: float = math.nan) -> Strategy:
-    """A run from standstill, stage by stage: decide(stage, v) -> (kind of control,
-    force N/kN, end speed). A train that stops short of the mark ends where that stage
-    begins, standing, with an infinite running time."""
+
+# The kinds of control a run's stage takes (the codes compiled code returns)
+KINDS = ("traction", "cruise", "coast", "brake")
+TRACTION, CRUISING, COASTING, BRAKING = range(len(KINDS))
+KIND_MODES = np.array([MODE[kind] for kind in KINDS])
+NO_PLAN = np.zeros(0)  # _drive's planned forces when the switching strategy decides
+# The exponent of the brake correction's squares, handed to compiled code at run time: in
+# Python x ** 2 is libm's pow, which compiled code turns into x * x when it knows the
+# exponent (the two differ in the last bit for about one x in a thousand).
+SQUARE = 2.0
+
+
+def _drive(problem: Problem, curve: np.ndarray, cruise: np.ndarray, coasting: np.ndarray,
+           planned: np.ndarray, lam: float = math.nan) -> Strategy:
+    """A run from standstill, stage by stage (`driven`): the switching strategy's controls,
+    or the `planned` forces replayed. A train that stops short of the mark ends where
+    that stage begins, standing, with an infinite running time."""
     track = problem.track
-    speeds, forces, chosen = [0.0], [], []
+    speeds, forces, kinds, energy, elapsed, stages = driven(
+        problem.physics, curve, cruise, coasting, planned, SQUARE)
+    positions = track.boundaries
+    if stages < len(track.positions):  # stopped short: coasting to a stand at the stage
+        positions = np.append(track.positions[:stages + 1], track.positions[stages])
+        speeds, forces = np.append(speeds[:stages + 1], 0.0), np.append(forces[:stages], 0.0)
+        kinds = kinds[:stages + 1]
+    chosen = list(zip(map(KINDS.__getitem__, kinds.tolist()), forces.tolist(), strict=True))
+    return Strategy(positions, speeds, forces, KIND_MODES[kinds], chosen,
+                    float(energy) / 3600.0, float(elapsed), lam)
+
+
+def _driven(physics: Physics, curve, cruise, coasting, planned, square):
+    """(speeds at the boundaries, forces and kinds per stage, energy kJ, time s, stages
+    driven) of a run from standstill: each stage's control chosen at the actual speed by
+    the switching strategy (`_switched`), or the `planned` forces (if any) replayed. A train
+    that stops short ends after the stages driven, coasting to a stand in the next, with
+    an infinite time. Compiled when numba is installed."""
+    stages = len(physics.cap)
+    speeds, forces = np.zeros(stages + 1), np.zeros(stages)
+    kinds = np.full(stages, COASTING)
     energy = elapsed = 0.0
-    for stage in range(len(track.positions)):
-        v = speeds[-1]
-        kind, force, following = decide(stage, v)
-        if following <= 1e-9 and stage < len(track.positions) - 1:
-            positions = np.append(track.positions[:stage + 1], track.positions[stage])
-            chosen.append(("coast", 0.0))
-            return Strategy(positions, np.array(speeds + [0.0]), np.array(forces + [0.0]),
-                            np.array([MODE[k] for k, _ in chosen]), chosen,
-                            energy / 3600.0, math.inf, lam)
-        elapsed += track.ds / max(0.5 * (v + following), 1e-6)
-        energy += float(problem.energy(force))
-        speeds.append(following)
-        forces.append(force)
-        chosen.append((kind, force))
-    return Strategy(track.boundaries, np.array(speeds), np.array(forces),
-                    np.array([MODE[k] for k, _ in chosen]), chosen, energy / 3600.0,
-                    elapsed, lam)
+    for stage in range(stages):
+        v = speeds[stage]
+        if len(planned):
+            if stage >= len(planned):
+                raise ValueError("the replayed plan stops short of where its run goes on")
+            kind, force, following = _replayed(physics, stage, v, planned[stage])
+        else:
+            kind, force, following = _switched(physics, curve, stage, v, cruise[stage],
+                                               coasting[stage], square)
+        if following <= 1e-9 and stage < stages - 1:
+            return speeds, forces, kinds, energy, math.inf, stage
+        elapsed += physics.ds / max(0.5 * (v + following), 1e-6)
+        energy += _energy(force, physics)
+        speeds[stage + 1], forces[stage], kinds[stage] = following, force, kind
+    return speeds, forces, kinds, energy, elapsed, stages
 
 
-def _force_for(problem: Problem, stage: int, v: float, target: float) -> float:
+@jitable
+def _switched(physics: Physics, curve, stage: int, v: float, cruise: float, coasting: bool,
+              square: float):
+    """(kind, force N/kN, end speed) of SwitchingStrategy's control at speed v."""
+    brake, traction = _limits(v, physics)
+    hold = _resistance(v, physics) + physics.line_resistance[stage]
+    limit = min(curve[stage + 1], physics.cap[stage])
+    if coasting:
+        kind, force = COASTING, 0.0
+    elif v < min(cruise, limit):
+        kind, force = TRACTION, traction
+    else:
+        kind, force = CRUISING, min(max(hold, brake), traction)
+    if not physics.powered[stage] and force > 0:
+        kind, force = COASTING, 0.0
+    following = _step(physics, stage, v, force)
+    if kind == CRUISING and brake <= hold <= traction:
+        following = v
+    if following > limit:  # the braking curve or a cap: brake down to it
+        kind = BRAKING
+        force = max(brake, _force_for(physics, stage, v, limit))
+        following = _step(physics, stage, v, force)
+        if following > limit:  # correct by what the stage really gave
+            force = max(brake, force - (following ** square - limit ** square)
+                        / (2.0 * physics.ds * physics.xi))
+            following = _step(physics, stage, v, force)
+    return kind, force, following
+
+
+@jitable
+def _replayed(physics: Physics, stage: int, v: float, force: float):
+    """(kind, force N/kN, end speed) of a planned force, traction cut where unpowered."""
+    if not physics.powered[stage] and force > 0:
+        force = 0.0
+    kind = TRACTION if force > 0 else BRAKING if force < 0 else COASTING
+    return kind, force, _step(physics, stage, v, force)
+
+
+@jitable
+def _force_for(physics: Physics, stage: int, v: float, target: float) -> float:
     """The specific force that takes speed v to `target` over the stage (Euler)."""
-    track = problem.track
-    resistance = float(problem.resistance(np.array([0.5 * (v + target)]))[0])
-    return ((target * target - v * v) / (2.0 * track.ds) / problem.xi + resistance
-            + track.line_resistance[stage])
+    resistance = _resistance(0.5 * (v + target), physics)
+    return ((target * target - v * v) / (2.0 * physics.ds) / physics.xi + resistance
+            + physics.line_resistance[stage])
+
+
+driven = compiled(_driven) or _driven
 
 
 def indices(result: Strategy, planned_time: float, track: Track) -> dict:
@@ -589,17 +707,10 @@ def mareco(problem, planned: float) -> Strategy:
 
 def replay(problem: Problem, planned_result: Strategy) -> Strategy:
     """A plan made without neutral sections, driven on the line: each stage's force,
-    traction cut where unpowered."""
-    track = problem.track
-
-    def decide(stage: int, v: float) -> tuple[str, float, float]:
-        force = float(planned_result.forces[stage])
-        if not track.powered[stage] and force > 0:
-            force = 0.0
-        kind = "traction" if force > 0 else "brake" if force < 0 else "coast"
-        return kind, force, float(problem.step(stage, np.array([v]), np.array([force]))[0])
-
-    return _drive(problem, decide, planned_result.lam)
+    traction cut where unpowered (ValueError where the plan, stopped short, has no force)."""
+    stages = len(problem.track.positions)
+    return _drive(problem, NO_PLAN, NO_PLAN, np.zeros(stages, dtype=bool),
+                  np.asarray(planned_result.forces, dtype=float), planned_result.lam)
 
 
 def problems(line: Line, values: dict, ds: float, ignore_neutral: bool = False,
