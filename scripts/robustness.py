@@ -32,7 +32,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies.backend import Backend, ClusterLost, Progress, check_cluster
 from ato_nodes.studies.robustness import COLUMNS, FACTORS, INDICES, run_sample, summarise
 from ato_nodes.studies.runner import Variant, check_counts, prepare_variants
-from ato_nodes.studies.samples import SampleStudy, write_json_with_rows
+from ato_nodes.studies.samples import SampleFailed, SampleStudy, write_json_with_rows
 
 
 def span(text: str, name: str) -> tuple[float, float]:
@@ -95,29 +95,38 @@ def main() -> None:
     base, ranges = checked(args)
     settings = {"scenario": args.scenario, "set": args.set, "ranges": ranges,
                 "seed": args.seed, "samples": args.samples}
+    study = None
     try:
         study = SampleStudy(args.out, settings, base, COLUMNS, args.samples, args.resume)
-    except ScenarioError as exc:
-        _cli.fail(str(exc))
-    try:
         run_missing(study, base, ranges, args)
+    except ScenarioError as exc:  # refused before anything was written
+        _cli.fail(str(exc))
     except KeyboardInterrupt:
-        print(f"interrupted; every finished sample is in {study.file.path}; continue with "
-              "--resume", file=sys.stderr)
+        print(f"interrupted{kept(study)}", file=sys.stderr)
         sys.exit(130)
-    except (ClusterLost, ScenarioError) as exc:
-        _cli.fail(f"{exc}{' mid-study' if isinstance(exc, ClusterLost) else ''}; every "
-                  f"finished sample is in {study.file.path}; continue with --resume", 1)
+    except (ClusterLost, SampleFailed) as exc:
+        _cli.fail(f"{exc}{' mid-study' if isinstance(exc, ClusterLost) else ''}{kept(study)}", 1)
     finally:
-        study.close()
+        if study is not None:
+            study.close()
     report(study, settings, args)
 
 
+def kept(study: SampleStudy | None) -> str:
+    """What a stopped study says of its samples: where the finished ones are, if it had
+    begun (else nothing was written)."""
+    if study is None or not study.started:
+        return ""
+    return f"; every finished sample is in {study.file.path}; continue with --resume"
+
+
 def run_missing(study: SampleStudy, base: dict, ranges: dict, args: argparse.Namespace) -> None:
-    """The samples the study lacks, each row appended as it finishes."""
-    progress = Progress(args.samples, len(study.file.done), "samples")
-    tasks = ((number, (base, ranges, args.seed, number)) for number in study.missing())
+    """The samples the study lacks, each row appended as it finishes (the cluster is
+    opened, and refused, before the study's directory is written)."""
     with Backend(args.workers, args.cluster) as backend:
+        study.begin()
+        progress = Progress(args.samples, len(study.file.done), "samples")
+        tasks = ((number, (base, ranges, args.seed, number)) for number in study.missing())
         for _, row in backend.stream(run_sample, tasks):
             study.file.append(row)
             progress.advance()

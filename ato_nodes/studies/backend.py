@@ -8,8 +8,10 @@ progress line on stderr.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import itertools
 import logging
+import os
 import signal
 import sys
 import threading
@@ -24,6 +26,8 @@ from ato_nodes.core.base.errors import ScenarioError
 INTERRUPT_POLL = 0.1  # s: how soon a Ctrl-C stops the runs under way
 BAR_WIDTH = 30  # characters of the progress bar on a terminal
 QUEUED_PER_SLOT = 4  # runs handed out ahead per worker (stream()): its next ones are queued
+PR_SET_PDEATHSIG = 1
+LIBC = ctypes.CDLL(None, use_errno=True)  # loaded before any fork: prctl in the worker
 
 
 class ClusterLost(RuntimeError):
@@ -110,8 +114,9 @@ class Backend:
                 self.stack.enter_context(dask_logs_silenced())  # one line says what went wrong
                 self.pool = self.client.get_executor(pure=False)
             else:
-                self.pool = (ThreadPoolExecutor if self.threads
-                             else ProcessPoolExecutor)(self.workers)
+                self.pool = (ThreadPoolExecutor(self.workers) if self.threads else
+                             ProcessPoolExecutor(self.workers, initializer=die_with_parent,
+                                                 initargs=(os.getpid(),)))
         except BaseException:
             self.stack.close()
             raise
@@ -189,6 +194,15 @@ class Backend:
         if self.client.status == "running":
             self.pool.shutdown(wait=False)  # a ClientExecutor cancels its tasks
         self._close_cluster()
+
+
+def die_with_parent(parent: int) -> None:
+    """A pool worker's start: it is killed when the process that started it dies, even
+    by SIGKILL (an orphaned worker, forked, would keep that process's task queue and
+    its output directory's lock open forever, and a resume would be refused)."""
+    LIBC.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # it died before the line above
+        os._exit(1)
 
 
 def show_progress(done: int, total: int, line: str, note: str = "") -> None:

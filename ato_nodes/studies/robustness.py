@@ -13,7 +13,7 @@ import numpy as np
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides
 from ato_nodes.results.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
-from ato_nodes.studies.samples import NUMBER
+from ato_nodes.studies.samples import NUMBER, SampleFailed
 
 FACTORS = {  # the real train's shares of the nominal values, and the option of each range
     "plant.mass_factor": "mass", "plant.resistance_factor": "resistance",
@@ -61,7 +61,7 @@ def run_sample(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]], 
     try:
         values = apply_overrides(base, draw)
     except ScenarioError as exc:
-        raise ScenarioError(f"sample {number}: {exc}") from None
+        raise SampleFailed(f"sample {number}: {exc}") from None
     return {NUMBER: number, **sample_result(draw, score_with_journey(values)),
             "train.mass_reading": values["train.mass_reading"]}  # what the ATO knew
 

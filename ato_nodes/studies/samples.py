@@ -29,6 +29,11 @@ from ato_nodes.studies.directory import (check_same_settings, conditions_digest,
 NUMBER = "sample"  # the first column: the sample's number, 0 to samples - 1
 
 
+class SampleFailed(RuntimeError):
+    """A sample that cannot run (its drawn values refused): the study stops there, its
+    finished samples kept."""
+
+
 class SampleFile:
     """samples.csv: a header (`columns`, NUMBER first), then one row per finished
     sample, a value in full precision (repr), an empty cell for an index the sample
@@ -130,26 +135,34 @@ class SampleStudy:
 
     def __init__(self, out: Path, settings: dict[str, Any], values: dict[str, Any],
                  columns: Mapping[str, type], samples: int, resume: bool):
-        self.out, self.samples = out, samples
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ScenarioError(f"cannot create {out}: {exc.strerror or exc}") from None
-        self.lock = hold_directory(out, "study")
-        described = jsontext.dumps({**settings, "conditions": conditions_digest(values, settings)},
-                                   indent=2)
-        settings_file = out / self.SETTINGS
+        self.out, self.samples, self.started = out, samples, False
+        self.described = jsontext.dumps(
+            {**settings, "conditions": conditions_digest(values, settings)}, indent=2)
         self.file = SampleFile(out / "samples.csv", columns)
-        if resume and settings_file.exists():
-            check_same_settings(out, settings_file, described, "study",
+        self.lock = None
+        self.resume = resume and (out / self.SETTINGS).exists()
+        if self.resume:  # read and checked; begin() writes
+            self.lock = hold_directory(out, "study")
+            check_same_settings(out, out / self.SETTINGS, self.described, "study",
                                 "scenario, its files, --set, the ranges, seed or samples",
                                 "use a new --out")
-        resume = resume and settings_file.exists() and self.file.path.exists()
-        if resume:
-            self.file.read(samples)
+            self.resume = self.file.path.exists()
+            if self.resume:
+                self.file.read(samples)
+
+    def begin(self) -> None:
+        """OUT made this study's: created if new, held, its settings and samples file
+        written (those of a resumed study without a row cut short)."""
+        if self.lock is None:
+            try:
+                self.out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ScenarioError(f"cannot create {self.out}: {exc.strerror or exc}") from None
+            self.lock = hold_directory(self.out, "study")
         name_holder(self.lock)
-        settings_file.write_text(described)
-        self.file.start(resume)
+        (self.out / self.SETTINGS).write_text(self.described)
+        self.file.start(self.resume)
+        self.started = True
 
     def missing(self) -> Iterator[int]:
         """The numbers of the samples the file lacks, in order."""
