@@ -11,6 +11,7 @@ import contextlib
 import ctypes
 import itertools
 import logging
+import math
 import os
 import signal
 import sys
@@ -26,6 +27,7 @@ from ato_nodes.core.base.errors import ScenarioError
 INTERRUPT_POLL = 0.1  # s: how soon a Ctrl-C stops the runs under way
 BAR_WIDTH = 30  # characters of the progress bar on a terminal
 QUEUED_PER_SLOT = 4  # runs handed out ahead per worker (stream()): its next ones are queued
+SLOTS_REFRESH = 2.0  # s between asking a cluster how many threads it has
 PR_SET_PDEATHSIG = 1
 LIBC = ctypes.CDLL(None, use_errno=True)  # loaded before any fork: prctl in the worker
 
@@ -56,10 +58,12 @@ def open_cluster(spec: str):
     except ImportError:
         raise ScenarioError("--cluster needs Dask: pip install 'dask[distributed]'") from None
     if spec.startswith("local:"):
-        # silence_logs: its workers' notes on tasks they lose (Ctrl-C) are no errors
+        # silence_logs: its workers' notes on tasks they lose and on the scheduler they
+        # lose as it closes (Ctrl-C, a loaded machine) are no errors; a task's are raised
+        # where its result is read
         cluster = LocalCluster(n_workers=int(spec.partition(":")[2]), threads_per_worker=1,
                                processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+                               silence_logs=logging.CRITICAL)
         return Client(cluster), cluster
     try:
         return Client(spec, timeout=10), None
@@ -101,6 +105,7 @@ class Backend:
         self.interrupted = False
         self.client = self.local_cluster = None
         self.pool: Executor | None = None
+        self.slots_asked = (-math.inf, 1)  # (when, the cluster's threads then)
         self.stack = contextlib.ExitStack()
 
     def __enter__(self) -> Backend:
@@ -128,23 +133,29 @@ class Backend:
                 self.pool.shutdown(wait=True)
                 self._close_cluster()
                 return
-            lost = isinstance(error, (CancelledError, OSError)) and self.lost
+            lost = self._lost_by(error)
             self._stop()
             if lost:
                 raise ClusterLost(f"the Dask scheduler {self.cluster} stopped answering") \
                     from None
 
-    @property
-    def lost(self) -> bool:
-        """A cluster whose client is no longer running (its scheduler went away)."""
-        return self.client is not None and self.client.status != "running"
+    def _lost_by(self, error: BaseException) -> bool:
+        """The error says the cluster's scheduler went away: a call to it failed, or a
+        task was cancelled or a connection closed as its client stopped running."""
+        if self.client is None or not isinstance(error, (CancelledError, OSError)):
+            return False
+        from distributed.comm import CommClosedError
+        return isinstance(error, CommClosedError) or self.client.status != "running"
 
-    @property
     def slots(self) -> int:
-        """How many runs go at once: the workers, or the cluster's threads now."""
+        """How many runs go at once: the workers, or the cluster's threads now (asked
+        of its scheduler at most every SLOTS_REFRESH: workers may come and go)."""
         if self.client is None:
             return self.workers
-        return max(1, sum(self.client.nthreads().values()))
+        if time.monotonic() - self.slots_asked[0] > SLOTS_REFRESH:
+            self.slots_asked = (time.monotonic(),
+                                max(1, sum(self.client.nthreads().values())))
+        return self.slots_asked[1]
 
     def submit(self, function: Callable, *args: Any) -> Future:
         return self.pool.submit(function, *args)
@@ -166,7 +177,7 @@ class Backend:
         tasks = iter(tasks)
         pending: dict[Future, Hashable] = {}
         while True:
-            room = QUEUED_PER_SLOT * self.slots - len(pending)
+            room = QUEUED_PER_SLOT * self.slots() - len(pending)
             for key, args in itertools.islice(tasks, max(room, 0)):
                 pending[self.submit(function, *args)] = key
             if not pending:
