@@ -127,9 +127,12 @@ def run_missing(study: SampleStudy, base: dict, ranges: dict, args: argparse.Nam
         study.begin()
         progress = Progress(args.samples, len(study.file.done), "samples")
         tasks = ((number, (base, ranges, args.seed, number)) for number in study.missing())
-        for _, row in backend.stream(run_sample, tasks):
-            study.file.append(row)
-            progress.advance()
+        try:
+            for _, row in backend.stream(run_sample, tasks):
+                study.file.append(row)
+                progress.advance()
+        finally:
+            progress.end()
 
 
 def report(study: SampleStudy, settings: dict, args: argparse.Namespace) -> None:

@@ -4,12 +4,14 @@ finished one), --resume running only the rest to the uninterrupted study's resul
 refusing a study whose settings changed."""
 
 import json
+import os
 import selectors
 import signal
 import subprocess
 import time
 from pathlib import Path
 
+import psutil
 import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
@@ -92,7 +94,7 @@ def study(out: Path, *extra, samples: int = 30) -> subprocess.CompletedProcess:
 def start_study(out: Path, samples: int) -> subprocess.Popen:
     return subprocess.Popen([*invocation("robustness.py"), *STUDY, "--samples", str(samples),
                              "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 
 def rows(out: Path) -> int:
@@ -100,10 +102,13 @@ def rows(out: Path) -> int:
     return len(path.read_text().splitlines()) - 1 if path.exists() else 0
 
 
-def stop_after(process: subprocess.Popen, out: Path, count: int, number: int) -> str:
+def stop_after(process: subprocess.Popen, out: Path, count: int, number: int
+               ) -> tuple[str, list]:
     """Signal `number` to the study once its samples.csv has `count` rows (it prints a
     progress line after the row of each tenth of its samples: read, no fixed sleep); it
-    must still be running then. Its stderr."""
+    must still be running then: SIGINT to its process group, as a terminal's Ctrl-C
+    (its workers get it too), SIGKILL to its process alone. (Its stderr, the worker
+    processes it had.)"""
     deadline = time.monotonic() + 120
     with selectors.DefaultSelector() as selector:
         selector.register(process.stderr, selectors.EVENT_READ)
@@ -112,9 +117,13 @@ def stop_after(process: subprocess.Popen, out: Path, count: int, number: int) ->
             assert time.monotonic() < deadline and process.poll() is None, lines
             if selector.select(timeout=deadline - time.monotonic()):
                 lines.append(process.stderr.readline())
-        process.send_signal(number)
+        workers = psutil.Process(process.pid).children(recursive=True)
+        if number == signal.SIGINT:
+            os.killpg(process.pid, number)
+        else:
+            process.send_signal(number)
         _, rest = process.communicate(timeout=120)
-    return "".join(lines) + rest
+    return "".join(lines) + rest, workers
 
 
 @pytest.fixture(scope="module")
@@ -136,13 +145,15 @@ def test_a_stopped_study_keeps_every_finished_sample_and_resumes_to_the_same_res
         tmp_path, uninterrupted, number, status):
     out = tmp_path / "r"
     process = start_study(out, 300)
-    stderr = stop_after(process, out, 30, number)
+    stderr, workers = stop_after(process, out, 30, number)
     assert process.returncode == status, stderr
     if number == signal.SIGINT:
         assert messages(stderr) == [f"interrupted; every finished sample is in "
                                     f"{out / 'samples.csv'}; continue with --resume"]
     kept = rows(out)
     assert 30 <= kept < 300 and not (out / "robustness.json").exists()
+    _, left = psutil.wait_procs(workers, timeout=60)  # none outlives the study: none
+    assert left == []  # holds OUT's lock
     resumed = study(out, "--resume", samples=300)
     assert resumed.returncode == 0, resumed.stderr
     assert (out / "robustness.json").read_text() == uninterrupted

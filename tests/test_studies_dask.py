@@ -6,6 +6,7 @@ samples kept for --resume; compare_scenarios.py's stack runs go on the workers."
 
 import contextlib
 import json
+import os
 import selectors
 import signal
 import subprocess
@@ -38,7 +39,7 @@ def study(out: Path, samples: int, *extra) -> str:
 def start_study(out: Path, samples: int, *extra) -> subprocess.Popen:
     return subprocess.Popen([*invocation("robustness.py"), *STUDY, "--samples", str(samples),
                              "--out", str(out), *extra], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
 
 
 def wait_for_rows(process: subprocess.Popen, out: Path, count: int) -> None:
@@ -129,7 +130,7 @@ def test_ctrl_c_of_a_local_cluster_study_is_one_line_exit_130_and_no_process_lef
         wait_for_rows(process, out, 200)
         started = psutil.Process(process.pid).children(recursive=True)
         assert len(started) >= 2  # the cluster's worker processes, at least
-        process.send_signal(signal.SIGINT)
+        os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: its workers too
         _, stderr = process.communicate(timeout=120)
     finally:
         if process.poll() is None:

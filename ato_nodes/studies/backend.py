@@ -64,7 +64,10 @@ def open_cluster(spec: str):
         cluster = LocalCluster(n_workers=int(spec.partition(":")[2]), threads_per_worker=1,
                                processes=True, dashboard_address=None,
                                silence_logs=logging.CRITICAL)
-        return Client(cluster), cluster
+        client = Client(cluster)
+        from ato_nodes.studies.dask_workers import StopsAreTheStudys
+        client.register_plugin(StopsAreTheStudys())
+        return client, cluster
     try:
         return Client(spec, timeout=10), None
     except OSError as exc:
@@ -249,3 +252,9 @@ class Progress:
         eta = (time.monotonic() - self.started) / self.fresh * (self.total - self.done)
         show_progress(self.done, self.total, f"{self.what} {self.done:5d}/{self.total}  "
                       f"ETA {eta:6.0f} s")
+
+    def end(self) -> None:
+        """A study stopped before its end leaves the terminal's bar line: what it says
+        next starts on a line of its own."""
+        if sys.stderr.isatty() and self.fresh and self.done < self.total:
+            print(file=sys.stderr, flush=True)
