@@ -73,7 +73,7 @@ def in_process_rate(values, count: int, workers: int) -> float:
 def dask_overhead(values, count: int = 60) -> float | None:
     """Seconds per task a Dask LocalCluster (2 workers) adds over the local pool."""
     try:
-        from ato_nodes.studies.tuning import open_cluster
+        from ato_nodes.studies.backend import open_cluster
         client, cluster = open_cluster("local:2")
     except Exception:  # no dask: nothing to measure
         return None

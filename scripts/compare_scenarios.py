@@ -10,7 +10,9 @@ may hold colons (seed004-metro-line:profile.journey.dwell_extension=2:30). Print
 writes (comparison.md, comparison.json) one row per run: max |e| (outside seed 003's
 stepped approach where it has one), p95 |e|, ITAE, stopping error, max jerk over 1 s,
 traction/brake switches, overspeed, net energy and whether the stack and the
-in-process run agree.
+in-process run agree. With --cluster the runs go on a Dask cluster's workers, several
+at once, each in a ROS domain of its own on its worker's host; the workers write the
+bags into --out, so they must see it (this host, or a shared file system).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import _cli
 
 from ato_nodes.reports.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.studies.backend import ClusterLost, check_cluster
 from ato_nodes.studies.runner import (Outcome, Variant, numeric, prepare_variants, run_study,
                                      write_outputs)
 
@@ -45,8 +48,12 @@ def main() -> None:
     parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenarios", nargs="+", metavar="SCENARIO[:NAME=VALUE...]")
     parser.add_argument("--out", type=Path, required=True, help="directory to create")
+    parser.add_argument("--cluster", default="", metavar="local:N|tcp://HOST:PORT",
+                        help="run on a Dask cluster (as tune.py --cluster)")
     args = parser.parse_args()
     try:
+        if args.cluster:
+            check_cluster(args.cluster)
         runs = prepare_variants({text: variant(text) for text in args.scenarios})
     except ScenarioError as exc:
         _cli.fail(str(exc))
@@ -54,7 +61,12 @@ def main() -> None:
     args.out.mkdir()
     bags = {text: args.out / f"run{number}" for number, text in enumerate(runs)}
     try:
-        outcomes = run_study(runs, bags=bags, progress=progress)
+        outcomes = run_study(runs, bags=bags, cluster=args.cluster, progress=progress)
+    except ScenarioError as exc:  # the cluster refused (no scheduler answers): nothing ran
+        args.out.rmdir()
+        _cli.fail(str(exc))
+    except ClusterLost as exc:
+        _cli.fail(f"{exc} mid-study; the finished runs' bags are in {args.out}", 1)
     except RuntimeError as exc:
         _cli.fail(str(exc), 1)
     results = {text: {**numeric(outcome.indices), "bit_identical": outcome.identical}

@@ -5,14 +5,16 @@ compare_seed001.py; compare_strategies.py its pool and outputs, compare_tuners.p
 outputs, their variants being optimisations): each variant is a scenario and the
 overrides that make it, prepared (loaded, overridden, checked) before anything runs;
 the runs go in-process in a pool of processes, or through the stack one after another,
-each scored from its bag and checked bit for bit against the same run in-process; the
-study's Markdown table and its JSON report go to its output directory.
+each scored from its bag and checked bit for bit against the same run in-process, or
+either kind on a Dask cluster (backend.py); the study's Markdown table and its JSON
+report go to its output directory. A study of many numbered samples (robustness.py)
+draws and prepares each in the worker that runs it, streams its rows to a file and
+resumes (samples.py).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,11 +24,12 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
+from ato_nodes.studies.backend import Backend
 
 
 # A study's counts, checked before anything is drawn, prepared or started (check_counts()).
 MAX_WORKERS = 64      # processes of a pool: more than the machine's cores only share them
-MAX_SAMPLES = 10_000  # runs drawn at once: every one is prepared before the first starts
+MAX_SAMPLES = 10_000  # runs of a study (robustness.py: samples.csv and its report)
 MAX_SEED = 2**31 - 1  # a study's seed, as the schema's (plant.noise_seed and the others)
 COUNT_BOUNDS = {"samples": (1, MAX_SAMPLES), "workers": (1, MAX_WORKERS), "seed": (0, MAX_SEED),
                 "seeds": (0, MAX_SEED), "population": (2, MAX_SAMPLES)}
@@ -84,17 +87,29 @@ class Outcome:
 
 
 def run_study(runs: Mapping[str, dict[str, Any]], *, workers: int = 1,
-              bags: Mapping[str, Path] | None = None,
+              bags: Mapping[str, Path] | None = None, cluster: str = "",
               progress: Callable[[str, Outcome], None] | None = None) -> dict[str, Outcome]:
-    """label -> Outcome of each run (label -> prepared values): in-process in `workers`
-    processes, or, given `bags` (label -> the bag directory to record), through the
-    stack one after another. progress(label, outcome) as each outcome is known. A
-    failed stack run raises RuntimeError (one line, naming its bag)."""
-    if bags is None:
-        outcomes = zip(runs, in_pool(run_in_process, runs.values(), workers), strict=True)
-    else:
+    """label -> Outcome of each run (label -> prepared values), in the runs' order:
+    in-process in `workers` processes, or, given `bags` (label -> the bag directory to
+    record), through the stack one after another; with `cluster` (--cluster) either
+    kind on a Dask cluster's workers, several at once (a stack run takes a ROS domain
+    of its own on its worker's host, and its bag must be a path that host writes).
+    progress(label, outcome) as each outcome is known. A failed stack run raises
+    RuntimeError (one line, naming its bag); a lost scheduler ClusterLost."""
+    if bags is not None and not cluster:  # here: the stack takes this process's signals
         outcomes = ((label, run_through_stack(values, bags[label]))
                     for label, values in runs.items())
+        return _recorded(outcomes, progress)
+    tasks = ((label, (values,) if bags is None else (values, bags[label]))
+             for label, values in runs.items())
+    with Backend(workers, cluster, threads=bags is not None) as backend:
+        results = _recorded(backend.stream(
+            run_in_process if bags is None else run_through_stack, tasks), progress)
+    return {label: results[label] for label in runs}
+
+
+def _recorded(outcomes: Iterable[tuple[str, Outcome]],
+              progress: Callable[[str, Outcome], None] | None) -> dict[str, Outcome]:
     results = {}
     for label, outcome in outcomes:
         results[label] = outcome
@@ -114,10 +129,13 @@ def run_through_stack(values: dict[str, Any], bag: Path) -> Outcome:
     return Outcome(indices, bag, identical)
 
 
-def in_pool(function: Callable, items: Iterable, workers: int) -> list:
-    """function(item) for every item, in `workers` processes, in the items' order."""
-    with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(function, items))
+def in_pool(function: Callable, items: Iterable, workers: int, cluster: str = "") -> list:
+    """function(item) for every item, in `workers` processes (or on a Dask cluster's
+    workers), in the items' order."""
+    with Backend(workers, cluster) as backend:
+        results = dict(backend.stream(function, ((number, (item,))
+                                                  for number, item in enumerate(items))))
+    return [results[number] for number in range(len(results))]
 
 
 def numeric(indices: Mapping[str, Any]) -> dict[str, int | float]:

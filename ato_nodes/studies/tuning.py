@@ -12,23 +12,16 @@ values) against the log, running only what the log lacks.
 
 from __future__ import annotations
 
-import contextlib
 import csv
-import fcntl
 import functools
-import hashlib
 import json
-import logging
 import math
 import os
 import shutil
-import signal
 import sys
 import tempfile
 import threading
 import time
-from concurrent.futures import (FIRST_COMPLETED, CancelledError, Executor, ProcessPoolExecutor,
-                                ThreadPoolExecutor, wait)
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -37,6 +30,9 @@ import numpy as np
 import yaml
 
 from ato_nodes.results import jsontext
+from ato_nodes.studies.backend import Backend, ClusterLost, check_cluster, show_progress
+from ato_nodes.studies.directory import (check_same_settings, conditions_digest, hold_directory,
+                                         name_holder)
 from ato_nodes.reports.analysis import plot_convergence
 from ato_nodes.core.base import kernels
 from ato_nodes.core.run.loop import simulate, warm
@@ -47,7 +43,7 @@ from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.base.paths import config_dir
 from ato_nodes.core.config.scenario import (apply_overrides, check_used, load_scenario,
                                             resolve_scenario, ros_parameter_file)
-from ato_nodes.core.config.schema import FILE_PARAMETERS, SPEC_BY_NAME
+from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import planned_steps
 from ato_nodes.core.scoring.catalogue import FITNESS, Requirement
 from ato_nodes.core.run.scoring import score_series
@@ -135,8 +131,6 @@ class Evaluation:
 
 INFEASIBLE = 1e9  # base fitness of a run that breaks a requirement (below PENALTY)
 PRUNE_MARGIN = 1e-9  # relative: a pruned run's value is above its bound by more than this
-BAR_WIDTH = 30  # characters of the progress bar on a terminal
-INTERRUPT_POLL = 0.1  # s: how soon a Ctrl-C stops the candidates under way
 
 
 @dataclass(frozen=True)
@@ -291,47 +285,14 @@ def evaluate_in_stack_anywhere(values: dict[str, Any], overrides: dict[str, Any]
         shutil.rmtree(workdir, ignore_errors=True)
 
 
-def open_cluster(spec: str):
-    """(client, cluster or None) for --cluster: `local:N` starts a Dask LocalCluster of
-    N single-threaded worker processes on this machine, `tcp://HOST:PORT` connects to
-    a running scheduler (`dask scheduler`, `dask worker ...`)."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise ScenarioError("--cluster needs Dask: pip install 'dask[distributed]'") from None
-    if spec.startswith("local:"):
-        count = spec.partition(":")[2]
-        if not count.isdigit() or int(count) < 1:
-            raise ScenarioError(f"--cluster local:N needs a positive worker count, got {spec!r}")
-        # silence_logs: its workers' notes on tasks they lose (Ctrl-C) are no errors
-        cluster = LocalCluster(n_workers=int(count), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
-        return Client(cluster), cluster
-    if spec.startswith("tcp://"):
-        try:
-            return Client(spec, timeout=10), None
-        except OSError as exc:
-            raise ScenarioError(f"--cluster {spec}: no scheduler answers ({exc})") from None
-    raise ScenarioError(f"--cluster expects local:N or tcp://HOST:PORT, got {spec!r}")
-
-
 def conditions(values: dict[str, Any], settings: TuningSettings) -> str:
     """A digest of everything that makes a logged fitness mean what it means: every
     parameter of the base run, the text of its line and table files, the fitness,
     requirements, search space, algorithm and how candidates are run."""
-    files = {}
-    for name in FILE_PARAMETERS:
-        if values.get(name):
-            try:
-                files[name] = hashlib.sha256(Path(values[name]).read_bytes()).hexdigest()
-            except OSError:
-                files[name] = "unreadable"
-    text = json.dumps({"values": values, "files": files, "settings": settings.describe()},
-                      sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return conditions_digest(values, settings.describe())
 
 
-class TuningLost(RuntimeError):
+class TuningLost(ClusterLost):
     """A tuning that cannot go on through no fault of its input (its Dask scheduler
     stopped answering); its log keeps every finished evaluation for --resume."""
 
@@ -448,23 +409,23 @@ class Tuner:
             out.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise ScenarioError(f"cannot create {out}: {exc.strerror or exc}") from None
-        self.directory_lock = _hold_directory(out)
+        self.directory_lock = hold_directory(out, "tuning")
         self.conditions = conditions(values, settings)
         settings_file = out / "tuning.json"
         described = jsontext.dumps({**settings.describe(), "conditions": self.conditions},
                                    indent=2)
         if resume and settings_file.exists():
-            _check_same_tuning(out, settings_file, described)
+            check_same_settings(out, settings_file, described, "tuning",
+                                "scenario, files, --set", "tune into a new --out")
         self.log = EvaluationLog(out / "evaluations.jsonl", resume, self.conditions)
         self.summary = _finished_summary(out, self.conditions, len(self.log.done)) \
             if resume else None
         if self.summary is None:  # accepted, with work to do: the directory is this tuning's
-            _name_holder(self.directory_lock)
+            name_holder(self.directory_lock)
             settings_file.write_text(described)
             self.log.start()
         self.in_process_pool = evaluate is None and settings.in_process
         self.evaluate = evaluate if evaluate is not None else self._evaluator()
-        self.client = self.local_cluster = None
         algorithm = create(settings.algorithm, **settings.options)
         # Pruning: a fitness that only grows, an algorithm that bounds its candidates
         # (optimizers/base.py); in-process or by the supervisor; the result is the same.
@@ -473,7 +434,6 @@ class Tuner:
         self.initial_evaluations = algorithm.initial_evaluations()
         self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
         self.cancel = threading.Event()  # stops the stack candidates under way
-        self.interrupted = False  # Ctrl-C during the tuning (see _on_interrupt)
         self.next_index = 0
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
         self.pruned = 0  # of them, ended early by pruning
@@ -514,34 +474,12 @@ class Tuner:
             shutil.rmtree(bag, ignore_errors=True)
         return record
 
-    def _pool(self) -> Executor:
+    def _backend(self) -> Backend:
         """Where candidates run: local worker processes (in-process evaluations),
         threads (stack runs are processes already), or a Dask cluster's workers; all
         give the same fitness for the same candidate."""
-        if self.settings.cluster:
-            self.client, self.local_cluster = open_cluster(self.settings.cluster)
-            return self.client.get_executor(pure=False)
-        if self.in_process_pool:
-            return ProcessPoolExecutor(self.settings.workers)
-        return ThreadPoolExecutor(self.settings.workers)
-
-    def _close_cluster(self) -> None:
-        if self.client is not None:
-            self.client.close()
-        if self.local_cluster is not None:
-            self.local_cluster.close()
-
-    def _stop(self, pool: Executor) -> None:
-        """Stop at once: the candidates under way are cancelled (not logged: --resume
-        evaluates them again), a cluster is closed without its log messages about the
-        tasks it loses."""
-        self.cancel.set()
-        if self.client is None:
-            pool.shutdown(wait=True, cancel_futures=True)
-            return
-        if self.client.status == "running":
-            pool.shutdown(wait=False)  # a ClientExecutor cancels its tasks
-        self._close_cluster()
+        return Backend(self.settings.workers, self.settings.cluster,
+                       threads=not self.in_process_pool, cancel=self.cancel)
 
     def _warm_kernels(self) -> None:
         """Compile the in-process loop here, once, before the workers start: they then
@@ -553,7 +491,7 @@ class Tuner:
         else:
             warm(self.values)
 
-    def _batch_fitness(self, pool: Executor, population: np.ndarray,
+    def _batch_fitness(self, backend: Backend, population: np.ndarray,
                        bounds: np.ndarray | None = None) -> np.ndarray:
         requests = []
         for x in population:
@@ -569,13 +507,12 @@ class Tuner:
                 self.best = min(self.best, record.fitness)
             else:
                 extra = (float(bounds[index - requests[0][0]]),) if bounds is not None else ()
-                pending[pool.submit(self.evaluate, self.values, overrides,
-                                    self.settings.objective, index, *extra)] = index
+                pending[backend.submit(self.evaluate, self.values, overrides,
+                                       self.settings.objective, index, *extra)] = index
         waiting = set(pending)
         while waiting:
-            finished, waiting = wait(waiting, timeout=INTERRUPT_POLL, return_when=FIRST_COMPLETED)
-            if self.interrupted:  # raised here, where the stop is handled, not in a callback
-                raise KeyboardInterrupt
+            finished = backend.finished(waiting)
+            waiting -= finished
             for future in sorted(finished, key=pending.get):
                 record = self._stamped(future.result())
                 self.fresh += 1
@@ -583,11 +520,6 @@ class Tuner:
                 results[record.index] = record
                 self._report(record)
         return np.array([results[index].fitness for index, _ in requests])
-
-    def _on_interrupt(self, signum, frame) -> None:
-        """Ctrl-C: noted, acted on within INTERRUPT_POLL (a KeyboardInterrupt raised at
-        whatever line runs can land in a library's finaliser and be swallowed)."""
-        self.interrupted = True
 
     def _report(self, record: Evaluation) -> None:
         self.best = min(self.best, record.fitness)
@@ -602,15 +534,8 @@ class Tuner:
         line = (f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}"
                 f"{pruned}  ETA {eta:6.0f} s")
         notable = record.status not in ("ok", "pruned")
-        if sys.stderr.isatty():  # one bar redrawn in place; what went wrong stays above it
-            filled = round(BAR_WIDTH * done / max(total, 1))
-            if notable:
-                print(f"\r\033[Kcandidate {record.index}: {record.status}", file=sys.stderr)
-            print(f"\r\033[K[{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {line}",
-                  end="" if done < total else "\n", file=sys.stderr, flush=True)
-        else:
-            status = f" ({record.status}: candidate {record.index})" if notable else ""
-            print(line + status, file=sys.stderr, flush=True)
+        show_progress(done, total, line, f"candidate {record.index}: {record.status}"
+                      if notable else "")
 
     def run(self) -> Result:
         """The tuning. Ctrl-C stops the candidates under way at once (their runs are
@@ -618,33 +543,17 @@ class Tuner:
         s = self.settings
         if self.in_process_pool:
             self._warm_kernels()
-        with contextlib.ExitStack() as stack:
-            if threading.current_thread() is threading.main_thread():
-                for number in (signal.SIGINT, signal.SIGTERM):  # either one stops it
-                    previous = signal.signal(number, self._on_interrupt)
-                    stack.callback(signal.signal, number, previous)
-            pool = self._pool()
-            if self.client is not None:  # the tuner says what goes wrong, in one line
-                stack.enter_context(_dask_logs_silenced())
-            try:
+        try:
+            with self._backend() as backend:
                 result = optimize(s.algorithm,
                                   lambda population, bounds=None: self._batch_fitness(
-                                      pool, population, bounds),
+                                      backend, population, bounds),
                                   s.space.lower, s.space.upper, s.evaluations, s.seed,
                                   x0=s.space.start(self.values), bounded=self.prune,
                                   **s.options)
-            except KeyboardInterrupt:
-                self._stop(pool)
-                raise
-            except (CancelledError, OSError):  # a task cancelled, a connection closed
-                if self.client is None or self.client.status == "running":
-                    raise
-                self._stop(pool)
-                raise TuningLost(f"the Dask scheduler {s.cluster} stopped answering "
-                                 f"mid-tuning; every finished evaluation is in "
-                                 f"{self.log.path}; continue with --resume") from None
-            pool.shutdown(wait=True)
-            self._close_cluster()
+        except ClusterLost as exc:
+            raise TuningLost(f"{exc} mid-tuning; every finished evaluation is in "
+                             f"{self.log.path}; continue with --resume") from None
         self._write_outputs(result)
         return result
 
@@ -708,22 +617,10 @@ def _check_settings(settings: TuningSettings) -> None:
     if settings.fitness not in FITNESS:
         raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
                             f"{', '.join(FITNESS)}")
+    if settings.cluster:
+        check_cluster(settings.cluster)
     if settings.cluster and settings.keep_bags:
         raise ScenarioError("--keep-bags keeps bags on this host; not with --cluster")
-
-
-def _check_same_tuning(out: Path, settings_file: Path, described: str) -> None:
-    """A resumed OUT's tuning.json must describe this tuning: the same settings under
-    the same conditions."""
-    try:
-        before = json.loads(settings_file.read_text())
-    except json.JSONDecodeError:
-        raise ScenarioError(f"{settings_file} is not valid JSON; tune into a new "
-                            "--out") from None
-    if before != json.loads(described):
-        raise ScenarioError(f"{out} holds a tuning with other settings or conditions "
-                            "(scenario, files, --set); resume it with the same options "
-                            "or tune into a new --out")
 
 
 def at_bounds(space: SearchSpace, x: np.ndarray) -> list[str]:
@@ -733,45 +630,6 @@ def at_bounds(space: SearchSpace, x: np.ndarray) -> list[str]:
     return [name for name, value, low, high, span in zip(space.names, x, space.lower,
                                                          space.upper, width, strict=True)
             if min(value - low, high - value) <= 1e-6 * span]
-
-
-def _hold_directory(out: Path):
-    """An exclusive lock on OUT for this tuning's lifetime (released when the process
-    ends, however it ends): two tunings never write one directory."""
-    handle = (out / ".lock").open("a+")
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        handle.seek(0)
-        holder = handle.read().strip() or "another process"
-        handle.close()
-        raise ScenarioError(f"{out} is being written by another tuning (pid {holder}); wait "
-                            "for it or use another --out") from None
-    return handle
-
-
-@contextlib.contextmanager
-def _dask_logs_silenced():
-    """Dask's log lines in this process (a lost connection's tracebacks from its event
-    loop, tasks it cancels) are not shown while they last."""
-    loggers = [logging.getLogger(name) for name in list(logging.root.manager.loggerDict)
-               if name.partition(".")[0] in ("distributed", "tornado")]
-    disabled = [logger.disabled for logger in loggers]
-    for logger in loggers:
-        logger.disabled = True
-    try:
-        yield
-    finally:
-        for logger, before in zip(loggers, disabled, strict=True):
-            logger.disabled = before
-
-
-def _name_holder(lock) -> None:
-    """This process's pid in the held lock file (what a refused second tuning names)."""
-    lock.seek(0)
-    lock.truncate()
-    lock.write(str(os.getpid()))
-    lock.flush()
 
 
 def _finished_summary(out: Path, expected_conditions: str, logged: int) -> dict[str, Any] | None:

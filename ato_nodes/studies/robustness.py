@@ -1,0 +1,95 @@
+"""Robustness of a controller (scripts/robustness.py): one scenario over a seeded spread
+of real trains, each sample drawn, prepared and run in the worker that runs it, from
+the study's seed and the sample's number alone (any worker, any order, any resume
+gives the sample the same train and result)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import apply_overrides
+from ato_nodes.results.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
+from ato_nodes.studies.samples import NUMBER, SampleFailed
+
+FACTORS = {  # the real train's shares of the nominal values, and the option of each range
+    "plant.mass_factor": "mass", "plant.resistance_factor": "resistance",
+    "plant.lag_factor": "lag"}
+SEEDS = ("plant.noise_seed", "train.load_weighing_seed")
+INDICES = (  # key, heading; worst is the largest
+    ("max_abs_error_kmh", "max abs(e) km/h"),
+    ("p95_abs_error_kmh", "p95 abs(e) km/h"),
+    ("abs_stopping_error", "abs(stop error) m"),
+    ("max_jerk", "max jerk (1 s) m/s^3"),
+    ("itae", "ITAE"),
+    (WORST_STOP, "journey: worst stop m"),
+    (WORST_ARRIVAL, "journey: worst arrival s"),
+)
+WITHIN = (  # key, bound, what the count says
+    ("max_abs_error_kmh", 1.0, "within 1 km/h"),
+    ("abs_stopping_error", 0.1, "stops within 0.1 m"),
+    ("abs_running_time_error", 5.0, "arrivals within 5 s"),
+    (WORST_STOP, 0.1, "every stop of the journey within 0.1 m"),
+    (WORST_ARRIVAL, 5.0, "every arrival of the journey within 5 s"),
+)
+COLUMNS = {  # a sample's row (after its number): its draw, what the ATO knew, its indices
+    **dict.fromkeys(FACTORS, float), **dict.fromkeys(SEEDS, int), "train.mass_reading": float,
+    **{key: float for key, _ in INDICES}, "running_time_error": float,
+    "abs_running_time_error": float}
+SEED_BOUND = 2**31 - 1  # the schema's bound of a noise or weighing seed
+
+
+def draw_train(ranges: Mapping[str, tuple[float, float]], seed: int, number: int) -> dict:
+    """Sample `number`'s real train: a share of each nominal value, uniform in its range,
+    a speed-sensor noise seed and a load-weighing seed (from a stream of its own, so
+    the trains are those of the same seed before the load weighing)."""
+    rng = np.random.default_rng([seed, number, 0])
+    weighing = np.random.default_rng([seed, number, 1])
+    return {**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},
+            "plant.noise_seed": int(rng.integers(0, SEED_BOUND)),
+            "train.load_weighing_seed": int(weighing.integers(0, SEED_BOUND))}
+
+
+def run_sample(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]], seed: int,
+               number: int) -> dict[str, Any]:
+    """Sample `number` of the study on `base` (the scenario's checked values with the
+    study's --set): drawn, prepared and run here (a worker), its row of COLUMNS."""
+    draw = draw_train(ranges, seed, number)
+    try:
+        values = apply_overrides(base, draw)
+    except ScenarioError as exc:
+        raise SampleFailed(f"sample {number}: {exc}") from None
+    return {NUMBER: number, **sample_result(draw, score_with_journey(values)),
+            "train.mass_reading": values["train.mass_reading"]}  # what the ATO knew
+
+
+def sample_result(draw: dict, indices: dict) -> dict:
+    """The sample's draw and the indices of INDICES it has."""
+    result = {**draw, **{key: float(indices[key]) for key, _ in INDICES if key in indices}}
+    if "stopping_error" in indices:
+        result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
+    if "running_time_error" in indices:
+        result["running_time_error"] = float(indices["running_time_error"])
+        result["abs_running_time_error"] = abs(result["running_time_error"])
+    return result
+
+
+def summarise(values: np.ndarray, present: np.ndarray, columns: list[str]
+              ) -> tuple[dict[str, dict[str, float]], dict[str, int]]:
+    """(median and worst of each index of INDICES the samples have, how many samples
+    keep each bound of WITHIN of those that have its index) of the samples' table
+    (SampleFile.table(), its `columns`)."""
+    summary, within = {}, {}
+    for key, _ in INDICES:
+        has = present[:, columns.index(key)]
+        if has.any():
+            column = values[has, columns.index(key)]
+            summary[key] = {"median": float(np.median(column)), "worst": float(np.max(column))}
+    for key, bound, text in WITHIN:
+        has = present[:, columns.index(key)]
+        if has.any():
+            within[text] = int(np.count_nonzero(values[has, columns.index(key)] <= bound))
+    return summary, within
