@@ -203,6 +203,15 @@ class Dictionary(NamedTuple):
     forgotten: int
 
 
+def empty_dictionary(columns: int) -> Dictionary:
+    """A Dictionary of no samples and no room: what the GPC's predictions without an
+    LSSVM carry (one compiled step serves them all)."""
+    return Dictionary(1.0, 1.0, np.zeros(columns), np.ones(columns), 0,
+                      np.zeros((0, columns)), np.zeros(0), np.zeros((0, 0)), np.zeros(0),
+                      np.zeros((2, 0)), np.zeros(0), np.zeros((0, columns)), np.zeros(0),
+                      np.zeros(0), np.zeros((2, 0)), 0, 0.0, 0, 0, 0)
+
+
 @jitable
 def _counted(d: Dictionary, size: int, bias: float, added: int, rejected: int, forgotten: int
              ) -> Dictionary:
