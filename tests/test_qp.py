@@ -1,10 +1,17 @@
 """The GPC's QP solver (core/control/qp.py) against DAQP, the reference it replaced."""
 
+import importlib
+import signal
+import sys
+from pathlib import Path
+
 import daqp
 import numpy as np
 import pytest
 
 from ato_nodes.core.base.kernels import AVAILABLE
+from ato_nodes.core.config.scenario import apply_overrides, prepare
+from ato_nodes.core.config.schema import steps
 from ato_nodes.core.control import qp
 
 if AVAILABLE:
@@ -86,3 +93,32 @@ def test_a_constraint_held_twice_over_is_solved():
         reference, flag = daqp_solution(hessian, gradient, rows, lower, upper)
         assert flag >= 1
         assert np.abs(x - reference).max() <= 1e-9 * max(1.0, np.abs(reference).max())
+
+
+@pytest.fixture
+def benchmark_gpc():
+    """benchmarks/benchmark_gpc.py as a module; the signal handlers its scripts' prelude
+    installs are pytest's again after the import."""
+    handlers = {number: signal.getsignal(number) for number in (signal.SIGINT, signal.SIGPIPE)}
+    folder = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    sys.path.insert(0, folder)
+    try:
+        module = importlib.import_module("benchmark_gpc")
+    finally:
+        sys.path.remove(folder)
+        for number, handler in handlers.items():
+            signal.signal(number, handler)
+    return module
+
+
+def test_every_qp_of_the_shipped_gpc_scenarios_is_daqps_to_1e_9(benchmark_gpc):
+    """The first 120 s of each scenario whose controller is the GPC (the benchmark
+    measures their whole runs the same way)."""
+    names = benchmark_gpc.gpc_scenarios()
+    assert {"seed001-crh380al", "seed001-crh380al-ato"} <= set(names)
+    for name in names:
+        values = apply_overrides(prepare(name), ["run.duration=120"])
+        problems = benchmark_gpc.shipped_qps(values)
+        assert len(problems) == steps(values)
+        worst, unsolved = benchmark_gpc.against_daqp(problems)
+        assert unsolved == 0 and worst <= 1e-9, name

@@ -300,15 +300,13 @@ def _closed_form(hessian: np.ndarray, gradient: np.ndarray) -> float:
 
 
 @jitable
-def first_move(settings: GPCSettings, hessian: np.ndarray, gradient: np.ndarray,
-               previous: float, low: float, high: float, max_change: float) -> float:
-    """The first move du(k) of the plan, the command kept in [low, high] and each move
-    within the jerk limit (`max_change`, N/kN per step; 0: none)."""
-    if not settings.constrained:
-        return _closed_form(hessian, gradient)
-    moves = settings.moves
+def constraints(moves: int, previous: float, low: float, high: float, max_change: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rows, lower, upper) of the QP's constraints on the moves du: each move within the
+    jerk limit (`max_change`, N/kN per step; 0: none), then the command u0 + C du inside
+    [low, high]."""
     rate = max_change if max_change > 0.0 else math.inf
-    rows = np.zeros((2 * moves, moves))  # |du| <= the move limit, then u0 + C du in bounds
+    rows = np.zeros((2 * moves, moves))
     lower, upper = np.empty(2 * moves), np.empty(2 * moves)
     for i in range(moves):
         rows[i, i] = 1.0
@@ -318,6 +316,18 @@ def first_move(settings: GPCSettings, hessian: np.ndarray, gradient: np.ndarray,
         reach = rate * (i + 1)
         upper[moves + i] = max(high, previous - reach) - previous
         lower[moves + i] = min(low, previous + reach) - previous
+    return rows, lower, upper
+
+
+@jitable
+def first_move(settings: GPCSettings, hessian: np.ndarray, gradient: np.ndarray,
+               previous: float, low: float, high: float, max_change: float) -> float:
+    """The first move du(k) of the plan, the command kept in [low, high] and each move
+    within the jerk limit (constraints())."""
+    if not settings.constrained:
+        return _closed_form(hessian, gradient)
+    moves = settings.moves
+    rows, lower, upper = constraints(moves, previous, low, high, max_change)
     move = np.empty(moves)
     if solve_qp(hessian, gradient, rows, lower, upper, move, work_space(moves)) != SOLVED:
         return _closed_form(hessian, gradient)  # the limiter clips it

@@ -235,6 +235,13 @@ def _solved(d: Dictionary) -> Dictionary:
     eta, nu = d.solved[0], d.solved[1]
     eta[:n], nu[:n] = d.forward[0, :n], d.forward[1, :n]
     _back_substitution(d.factor, eta, nu, n)
+    return _coefficients(d)
+
+
+@jitable
+def _coefficients(d: Dictionary) -> Dictionary:
+    """b = 1^T nu / 1^T eta, alpha = nu - b eta, from d.solved's eta and nu."""
+    n, eta, nu = d.size, d.solved[0], d.solved[1]
     bias = nu[:n].sum() / eta[:n].sum()
     for i in range(n):
         d.alpha[i] = nu[i] - bias * eta[i]
@@ -242,6 +249,26 @@ def _solved(d: Dictionary) -> Dictionary:
 
 
 @jitable
+def _solved_with_row(d: Dictionary) -> Dictionary:
+    """_solved after the factor gained its last row [l^T, s] (l in d.row): with
+    u = L^-T l (one back substitution, not two), x = L'^-T y' is
+    [x_old - (y_n / s) u, y_n / s] for each of eta and nu."""
+    n = d.size - 1
+    u, scale = d.row, d.factor[n, n]
+    for j in range(n - 1, -1, -1):  # L^T u = l, in place, as _back_substitution
+        u[j] /= d.factor[j, j]
+        row, x = d.factor[j], u[j]
+        for i in range(j):
+            u[i] -= x * row[i]
+    for k in range(2):
+        last = d.forward[k, n] / scale
+        for i in range(n):
+            d.solved[k, i] -= last * u[i]
+        d.solved[k, n] = last
+    return _coefficients(d)
+
+
+@jitable(inline=True)
 def _kernel_terms(d: Dictionary, x: np.ndarray) -> None:
     """d.difference = z - the dictionary, d.weights = the kernel values at x (unscaled)."""
     n = d.size
@@ -251,7 +278,7 @@ def _kernel_terms(d: Dictionary, x: np.ndarray) -> None:
         d.weights[i] = math.exp(d.weights[i])
 
 
-@jitable
+@jitable(inline=True)
 def _linearise_dictionary(d: Dictionary, x: np.ndarray, gradient: np.ndarray) -> float:
     """g(x) at one unscaled regressor, its analytic gradient dg/dx into `gradient`: the
     RBF expansion's, sums in a fixed order (a model's bits are its numbers')."""
@@ -279,7 +306,8 @@ def _add_sample(d: Dictionary, x: np.ndarray, target: float) -> tuple[Dictionary
     capacity = len(d.t)
     if capacity == d.fixed:  # no window
         return d, False
-    if d.size == capacity:
+    full = d.size == capacity
+    if full:
         d = _forget_oldest_correction(d)
     n = d.size
     _kernel_terms(d, x)
@@ -294,7 +322,7 @@ def _add_sample(d: Dictionary, x: np.ndarray, target: float) -> tuple[Dictionary
     d.t[n] = target
     d = _counted(d, n + 1, d.bias, d.added + 1, d.rejected, d.forgotten)
     _forward_rows(d, n)
-    return _solved(d), True
+    return (_solved(d) if full else _solved_with_row(d)), True
 
 
 @jitable
