@@ -182,6 +182,6 @@ GPC_CONTROLLER = Component(
      Output("samples_added", "1", "samples the online correction has added so far"),
      *ESTIMATE_OUTPUTS),
     search_space=(("gpc.q", 0.1, 100.0), ("gpc.r", 1e-5, 1e-1), ("gpc.bias_filter", 0.0, 20.0)),
-    # the mechanistic model needs no model file
-    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 1), ("controller.preview", 1)),
+    # the mechanistic model needs no model file; 20 steps reach past a shipped dead time
+    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 20), ("controller.preview", 20)),
     steps=GPC_STEPS, estimates=True)
