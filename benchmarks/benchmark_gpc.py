@@ -3,9 +3,10 @@
 
     python benchmarks/benchmark_gpc.py [--duration 600] [--no-stack]
 
-1. Controller cost per step (median, p99, max), the controller stage's `run_ready_steps()` timed
-   around every call of a whole in-process run: the code the controller node runs
-   per step, without the messages. For each GPC prediction model and, beside them,
+1. Controller cost per step (median, p99, max), the kind's step (ControllerSteps.step,
+   what the controller node's SteppedController calls) timed around every call of a
+   whole in-process run of the Python loop: the code the node runs per step, without
+   the messages. For each GPC prediction model and, beside them,
    the ADRC and PID kinds of the comparison (their scenario files' gains).
 2. The QP at this size (Nu = 3 and 5 moves, the shipped constraints): the GPC's own
    (core/control/qp.py, compiled), DAQP, and quadprog if installed (pip install
@@ -29,8 +30,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.kernels import compiled
 from ato_nodes.core.config.scenario import prepare, scenario_names
 from ato_nodes.core.control import gpc_steps, lssvm, qp
-from ato_nodes.core.run import loop
-from ato_nodes.core.run.stages import ControllerStage
+from ato_nodes.core.run import fast_loop, loop
 from ato_nodes.studies.runner import Variant, prepare_variants
 
 VARIANTS = {
@@ -45,22 +45,22 @@ VARIANTS = {
 
 
 def step_costs(values) -> np.ndarray:
-    """Seconds of every ControllerStage.run_ready_steps() call of one in-process run of
-    the Python loop (the controller as its node runs it)."""
+    """Seconds of every controller step of one in-process run of the Python loop (the
+    kind's step as its node calls it)."""
     costs = []
-    original = ControllerStage.run_ready_steps
+    original = fast_loop.controller_step
 
-    def timed(self):
+    def timed(*arguments):
         started = time.perf_counter()
-        result = original(self)
+        result = original(*arguments)
         costs.append(time.perf_counter() - started)
         return result
 
-    ControllerStage.run_ready_steps = timed
+    fast_loop.controller_step = timed
     try:
         loop.simulate(values, compiled=False)
     finally:
-        ControllerStage.run_ready_steps = original
+        fast_loop.controller_step = original
     return np.array(costs)
 
 
