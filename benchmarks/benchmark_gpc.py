@@ -3,12 +3,16 @@
 
     python benchmarks/benchmark_gpc.py [--duration 600] [--no-stack]
 
-1. Controller cost per step (median, p99, max), the controller stage's `run_ready_steps()` timed
-   around every call of a whole in-process run: the code the controller node runs
-   per step, without the messages. For each GPC prediction model and, beside them,
+1. Controller cost per step (median, p99, max), the kind's step (ControllerSteps.step,
+   what the controller node's SteppedController calls) timed around every call of a
+   whole in-process run of the Python loop: the code the node runs per step, without
+   the messages. For each GPC prediction model and, beside them,
    the ADRC and PID kinds of the comparison (their scenario files' gains).
-2. The QP at this size (Nu = 3 and 5 moves, the shipped constraints): DAQP, and
-   quadprog if installed (pip install quadprog), against the closed form.
+2. The QP at this size (Nu = 3 and 5 moves, the shipped constraints): the GPC's own
+   (core/control/qp.py, compiled), DAQP, and quadprog if installed (pip install
+   quadprog), against the closed form; then every QP of the shipped GPC scenarios' whole
+   runs solved by the GPC's solver and by DAQP: the largest difference of the solutions,
+   relative to the largest move (at least 1 N/kN).
 3. The stack's rate (steps/s of the lockstep loop) with the GPC and with the Han
    ADRC of seed001-crh380al-adrc, one run each, one after the other, in this run.
 """
@@ -23,8 +27,10 @@ import _cli
 import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.run import loop
-from ato_nodes.core.run.stages import ControllerStage
+from ato_nodes.core.base.kernels import compiled
+from ato_nodes.core.config.scenario import prepare, scenario_names
+from ato_nodes.core.control import gpc_steps, lssvm, qp
+from ato_nodes.core.run import fast_loop, loop
 from ato_nodes.studies.runner import Variant, prepare_variants
 
 VARIANTS = {
@@ -39,23 +45,79 @@ VARIANTS = {
 
 
 def step_costs(values) -> np.ndarray:
-    """Seconds of every ControllerStage.run_ready_steps() call of one in-process run of
-    the Python loop (the controller as its node runs it)."""
+    """Seconds of every controller step of one in-process run of the Python loop (the
+    kind's step as its node calls it)."""
     costs = []
-    original = ControllerStage.run_ready_steps
+    original = fast_loop.controller_step
 
-    def timed(self):
+    def timed(*arguments):
         started = time.perf_counter()
-        result = original(self)
+        result = original(*arguments)
         costs.append(time.perf_counter() - started)
         return result
 
-    ControllerStage.run_ready_steps = timed
+    fast_loop.controller_step = timed
     try:
         loop.simulate(values, compiled=False)
     finally:
-        ControllerStage.run_ready_steps = original
+        fast_loop.controller_step = original
     return np.array(costs)
+
+
+def _solve_compiled(hessian, gradient, rows, lower, upper):
+    x = np.empty(len(gradient))
+    flag = qp.solve_qp(hessian, gradient, rows, lower, upper, x, qp.work_space(len(x)))
+    return x, flag
+
+
+solve_compiled = compiled(_solve_compiled) or _solve_compiled
+
+
+def shipped_qps(values) -> list[tuple]:
+    """Every QP (hessian, gradient, rows, lower, upper) a run of `values` solves: the
+    controller's step run as Python (its model's linearisation and corrections
+    compiled) with its QP recorded, the run otherwise the loop's."""
+    problems = []
+    original = gpc_steps.first_move
+
+    def recorded(settings, hessian, gradient, previous, low, high, max_change):
+        if settings.constrained:
+            problems.append((hessian, gradient, *gpc_steps.constraints(
+                settings.moves, previous, low, high, max_change)))
+        return original(settings, hessian, gradient, previous, low, high, max_change)
+
+    patches = {"compiled_step": gpc_steps._gpc_step, "first_move": recorded,
+               "_linearise_dictionary": lssvm.linearise_dictionary,
+               "_add_sample": lssvm.add_sample}
+    saved = {name: getattr(gpc_steps, name) for name in patches}
+    try:
+        for name, value in patches.items():
+            setattr(gpc_steps, name, value)
+        loop.simulate(values, compiled=False)
+    finally:
+        for name, value in saved.items():
+            setattr(gpc_steps, name, value)
+    return problems
+
+
+def against_daqp(problems) -> tuple[float, int]:
+    """(largest |x - x_daqp| over the problems, relative to max(1, |x_daqp|), problems
+    either solver did not solve)."""
+    import daqp
+    worst, unsolved = 0.0, 0
+    for hessian, gradient, rows, lower, upper in problems:
+        x, flag = solve_compiled(hessian, gradient, rows, lower, upper)
+        reference, _, reference_flag, _ = daqp.solve(hessian, gradient, rows, upper, lower)
+        if flag != qp.SOLVED or reference_flag < 1:
+            unsolved += 1
+            continue
+        scale = max(1.0, float(np.abs(reference).max()))
+        worst = max(worst, float(np.abs(x - reference).max()) / scale)
+    return worst, unsolved
+
+
+def gpc_scenarios() -> list[str]:
+    return [name for name in scenario_names() if prepare(name)["controller.kind"] == "gpc"]
 
 
 def qp_costs(nu: int, repeats: int = 2000) -> dict[str, float]:
@@ -81,6 +143,9 @@ def qp_costs(nu: int, repeats: int = 2000) -> dict[str, float]:
             samples.append(time.perf_counter() - started)
         return float(np.median(samples) * 1e6), float(np.percentile(samples, 99) * 1e6)
 
+    rows = np.vstack([np.eye(nu), cumulative])
+    bounds = np.concatenate([-moves, lower]), np.concatenate([moves, upper])
+    timings["qp.py (compiled)"] = timed(lambda g: solve_compiled(hessian, g, rows, *bounds))
     timings["daqp"] = timed(lambda g: daqp.solve(
         hessian, g, cumulative, np.concatenate([moves, upper]),
         np.concatenate([-moves, lower])))
@@ -123,6 +188,11 @@ def main() -> None:
     for nu in (3, 5):
         print(f"QP with Nu = {nu} (median / p99 microseconds per solve): " + ", ".join(
             f"{name} {median:.1f} / {p99:.1f}" for name, (median, p99) in qp_costs(nu).items()))
+    for name in gpc_scenarios():
+        problems = shipped_qps(prepare(name))
+        worst, unsolved = against_daqp(problems)
+        print(f"{name}: {len(problems)} QPs, qp.py against DAQP: largest difference "
+              f"{worst:.1e} relative, {unsolved} not solved by either")
     if args.no_stack:
         return
     with tempfile.TemporaryDirectory() as scratch:

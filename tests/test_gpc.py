@@ -1,102 +1,72 @@
 """Seed 001's generalized predictive controller: prediction, constraints, offset-free
-tracking, online correction, and its one-line start-up errors."""
+tracking, online correction, the compiled step's bits in every runner, and its one-line
+start-up errors."""
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_stages import same_bits
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.control import gpc as gpc_module
-from ato_nodes.core.control.estimation import on_board_estimator
-from ato_nodes.core.control.gpc import GPC, Arx, GPCSettings
-from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.control import gpc_steps
+from ato_nodes.core.control.limiter import LimiterSettings
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.core.config.schema import defaults
+
+C, A, B, DELAY = 0.01, np.array((1.6, -0.62)), np.array((0.004, 0.001)), 2  # an ARX model
+SPEEDS = np.array([10.0, 10.1, 10.3, 10.4, 10.6, 10.7, 10.9])
+COMMANDS = np.array([5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0])
 
 
-class FixedModel:
-    """A prediction model that always linearises to the same ARX model."""
-
-    def __init__(self, arx, history=6):
-        self.arx, self.delay, self.history = arx, arx.delay, history
-
-    def linearise(self, speeds, commands):
-        return self.arx
-
-    def observe(self, speeds, commands, error):
-        return False
-
-
-ARX = Arx(0.01, np.array((1.6, -0.62)), np.array((0.004, 0.001)), 2)
-
-
-def controller(arx=ARX, horizon=12, nu=3, constrained=True, rate=0.0, low=-1e6, high=1e6):
-    settings = GPCSettings(horizon, nu, 1.0, 1e-4, constrained, 0.0, 0.0, False)
-    limiter = CommandLimiter(low, high, 0.3, rate)
-    gpc = GPC(settings, FixedModel(arx), 0.3, limiter, train=None, envelope=False,
-              estimator=on_board_estimator(defaults(), 0.3))
-    gpc.start(10.0, 10.0)
-    gpc.speeds = np.array([10.0, 10.1, 10.3, 10.4, 10.6, 10.7, 10.9])
-    gpc.commands = np.array([5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0])
-    return gpc
-
-
-def simulate_arx(arx, speeds, commands, future):
+def simulate_arx(speeds, commands, future):
     """y(k+1..k+P) of the ARX model from the histories under the future commands."""
     speeds, commands = list(speeds), list(commands) + list(future)
     past = len(commands) - len(future)
     out = []
     for j in range(1, len(future) + 1):
-        value = arx.c + sum(a * speeds[-i] for i, a in enumerate(arx.a, 1))
-        value += sum(b * commands[past + j - arx.delay - i] for i, b in enumerate(arx.b, 1))
+        value = C + sum(a * speeds[-i] for i, a in enumerate(A, 1))
+        value += sum(b * commands[past + j - DELAY - i] for i, b in enumerate(B, 1))
         speeds.append(value)
         out.append(value)
     return np.array(out)
 
 
+def responses():
+    return gpc_steps.free_and_forced(C, A, B, DELAY, SPEEDS, COMMANDS, 12, 3)
+
+
 def test_free_and_forced_responses_are_those_of_the_arx_model():
-    gpc = controller()
-    free, matrix = gpc._responses(ARX, 0.0)
-    held = [gpc.commands[-1]] * 12
-    np.testing.assert_allclose(free, simulate_arx(ARX, gpc.speeds, gpc.commands, held))
+    free, matrix = responses()
+    held = [COMMANDS[-1]] * 12
+    np.testing.assert_allclose(free, simulate_arx(SPEEDS, COMMANDS, held))
     for i in range(3):  # a unit move at k+i, held after it
         moved = [u + (1.0 if m >= i else 0.0) for m, u in enumerate(held)]
-        response = simulate_arx(ARX, gpc.speeds, gpc.commands, moved) - free
+        response = simulate_arx(SPEEDS, COMMANDS, moved) - free
         np.testing.assert_allclose(matrix[:, i], response, atol=1e-12)
-    assert np.all(matrix[:ARX.delay] == 0.0)  # the input delay: no response before it
-
-
-@pytest.mark.skipif(gpc_module.free_and_forced is gpc_module._free_and_forced,
-                    reason="numba is not installed")
-def test_the_compiled_responses_give_the_bits_of_the_python_ones():
-    rng = np.random.default_rng(7)
-    for na, nb, delay, horizon, moves in [(1, 1, 0, 1, 1), (2, 2, 1, 16, 3), (3, 1, 2, 20, 5),
-                                          (2, 3, 0, 12, 12), (1, 2, 3, 8, 2)]:
-        arx = Arx(rng.normal(0.0, 0.1), rng.normal(0.5, 0.3, na), rng.normal(0.0, 0.01, nb),
-                  delay)
-        history = max(na, delay + nb + 1) + 1
-        speeds, commands = rng.uniform(0, 90, history), rng.uniform(-50, 50, history)
-        arguments = (arx.c, arx.a, arx.b, arx.delay, speeds, commands, horizon, moves)
-        for compiled, python in zip(gpc_module.free_and_forced(*arguments),
-                                    gpc_module._free_and_forced(*arguments), strict=True):
-            np.testing.assert_array_equal(compiled, python)
+    assert np.all(matrix[:DELAY] == 0.0)  # the input delay: no response before it
 
 
 def test_the_qp_keeps_the_moves_inside_the_jerk_limit_and_the_command_inside_its_bounds():
-    gpc = controller(rate=2.0, low=-20.0, high=12.0)
-    free, matrix = gpc._responses(ARX, 0.0)
+    free, matrix = responses()
     hessian = matrix.T @ matrix + 1e-4 * np.eye(3)
+    settings = SimpleNamespace(constrained=True, moves=3)
+
+    def move(gradient, previous):
+        return gpc_steps.first_move(settings, hessian, gradient, previous, -20.0, 12.0, 0.6)
+
     far_above = matrix.T @ (free - (free + 30.0))  # a target far above: wants full traction
-    move = gpc._solve(hessian, far_above, gpc.commands[-1], -20.0, 12.0)
-    assert move == pytest.approx(2.0 * 0.3)  # the jerk limit binds
+    assert move(far_above, 11.0) == pytest.approx(0.6)  # the jerk limit binds
     unconstrained = float(np.linalg.solve(hessian, -far_above)[0])
     assert unconstrained > 0.6
     near = matrix.T @ (free - (free + 0.01))  # a small move: no constraint active
-    assert gpc._solve(hessian, near, gpc.commands[-1], -20.0, 12.0) == pytest.approx(
-        float(np.linalg.solve(hessian, -near)[0]), rel=1e-6)
-    gpc.commands[-1] = 11.9  # next to u_max: the QP stops at it
-    assert gpc._solve(hessian, far_above, 11.9, -20.0, 12.0) == pytest.approx(0.1, abs=1e-6)
+    assert move(near, 11.0) == pytest.approx(float(np.linalg.solve(hessian, -near)[0]),
+                                             rel=1e-12)
+    assert move(far_above, 11.9) == pytest.approx(0.1, abs=1e-12)  # stops at u_max
+    assert gpc_steps.first_move(SimpleNamespace(constrained=False, moves=3), hessian,
+                                far_above, 11.0, -20.0, 12.0, 0.6) == pytest.approx(
+        unconstrained, rel=1e-12)
 
 
 def crh380al(*overrides):
@@ -174,16 +144,38 @@ def test_the_berthing_mode_stops_at_the_mark_and_the_holding_target_holds():
     assert np.all(series["model_error"][stopped + 5:] == 0.0)
 
 
-def test_the_additions_at_their_defaults_leave_the_paper_configuration_untouched(monkeypatch):
-    values = apply_overrides(load_scenario("seed001-crh380al"), ["run.duration=60"])
+def test_the_additions_at_their_defaults_leave_the_paper_configuration_untouched():
+    """berthing_speed 0: the cost counts the whole horizon, a stop in it or not; hold
+    false: a held train's one-step error is learnt."""
+    values = load_scenario("seed001-crh380al")
     assert values["gpc.berthing_speed"] == 0.0 and values["gpc.hold"] is False
-    before = simulate(values)
+    stopping = np.concatenate((np.linspace(2.0, 0.0, 8), np.zeros(13)))
+    for berthing_speed, counted in ((0.0, 16), (0.05, 7)):  # horizon[0]: the current target
+        settings = SimpleNamespace(berthing_speed=berthing_speed, horizon=16, delay=1)
+        assert gpc_steps._predictions(settings, stopping) == counted
+    limits = LimiterSettings(-50.0, 50.0, 12.0, 0.0, 30.0, 0.0)
+    state = SimpleNamespace(expecting=True, expected=0.02, bias=0.0, added=0, model=None,
+                            speeds=np.zeros(5), commands=np.zeros(5))
+    learning = SimpleNamespace(hold=False, bias_gain=0.5, prediction=gpc_steps.MECHANISTIC)
+    error, bias, _, _ = gpc_steps._learn(learning, state, 0.0, 0.0, limits)  # held
+    assert error == -0.02 and bias == -0.01
+    holding = SimpleNamespace(hold=True, bias_gain=0.5, prediction=gpc_steps.MECHANISTIC)
+    assert gpc_steps._learn(holding, state, 0.0, 0.0, limits)[:2] == (0.0, 0.0)
 
-    def entered(*arguments):
-        raise AssertionError("a berthing or holding path ran with the additions off")
 
-    monkeypatch.setattr(GPC, "_berthing", entered)
-    monkeypatch.setattr(gpc_module, "holds", entered)
-    after = simulate(values)
-    for name in before:
-        np.testing.assert_array_equal(before[name], after[name], err_msg=name)
+@pytest.mark.parametrize("scenario, overrides", [
+    ("seed001-crh380al", ["run.duration=60", "gpc.correction_threshold=0.03"]),
+    ("seed001-crh380al-ato", ["plant.initial_position=59950", "run.duration=60",
+                              "estimator.enabled=true", "gpc.correction_threshold=0.03"]),
+    ("seed001-crh380al", ["run.duration=30", "gpc.prediction=multimodel"]),
+    ("seed001-crh380al", ["run.duration=30", "gpc.constrained=false", "gpc.window=2",
+                          "gpc.correction_threshold=0.01"]),
+])
+def test_the_gpc_driven_as_the_nodes_drive_it_gives_the_loops_bits(scenario, overrides):
+    """The node's compiled step and the loop's: the same bits, online corrections (and a
+    full window forgetting), the estimator and the berth included."""
+    values = apply_overrides(load_scenario(scenario), overrides)
+    same_bits(values)
+    series = simulate(values)
+    if "gpc.correction_threshold=0.01" in overrides:
+        assert series["samples_added"][-1] > 2  # the window of 2 forgot some

@@ -16,10 +16,11 @@ Every step k (y(k) the measured speed, m/s; u the command, N/kN):
    from the run context's preview (controller.preview >= P). Constrained (the
    default): a QP with |du| <= the jerk limit (controller.max_rate h) and the
    command inside [controller.u_min, controller.u_max] and the train's traction and
-   brake envelope at the current speed, solved by DAQP (a dual active-set solver
-   for small dense QPs: ~10 us at Nu = 5 here, against ~160 us for OSQP and ~100 ms
-   of modelling per call for cvxpy). Unconstrained: the paper's closed form, then
-   the limiter clips.
+   brake envelope at the current speed, solved by Goldfarb and Idnani's dual
+   active-set method (core/control/qp.py, compiled: a few microseconds at Nu = 3;
+   DAQP, the solver it replaced, is its reference in tests/test_qp.py and
+   benchmarks/benchmark_gpc.py). Unconstrained: the paper's closed form, then the
+   limiter clips.
 4. u(k) = u(k-1) + du(k), through the shared CommandLimiter.
 
 The models see the effective command: the command clipped to the nominal train's
@@ -33,29 +34,40 @@ c grows by h d sum_j j a_j (the models' a sum to ~1), whatever the model.
 
 Online correction (LSSVM, `gpc.correction`): after y(k) arrives, a sample whose
 one-step prediction error exceeds `gpc.correction_threshold` (the paper's 2 km/h)
-joins the model (core/control/lssvm.py: factor update, bounded window); deterministic, so a
-node and simulate() stay bit-identical.
+joins the model (core/control/lssvm.py: factor update, bounded window).
+
+The mechanistic model: the nominal train's equations (the run context's train),
+discretised exactly for a command held over the period (zero-order hold) through the
+first-order lag tau, the dead time as an input delay, the resistance linearised at y(k)
+and held over the period. With e = exp(-h/tau), c1 = tau (1 - e) / h, G = h xi and
+u_d(k) the command acting over [k, k+1] (u(k - dead)):
+    F(k+1) = e F(k) + (1 - e) u_d(k)
+    y(k+1) = y(k) + G (c1 F(k) + (1 - c1) u_d(k) - w0(y(k)))
+and, F eliminated,
+    y(k+1) = (1 + e) y(k) - e y(k-1) + G ((1 - c1) u_d(k) + (c1 - e) u_d(k-1)
+             - w0(y(k)) + e w0(y(k-1))).
+
+The step is compiled (core/control/gpc_steps.py: plain functions of its settings and
+state NamedTuples, as every stepped kind), the node and the compiled loop running the
+same code: deterministic, so a node and simulate() stay bit-identical.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass
 
-import daqp
 import numpy as np
 
 from ..base.errors import ScenarioError
-from ..base.kernels import compiled
-from ..base.registry import Component, Controller, ControllerOutput, Output
+from ..base.registry import Component, Output
 from ..base.spec import param
 from ..base.units import KMH
-from ..train.plant import force_limits
-from .estimation import (ESTIMATE_OUTPUTS, OnBoardEstimator, estimated_force_limits,
-                         on_board_estimates, on_board_estimator, on_board_step)
-from .limiter import CommandLimiter, holds
-from .lssvm import load_model
+from .estimation import ESTIMATE_OUTPUTS, on_board_estimator
+from .gpc_steps import (GPC_STEPS, LEARNED, MECHANISTIC, MULTIMODEL, GPCSettings, GPCState,
+                        MultiModel, Nominal)
+from .limiter import CommandLimiter
+from .lssvm import Layout, empty_dictionary, load_model
+from .stepped import SteppedController
 
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
 
@@ -73,8 +85,9 @@ PARAMETERS = (
           0.0, 1e9),
     param("gpc.r", 1e-3, "weight of the squared command move, per (N/kN)^2", "controller",
           1e-12, 1e9),
-    param("gpc.constrained", True, "solve the input constraints as a QP (DAQP); false = the "
-          "paper's unconstrained closed form, clipped by the limiter", "controller"),
+    param("gpc.constrained", True, "solve the input constraints as a QP (a dual active-set "
+          "method); false = the paper's unconstrained closed form, clipped by the limiter",
+          "controller"),
     param("gpc.bias_filter", 3.0, "time constant of the filter on the one-step residual fed "
           "back into the prediction, s (0 = no feedback)", "controller", 0.0, 1e4),
     param("gpc.correction", True, "online correction of the LSSVM model during the run",
@@ -95,323 +108,51 @@ PARAMETERS = (
 )
 
 
-@dataclass(frozen=True)
-class Arx:
-    """y(k+1) = c + sum_j a[j-1] y(k+1-j) + sum_j b[j-1] u(k+1-delay-j)."""
-
-    c: float
-    a: np.ndarray  # float64, a_1 .. a_na
-    b: np.ndarray  # float64, b_1 .. b_nb
-    delay: int
-
-    def predict(self, speeds, commands) -> float:
-        """One step from histories ending with y(k) and u(k)."""
-        value = self.c
-        for j, a in enumerate(self.a, 1):
-            value += a * speeds[-j]
-        for j, b in enumerate(self.b, 1):
-            value += b * commands[-self.delay - j]
-        return value
-
-
-class LearnedModel:
-    """The LSSVM of a model file, linearised by its analytic gradient."""
-
-    def __init__(self, model, correct: bool, threshold: float):
-        self.model, self.layout = model, model.layout
-        self.correct, self.threshold = correct, threshold
-        self.delay = self.layout.delay
-        self.history = max(self.layout.speed_lags, self.layout.history + 1)
-        # x(k+1) from the histories (speeds end with y(k), commands with u(k-1)), u(k),
-        # not chosen yet, taken as u(k-1): the positions from the end it reads
-        self.speed_positions = -np.arange(1, self.layout.speed_lags + 1)
-        self.command_positions = -np.maximum(self.delay + np.arange(self.layout.command_lags), 1)
-
-    def linearise(self, speeds, commands) -> Arx:
-        x = np.concatenate((speeds[self.speed_positions], commands[self.command_positions]))
-        value, gradient = self.model.linearise(x)
-        na = self.layout.speed_lags
-        a = gradient[:na].copy()
-        a[0] += 1.0  # the model learns the increment y(k+1) - y(k)
-        return Arx(value - float(gradient @ x), a, gradient[na:], self.delay)
-
-    def observe(self, speeds, commands, error: float) -> bool:
-        """y(k) has arrived (speeds end with it, commands with u(k-1)) with the one-step
-        error of the model's last (linearised) prediction: beyond the threshold, the
-        sample joins the model."""
-        if not self.correct or abs(error) <= self.threshold:
-            return False
-        return self.model.add(self.layout.regressor(speeds[:-1], commands),
-                              speeds[-1] - speeds[-2])
-
-
-class MultiModel:
-    """Linear ARX models around operating speeds, blended by Gaussian weights of y(k)."""
-
-    def __init__(self, layout, centres, width: float, coefficients):
-        self.layout, self.centres, self.width = layout, centres, width
-        self.coefficients = coefficients
-        self.delay = layout.delay
-        self.history = max(layout.speed_lags, layout.history + 1)
-
-    def row(self, speed: float) -> np.ndarray:
-        """The blended coefficients [c, a.., b..] at this speed."""
-        weights = np.exp(-0.5 * ((speed - self.centres) / self.width) ** 2)
-        if not weights.sum() > 0.0:  # far outside every centre: the nearest alone
-            weights = (np.abs(speed - self.centres)
-                       == np.abs(speed - self.centres).min()).astype(float)
-        return weights @ self.coefficients / weights.sum()
-
-    def linearise(self, speeds, commands) -> Arx:
-        row = self.row(speeds[-1])
-        na = self.layout.speed_lags
-        return Arx(float(row[0]), row[1:1 + na], row[1 + na:], self.layout.delay)
-
-    def observe(self, speeds, commands, error: float) -> bool:
-        return False
-
-
-class MechanisticModel:
-    """The nominal train's equations (the run context's train), discretised exactly for
-    a command held over the period (zero-order hold) through the first-order lag tau,
-    the dead time as an input delay, the resistance linearised at y(k) and held over
-    the period. With e = exp(-h/tau), c1 = tau (1 - e) / h, G = h xi and u_d(k) the
-    command acting over [k, k+1] (u(k - dead)):
-        F(k+1) = e F(k) + (1 - e) u_d(k)
-        y(k+1) = y(k) + G (c1 F(k) + (1 - c1) u_d(k) - w0(y(k)))
-    and, F eliminated,
-        y(k+1) = (1 + e) y(k) - e y(k-1) + G ((1 - c1) u_d(k) + (c1 - e) u_d(k-1)
-                 - w0(y(k)) + e w0(y(k-1)))."""
-
-    def __init__(self, train, period: float):
-        self.train, self.h = train, period
-        self.dead = round(train.dead_time / period)
-        tau = train.actuator_lag
-        self.lag = math.exp(-period / tau) if tau > 0 else 0.0
-        self.c1 = tau * (1.0 - self.lag) / period if tau > 0 else 0.0
-        self.delay = self.dead
-        self.history = self.dead + 3
-
-    def linearise(self, speeds, commands) -> Arx:
-        train, h, e, c1 = self.train, self.h, self.lag, self.c1
-        v = speeds[-1]
-        gain = h * train.xi
-        slope = train.davis_b + 2.0 * train.davis_c * abs(v)  # dw0/dv, N/kN per m/s
-        w0 = train.resistance(v) - slope * v  # w0(y) ~ w0 + slope y near v
-        if e == 0.0:
-            return Arx(-gain * w0, np.array((1.0 - gain * slope,)), np.array((gain,)), self.dead)
-        return Arx(-gain * w0 * (1.0 - e),
-                   np.array((1.0 + e - gain * slope, -e + e * gain * slope)),
-                   np.array((gain * (1.0 - c1), gain * (c1 - e))), self.dead)
-
-    def observe(self, speeds, commands, error: float) -> bool:
-        return False
-
-
-@dataclass(frozen=True)
-class GPCSettings:
-    horizon: int
-    control_horizon: int
-    q: float
-    r: float
-    constrained: bool
-    bias_filter: float
-    berthing_speed: float  # m/s, 0: the whole horizon (the paper's)
-    hold: bool             # no learning while the limiter holds the train
-
-
-def _free_and_forced(c: float, a: np.ndarray, b: np.ndarray, delay: int, speeds: np.ndarray,
-                     commands: np.ndarray, horizon: int, moves: int
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """(free response y(k+1..k+P) with u held at u(k-1), step-response matrix
-    G: P x Nu, G[j, i] the response at k+j+1 to a unit move at k+i, held) of the ARX
-    model from the histories (speeds end with y(k), commands with u(k-1)). Plain
-    loops, P (na + nb) products: compiled below when numba is installed."""
-    na, nb, last = len(a), len(b), len(commands) - 1
-    trajectory = np.empty(na + horizon)  # y(k+1-na) .. y(k+P)
-    trajectory[:na] = speeds[len(speeds) - na:]
-    free, step = np.empty(horizon), np.empty(horizon)
-    for j in range(1, horizon + 1):
-        value, response = c, 0.0
-        for i in range(1, na + 1):
-            value += a[i - 1] * trajectory[na + j - 1 - i]
-            if j > i:
-                response += a[i - 1] * step[j - i - 1]
-        for i in range(1, nb + 1):
-            m = j - delay - i  # u(k+m): the held u(k-1) from m = -1 on
-            value += b[i - 1] * commands[last + 1 + m if m < -1 else last]
-            if m >= 0:
-                response += b[i - 1]
-        trajectory[na + j - 1] = value
-        free[j - 1], step[j - 1] = value, response
-    matrix = np.zeros((horizon, moves))
-    for j in range(horizon):
-        for i in range(min(j + 1, moves)):
-            matrix[j, i] = step[j - i]
-    return free, matrix
-
-
-# the same operations in the same order (numba keeps IEEE semantics): the same bits
-free_and_forced = compiled(_free_and_forced) or _free_and_forced
-
-
-def _push(history: np.ndarray, value: float) -> None:
-    """Drop the oldest entry, append the newest."""
-    history[:-1] = history[1:]
-    history[-1] = value
-
-
-class GPC(Controller):
-    def __init__(self, settings: GPCSettings, model, period: float, limiter: CommandLimiter,
-                 train, envelope: bool, estimator: tuple):
-        """`estimator`: on_board_estimator's settings and departure state."""
-        if settings.horizon <= model.delay:
-            raise ScenarioError(f"gpc.horizon = {settings.horizon} does not reach past the "
-                                f"model's input delay of {model.delay} steps")
-        self.s, self.model, self.limiter = settings, model, limiter
-        self.train, self.period = train, period
-        # the nominal train's traction and brake envelope (None: no envelope)
-        self.envelope = train.envelope if envelope else None
-        self.estimator: OnBoardEstimator = estimator[0]
-        self.estimated = estimator[1]  # None: off
-        self.nu = min(settings.control_horizon, settings.horizon)
-        self.bias_gain = period / (settings.bias_filter + period) if settings.bias_filter else 0.0
-        self.speeds = np.zeros(0)
-        self.commands = np.zeros(0)
-        self.expected: float | None = None  # the model's prediction of the next y(k)
-        self.bias = 0.0
-        self.added = 0
-        self.lags = np.zeros(0)  # 1 .. na, the weights of sum_j j a_j
-        moves = np.arange(self.nu)
-        self.cumulative = (moves[:, None] >= moves[None, :]).astype(float)  # u = u0 + C du
-        self.move_weight = settings.r * np.eye(self.nu)
-        rate = limiter.max_change if limiter.max_change > 0 else math.inf
-        self.move_limit = np.full(self.nu, min(rate, 1e30))  # |du| per step
-        self.reach = rate * np.arange(1, self.nu + 1)  # what the jerk limit can reach
-
-    def start(self, target: float, measured: float) -> None:
-        size = self.model.history + 1
-        self.speeds = np.full(size, float(measured))
-        self.commands = np.zeros(size)
-
-    def _responses(self, arx: Arx, bias: float) -> tuple[np.ndarray, np.ndarray]:
-        """(free response, step-response matrix) of `arx`, its constant plus `bias`, from
-        the histories."""
-        return free_and_forced(arx.c + bias, arx.a, arx.b, arx.delay, self.speeds,
-                               self.commands, self.s.horizon, self.nu)
-
-    def force_range(self, speed: float) -> tuple[float, float]:
-        """(brake, traction) the train can apply at this speed, N/kN: the nominal's, or
-        as estimated on board (unbounded without an envelope)."""
-        if self.envelope is None:
-            return -math.inf, math.inf
-        if self.estimated is not None:
-            return estimated_force_limits(self.estimator.settings, self.estimated, speed)
-        return force_limits(speed, self.envelope)
-
-    def estimated_resistance_change(self, arx: Arx) -> float:
-        """What the ARX constant gains from the estimated resistance (module docstring)."""
-        train, speed = self.train, self.speeds[-1]
-        if len(self.lags) != len(arx.a):  # once: every ARX of the model has its na
-            self.lags = np.arange(1, len(arx.a) + 1)
-        acceleration = -train.xi * (self.estimated.resistance_scale - 1.0) * train.resistance(
-            speed)
-        return self.period * acceleration * float(self.lags @ arx.a)
-
-    def step(self, target: float, measured: float, horizon) -> ControllerOutput:
-        s = self.s
-        if len(horizon) < s.horizon + 1:
-            raise ValueError("the GPC needs controller.preview >= gpc.horizon")
-        _push(self.speeds, measured)
-        error = self._learn(target, measured)
-        model_arx = self.model.linearise(self.speeds, self.commands)
-        if self.estimated is not None:  # the model's own prediction and error include it
-            model_arx = dataclasses.replace(
-                model_arx, c=model_arx.c + self.estimated_resistance_change(model_arx))
-        free, matrix = self._responses(model_arx, self.bias)
-        reference = np.asarray(horizon[1:s.horizon + 1], dtype=float)
-        if s.berthing_speed > 0.0:
-            free, matrix, reference = self._berthing(free, matrix, reference)
-        weighted = s.q * matrix.T
-        hessian = weighted @ matrix + self.move_weight
-        gradient = weighted @ (free - reference)
-        previous = self.limiter.last
-        brake, traction = self.force_range(measured)
-        move = self._solve(hessian, gradient, previous, max(self.limiter.u_min, brake),
-                           min(self.limiter.u_max, traction))
-        u = self.limiter.apply(previous + move, target, measured)
-        # what the models see: the part of the command the train can apply (the nominal
-        # envelope), as in identification
-        _push(self.commands, brake if u < brake else traction if u > traction else u)
-        self.expected = model_arx.predict(self.speeds, self.commands)
-        predicted = free[0] + matrix[0, 0] * (u - previous)
-        self.estimated = on_board_step(self.estimator, self.estimated, u, measured)
-        return ControllerOutput(u, (predicted, error, self.bias, float(self.added),
-                                    *on_board_estimates(self.estimator, self.estimated)))
-
-    def _learn(self, target: float, measured: float) -> float:
-        """The model's own one-step error (without the fed-back bias), fed back and to
-        the online correction; with `hold`, nothing is learnt while the limiter holds
-        the train (and the next step's error is not taken from a held one)."""
-        if self.s.hold and holds(target, measured, self.limiter.settings):
-            self.expected = None
-            return 0.0
-        error = 0.0
-        if self.expected is not None:
-            error = measured - self.expected
-            self.bias += self.bias_gain * (error - self.bias)
-            if self.model.observe(self.speeds, self.commands, error):
-                self.added += 1
-        return error
-
-    def _berthing(self, free, matrix, reference):
-        """The berthing mode: the predictions and targets up to the first target at or
-        below gpc.berthing_speed (the stop), at least to the first prediction a move
-        reaches. Beyond the stop the linear model rolls a braked train on backwards,
-        and a target of 0 there would ease the braking into the mark."""
-        below = np.flatnonzero(reference <= self.s.berthing_speed)
-        if not len(below):
-            return free, matrix, reference
-        count = max(int(below[0]) + 1, self.model.delay + 1)
-        return free[:count], matrix[:count], reference[:count]
-
-    def _solve(self, hessian, gradient, previous: float, low: float, high: float) -> float:
-        """The first move du(k) of the plan, the command kept in [low, high]."""
-        if not self.s.constrained:
-            return float(np.linalg.solve(hessian, -gradient)[0])
-        # never infeasible: a bound the jerk limit cannot reach yet widens to what it can
-        upper = np.maximum(high, previous - self.reach) - previous
-        lower = np.minimum(low, previous + self.reach) - previous
-        x, _, flag, _ = daqp.solve(hessian, gradient, self.cumulative,
-                                   np.concatenate([self.move_limit, upper]),
-                                   np.concatenate([-self.move_limit, lower]))
-        if flag < 1:  # no solution reported: the closed form, clipped by the limiter
-            return float(np.linalg.solve(hessian, -gradient)[0])
-        return float(x[0])
-
-
-def _build(values, context, limiter: CommandLimiter) -> GPC:
-    kind = values["gpc.prediction"]
-    settings = GPCSettings(values["gpc.horizon"], values["gpc.control_horizon"],
-                           values["gpc.q"], values["gpc.r"], values["gpc.constrained"],
-                           values["gpc.bias_filter"], values["gpc.berthing_speed"],
-                           values["gpc.hold"])
-    if values["controller.preview"] < settings.horizon:
-        raise ScenarioError(f"gpc.horizon = {settings.horizon} needs controller.preview >= "
-                            f"{settings.horizon} (it is {values['controller.preview']})")
+def _build(values, context, limiter: CommandLimiter) -> SteppedController:
+    horizon, kind = values["gpc.horizon"], values["gpc.prediction"]
+    if values["controller.preview"] < horizon:
+        raise ScenarioError(f"gpc.horizon = {horizon} needs controller.preview >= "
+                            f"{horizon} (it is {values['controller.preview']})")
+    train, period = context.train, context.period
     if kind == "mechanistic":
-        model = MechanisticModel(context.train, context.period)
+        layout, dictionary = Layout(2, 2, round(train.dead_time / period)), empty_dictionary(4)
+        multimodel = MultiModel(np.zeros(0), 1.0, np.zeros((0, 5)))
+        history = layout.delay + 3
     else:
         model = model_for_run(values, context)
-        if kind == "lssvm":
-            model = LearnedModel(model.lssvm, values["gpc.correction"],
-                                 values["gpc.correction_threshold"])
-        else:
-            model = MultiModel(model.lssvm.layout, model.arx_centres, model.arx_width,
-                               model.arx_coefficients)
-    return GPC(settings, model, context.period, limiter, context.train,
-               values["plant.envelope"],
-               on_board_estimator(values, context.period, context.line))
+        layout, dictionary = model.lssvm.layout, model.lssvm.dictionary
+        multimodel = MultiModel(model.arx_centres.copy(), model.arx_width,
+                                model.arx_coefficients.copy())
+        history = max(layout.speed_lags, layout.history + 1)
+    if horizon <= layout.delay:
+        raise ScenarioError(f"gpc.horizon = {horizon} does not reach past the model's input "
+                            f"delay of {layout.delay} steps")
+    estimator, estimated = on_board_estimator(values, period, context.line)
+    settings = GPCSettings(
+        horizon, min(values["gpc.control_horizon"], horizon), values["gpc.q"], values["gpc.r"],
+        values["gpc.constrained"], _bias_gain(values["gpc.bias_filter"], period),
+        values["gpc.berthing_speed"], values["gpc.hold"],
+        {"lssvm": LEARNED, "mechanistic": MECHANISTIC, "multimodel": MULTIMODEL}[kind],
+        layout.speed_lags, layout.command_lags, layout.delay,
+        kind == "lssvm" and values["gpc.correction"], values["gpc.correction_threshold"],
+        period, _nominal(train, period), multimodel, values["plant.envelope"],
+        train.envelope, estimator)
+    state = GPCState(np.zeros(history + 1), np.zeros(history + 1), False, 0.0, 0.0, 0,
+                     dictionary, estimated)
+    return SteppedController(GPC_STEPS, settings, limiter, state)
+
+
+def _bias_gain(bias_filter: float, period: float) -> float:
+    """The residual filter's gain per step (0: no feedback)."""
+    return period / (bias_filter + period) if bias_filter else 0.0
+
+
+def _nominal(train, period: float) -> Nominal:
+    """The nominal train's constants for the mechanistic model (module docstring)."""
+    tau = train.actuator_lag
+    lag = math.exp(-period / tau) if tau > 0 else 0.0
+    c1 = tau * (1.0 - lag) / period if tau > 0 else 0.0
+    return Nominal(train.xi, train.davis_a, train.davis_b, train.davis_c, lag, c1)
 
 
 def model_for_run(values, context):
@@ -441,6 +182,6 @@ GPC_CONTROLLER = Component(
      Output("samples_added", "1", "samples the online correction has added so far"),
      *ESTIMATE_OUTPUTS),
     search_space=(("gpc.q", 0.1, 100.0), ("gpc.r", 1e-5, 1e-1), ("gpc.bias_filter", 0.0, 20.0)),
-    # the mechanistic model needs no model file
-    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 1), ("controller.preview", 1)),
-    estimates=True)
+    # the mechanistic model needs no model file; 20 steps reach past a shipped dead time
+    warm_up=(("gpc.prediction", "mechanistic"), ("gpc.horizon", 20), ("controller.preview", 20)),
+    steps=GPC_STEPS, estimates=True)

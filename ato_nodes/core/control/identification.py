@@ -31,7 +31,7 @@ import numpy as np
 from ..base.units import KMH, MS_TO_KMH
 from ..optimizers import optimize
 from . import lssvm
-from .gpc import MultiModel
+from .gpc_steps import MultiModel, blended_row
 
 
 def excitation_table(seed: int, duration: float, top_speed: float) -> list[tuple[float, float]]:
@@ -244,10 +244,10 @@ def lssvm_step(model: lssvm.LSSVM) -> Callable[[np.ndarray], float]:
 
 def multimodel_step(layout: lssvm.Layout, centres: np.ndarray, width: float,
                     coefficients: np.ndarray) -> Callable[[np.ndarray], float]:
-    model = MultiModel(layout, centres, width, coefficients)  # as the GPC blends them
+    model = MultiModel(centres, width, coefficients)  # as the GPC blends them
 
     def step(x: np.ndarray) -> float:
-        row = model.row(x[0])
+        row = blended_row(model, x[0])
         return float(row[0] + row[1:] @ x)
     return step
 

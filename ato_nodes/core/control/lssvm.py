@@ -46,6 +46,7 @@ import os
 import zipfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from ..base import yamlfile
@@ -100,6 +101,7 @@ class Layout:
         return np.array(ys + us)
 
 
+@jitable
 def _rbf_exponents(z: np.ndarray, support: np.ndarray, width: float, difference: np.ndarray,
                    exponent: np.ndarray) -> None:
     """In place, row by row: difference = z - support and exponent = -|difference|^2 /
@@ -107,8 +109,8 @@ def _rbf_exponents(z: np.ndarray, support: np.ndarray, width: float, difference:
     x86-64 baseline kernel (SSE2) keeps two lanes, lane l the columns l, l+2, ..; per
     block of eight columns it adds each lane's four products last-first, past the blocks
     one product per lane at a time, then lane 0 + lane 1 (tests/test_lssvm.py checks it
-    against np.einsum). The compiled form of LSSVM.linearise's numpy expression: one
-    pass instead of two numpy calls looping over rows of a few columns."""
+    against np.einsum): one pass instead of two numpy calls looping over rows of a few
+    columns, and a fixed order of sums (einsum's own), whatever the machine."""
     count = len(z)
     blocks = count - count % 8
     for i in range(len(exponent)):
@@ -127,9 +129,6 @@ def _rbf_exponents(z: np.ndarray, support: np.ndarray, width: float, difference:
         exponent[i] = -(even + odd) / width
 
 
-compiled_rbf_exponents = compiled(_rbf_exponents)  # None without numba
-
-
 @jitable
 def _dot(a: np.ndarray, b: np.ndarray, count: int) -> float:
     """a[:count] . b[:count] in four lanes (lane l the entries l, l+4, ..), then the
@@ -146,6 +145,7 @@ def _dot(a: np.ndarray, b: np.ndarray, count: int) -> float:
     return (lane0 + lane1) + (lane2 + lane3)
 
 
+@jitable
 def _forward_substitution(factor: np.ndarray, rhs: np.ndarray, solution: np.ndarray,
                           start: int, stop: int) -> None:
     """Rows start .. stop-1 of L y = rhs into `solution` (whose rows before `start`
@@ -154,6 +154,7 @@ def _forward_substitution(factor: np.ndarray, rhs: np.ndarray, solution: np.ndar
         solution[i] = (rhs[i] - _dot(factor[i], solution, i)) / factor[i, i]
 
 
+@jitable
 def _back_substitution(factor: np.ndarray, first: np.ndarray, second: np.ndarray,
                        count: int) -> None:
     """In place, L^T x = y for two vectors (y in, x out), L's rows read whole (the
@@ -167,19 +168,203 @@ def _back_substitution(factor: np.ndarray, first: np.ndarray, second: np.ndarray
             second[i] -= x2 * row[i]
 
 
+@jitable
 def _squared_norm(a: np.ndarray, count: int) -> float:
     return _dot(a, a, count)
 
 
-# plain loops: slow in Python, so compiled whenever numba is installed
-forward_substitution = compiled(_forward_substitution) or _forward_substitution
-back_substitution = compiled(_back_substitution) or _back_substitution
-squared_norm = compiled(_squared_norm) or _squared_norm
+class Dictionary(NamedTuple):
+    """An LSSVM in fixed-capacity arrays (capacity: the identification samples plus the
+    correction window), what linearise_dictionary reads and add_sample changes: the
+    arrays in place, the scalars in the tuple it returns. The LSSVM below and the GPC's
+    compiled step (core/control/gpc_steps.py) run the same functions on it."""
+
+    mu: float
+    delta: float
+    offset: np.ndarray      # regressor scaling, per column
+    scale: np.ndarray
+    fixed: int              # identification samples: they stay
+    z: np.ndarray           # capacity x columns, scaled regressors
+    t: np.ndarray           # increments, m/s (0 beyond size)
+    # The lower Cholesky factor of H, padded with the identity beyond `size`: the
+    # solves then run on the whole (contiguous) buffer, never on a copied slice.
+    factor: np.ndarray
+    ones: np.ndarray
+    forward: np.ndarray     # 2 x capacity: L^-1 [1, t], the forward half of the solve
+    row: np.ndarray         # a new sample's row of the factor
+    difference: np.ndarray  # capacity x columns: z minus the dictionary (work space)
+    weights: np.ndarray     # capacity: kernel values times alpha (work space)
+    alpha: np.ndarray       # capacity: the coefficients (0 beyond size)
+    solved: np.ndarray      # 2 x capacity: eta and nu of the back substitution
+    size: int
+    bias: float
+    added: int
+    rejected: int
+    forgotten: int
+
+
+def empty_dictionary(columns: int) -> Dictionary:
+    """A Dictionary of no samples and no room: what the GPC's predictions without an
+    LSSVM carry (one compiled step serves them all)."""
+    return Dictionary(1.0, 1.0, np.zeros(columns), np.ones(columns), 0,
+                      np.zeros((0, columns)), np.zeros(0), np.zeros((0, 0)), np.zeros(0),
+                      np.zeros((2, 0)), np.zeros(0), np.zeros((0, columns)), np.zeros(0),
+                      np.zeros(0), np.zeros((2, 0)), 0, 0.0, 0, 0, 0)
+
+
+@jitable
+def _counted(d: Dictionary, size: int, bias: float, added: int, rejected: int, forgotten: int
+             ) -> Dictionary:
+    """`d` with these scalars (compiled code has no NamedTuple._replace)."""
+    return Dictionary(d.mu, d.delta, d.offset, d.scale, d.fixed, d.z, d.t, d.factor, d.ones,
+                      d.forward, d.row, d.difference, d.weights, d.alpha, d.solved, size, bias,
+                      added, rejected, forgotten)
+
+
+@jitable
+def _forward_rows(d: Dictionary, start: int) -> None:
+    """L^-1 [1, t] from row `start` on (the rows before it are solved)."""
+    _forward_substitution(d.factor, d.ones, d.forward[0], start, d.size)
+    _forward_substitution(d.factor, d.t, d.forward[1], start, d.size)
+
+
+@jitable
+def _solved(d: Dictionary) -> Dictionary:
+    """The coefficients from the forward half: eta = L^-T L^-1 1, nu = L^-T L^-1 t."""
+    n = d.size
+    eta, nu = d.solved[0], d.solved[1]
+    eta[:n], nu[:n] = d.forward[0, :n], d.forward[1, :n]
+    _back_substitution(d.factor, eta, nu, n)
+    return _coefficients(d)
+
+
+@jitable
+def _coefficients(d: Dictionary) -> Dictionary:
+    """b = 1^T nu / 1^T eta, alpha = nu - b eta, from d.solved's eta and nu."""
+    n, eta, nu = d.size, d.solved[0], d.solved[1]
+    bias = nu[:n].sum() / eta[:n].sum()
+    for i in range(n):
+        d.alpha[i] = nu[i] - bias * eta[i]
+    return _counted(d, d.size, bias, d.added, d.rejected, d.forgotten)
+
+
+@jitable
+def _solved_with_row(d: Dictionary) -> Dictionary:
+    """_solved after the factor gained its last row [l^T, s] (l in d.row): with
+    u = L^-T l (one back substitution, not two), x = L'^-T y' is
+    [x_old - (y_n / s) u, y_n / s] for each of eta and nu."""
+    n = d.size - 1
+    u, scale = d.row, d.factor[n, n]
+    for j in range(n - 1, -1, -1):  # L^T u = l, in place, as _back_substitution
+        u[j] /= d.factor[j, j]
+        row, x = d.factor[j], u[j]
+        for i in range(j):
+            u[i] -= x * row[i]
+    for k in range(2):
+        last = d.forward[k, n] / scale
+        for i in range(n):
+            d.solved[k, i] -= last * u[i]
+        d.solved[k, n] = last
+    return _coefficients(d)
+
+
+@jitable(inline=True)
+def _kernel_terms(d: Dictionary, x: np.ndarray) -> None:
+    """d.difference = z - the dictionary, d.weights = the kernel values at x (unscaled)."""
+    n = d.size
+    z = (x - d.offset) / d.scale
+    _rbf_exponents(z, d.z[:n], 2.0 * d.delta ** 2, d.difference[:n], d.weights[:n])
+    for i in range(n):
+        d.weights[i] = math.exp(d.weights[i])
+
+
+@jitable(inline=True)
+def _linearise_dictionary(d: Dictionary, x: np.ndarray, gradient: np.ndarray) -> float:
+    """g(x) at one unscaled regressor, its analytic gradient dg/dx into `gradient`: the
+    RBF expansion's, sums in a fixed order (a model's bits are its numbers')."""
+    n, columns = d.size, len(x)
+    _kernel_terms(d, x)
+    value = 0.0
+    for j in range(columns):
+        gradient[j] = 0.0
+    for i in range(n):
+        weight = d.alpha[i] * d.weights[i]
+        value += weight
+        for j in range(columns):
+            gradient[j] += weight * d.difference[i, j]
+    squared = d.delta ** 2
+    for j in range(columns):
+        gradient[j] = -gradient[j] / squared / d.scale[j]
+    return value + d.bias
+
+
+@jitable
+def _add_sample(d: Dictionary, x: np.ndarray, target: float) -> tuple[Dictionary, bool]:
+    """One more sample (unscaled regressor x, increment target): appended to the factor
+    (one triangular solve for its row), the coefficients solved anew; False if the
+    Schur-complement guard rejected it. The oldest correction leaves a full window."""
+    capacity = len(d.t)
+    if capacity == d.fixed:  # no window
+        return d, False
+    full = d.size == capacity
+    if full:
+        d = _forget_oldest_correction(d)
+    n = d.size
+    _kernel_terms(d, x)
+    _forward_substitution(d.factor, d.weights, d.row, 0, n)
+    pivot = 1.0 + 1.0 / d.mu
+    schur = pivot - _squared_norm(d.row, n)
+    if not schur > GUARD * pivot:
+        return _counted(d, d.size, d.bias, d.added, d.rejected + 1, d.forgotten), False
+    d.factor[n, :n] = d.row[:n]
+    d.factor[n, n] = math.sqrt(schur)
+    d.z[n] = (x - d.offset) / d.scale
+    d.t[n] = target
+    d = _counted(d, n + 1, d.bias, d.added + 1, d.rejected, d.forgotten)
+    _forward_rows(d, n)
+    return (_solved(d) if full else _solved_with_row(d)), True
+
+
+@jitable
+def _forget_oldest_correction(d: Dictionary) -> Dictionary:
+    """Drop row/column `fixed` of H: the trailing block's factor becomes
+    chol(L22 L22^T + l l^T), l the dropped column below it (rank-1 update), in place
+    (the block moves up and left by one as it is updated)."""
+    i, n, factor = d.fixed, d.size, d.factor
+    column = factor[i + 1:n, i].copy()
+    for j in range(n - i - 1):  # the classic rank-1 Cholesky update
+        diagonal = factor[i + 1 + j, i + 1 + j]
+        r = math.hypot(diagonal, column[j])
+        c, s = r / diagonal, column[j] / diagonal
+        factor[i + j, i + j] = r
+        for k in range(j + 1, n - i - 1):
+            updated = (factor[i + 1 + k, i + 1 + j] + s * column[k]) / c
+            column[k] = c * column[k] - s * updated
+            factor[i + k, i + j] = updated
+    for k in range(i, n - 1):
+        factor[k, :i] = factor[k + 1, :i]
+        d.z[k] = d.z[k + 1]
+        d.t[k] = d.t[k + 1]
+    factor[n - 1, :] = 0.0
+    factor[n - 1, n - 1] = 1.0
+    d.z[n - 1] = 0.0
+    d.t[n - 1] = 0.0
+    d.alpha[n - 1] = 0.0
+    d = _counted(d, n - 1, d.bias, d.added, d.rejected, d.forgotten + 1)
+    _forward_rows(d, i)  # the rows from the dropped one on moved
+    return d
+
+
+# plain loops, slow in Python: from Python these, compiled whenever numba is installed
+forward_rows = compiled(_forward_rows) or _forward_rows
+solved = compiled(_solved) or _solved
+linearise_dictionary = compiled(_linearise_dictionary) or _linearise_dictionary
+add_sample = compiled(_add_sample) or _add_sample
 
 
 class LSSVM:
     """The fitted regression g(x) with its factor, ready for prediction, its gradient
-    (the GPC's linearisation) and online correction."""
+    (the GPC's linearisation) and online correction: a Dictionary and its functions."""
 
     def __init__(self, layout: Layout, mu: float, delta: float, offset: np.ndarray,
                  scale: np.ndarray, regressors: np.ndarray, targets: np.ndarray,
@@ -188,37 +373,27 @@ class LSSVM:
             raise ValueError("mu and delta must be positive and finite")
         self.layout, self.mu, self.delta = layout, float(mu), float(delta)
         self.offset, self.scale = np.asarray(offset, float), np.asarray(scale, float)
-        self.fixed = len(targets)  # identification samples: they stay
+        self.fixed = len(targets)
         self.window = window
         capacity = self.fixed + window
-        self._z = np.zeros((capacity, layout.size))  # scaled regressors
-        self._t = np.zeros(capacity)                 # increments, m/s (0 beyond size)
-        # The lower Cholesky factor of H, padded with the identity beyond `size`: the
-        # solves then run on the whole (contiguous) buffer, never on a copied slice.
-        self._factor = np.eye(capacity)
-        # the right-hand sides [1, t] and the forward half of the solve, L^-1 [1, t]
-        self._ones = np.ones(capacity)
-        self._forward = np.zeros((2, capacity))
-        self._row = np.empty(capacity)  # a new sample's row of the factor
-        # linearise's work space: the differences to the dictionary and their weights
-        self._difference = np.empty((capacity, layout.size))
-        self._weights = np.empty(capacity)
-        self.size = self.fixed
-        self._z[:self.fixed] = self.to_unit(np.asarray(regressors, float))
-        self._t[:self.fixed] = targets
-        z = self._z[:self.fixed]
-        gram = self._kernel(z, z) + np.eye(self.fixed) / self.mu
+        z, t = np.zeros((capacity, layout.size)), np.zeros(capacity)
+        z[:self.fixed], t[:self.fixed] = self.to_unit(np.asarray(regressors, float)), targets
+        factor = np.eye(capacity)
+        gram = self._kernel(z[:self.fixed], z[:self.fixed]) + np.eye(self.fixed) / self.mu
         try:
-            self._factor[:self.fixed, :self.fixed] = np.linalg.cholesky(gram)
+            factor[:self.fixed, :self.fixed] = np.linalg.cholesky(gram)
         except np.linalg.LinAlgError:
             raise ValueError(f"the kernel matrix is numerically singular for mu = {mu:g}, "
                              f"delta = {delta:g}") from None
-        if not np.all(np.diag(self._factor)[:self.fixed] ** 2 > GUARD / self.mu):
+        if not np.all(np.diag(factor)[:self.fixed] ** 2 > GUARD / self.mu):
             raise ValueError(f"the kernel matrix is numerically singular for mu = {mu:g}, "
                              f"delta = {delta:g}")
-        self.added = self.rejected = self.forgotten = 0
-        self._forward_rows(0)
-        self._solve()
+        d = Dictionary(self.mu, self.delta, self.offset, self.scale, self.fixed, z, t, factor,
+                       np.ones(capacity), np.zeros((2, capacity)), np.empty(capacity),
+                       np.empty((capacity, layout.size)), np.empty(capacity),
+                       np.zeros(capacity), np.zeros((2, capacity)), self.fixed, 0.0, 0, 0, 0)
+        forward_rows(d, 0)
+        self.dictionary = solved(d)
 
     # The kernel in scaled coordinates ------------------------------------------
     def to_unit(self, x: np.ndarray) -> np.ndarray:
@@ -229,99 +404,61 @@ class LSSVM:
                     - 2.0 * a @ b.T)
         return np.exp(-np.maximum(distance, 0.0) / (2.0 * self.delta ** 2))
 
-    def _forward_rows(self, start: int) -> None:
-        """L^-1 [1, t] from row `start` on (the rows before it are solved)."""
-        for rhs, solution in zip((self._ones, self._t), self._forward, strict=True):
-            forward_substitution(self._factor, rhs, solution, start, self.size)
+    # The dictionary's figures -----------------------------------------------------
+    @property
+    def size(self) -> int:
+        return self.dictionary.size
 
-    def _solve(self) -> None:
-        """The coefficients from the forward half: eta = L^-T L^-1 1, nu = L^-T L^-1 t."""
-        eta, nu = self._forward[:, :self.size].copy()
-        back_substitution(self._factor, eta, nu, self.size)
-        self.bias = float(nu.sum() / eta.sum())
-        self.alpha = nu - self.bias * eta
+    @property
+    def bias(self) -> float:
+        return self.dictionary.bias
 
-    # Prediction ---------------------------------------------------------------
+    @property
+    def alpha(self) -> np.ndarray:
+        return self.dictionary.alpha[:self.size]
+
+    @property
+    def added(self) -> int:
+        return self.dictionary.added
+
+    @property
+    def rejected(self) -> int:
+        return self.dictionary.rejected
+
+    @property
+    def forgotten(self) -> int:
+        return self.dictionary.forgotten
+
     @property
     def support(self) -> np.ndarray:
         """The dictionary's regressors, scaled."""
-        return self._z[:self.size]
+        return self.dictionary.z[:self.size]
 
+    # Prediction ---------------------------------------------------------------
     def increment(self, x: np.ndarray) -> np.ndarray:
         """g at each row of x (unscaled regressors), m/s."""
         z = self.to_unit(np.atleast_2d(x))
         return self._kernel(z, self.support) @ self.alpha + self.bias
 
     def linearise(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        """(g(x), dg/dx) at one unscaled regressor: the RBF expansion's analytic gradient,
-        in preallocated buffers (once per control step). The exponential, the sum and the
-        product with the differences stay numpy's and BLAS's: their results are their
-        own (numpy's exp is not libm's, BLAS orders its sums by its kernel)."""
-        n = self.size
-        z, width = self.to_unit(x), 2.0 * self.delta ** 2
-        difference, weights = self._difference[:n], self._weights[:n]
-        if compiled_rbf_exponents is not None:
-            compiled_rbf_exponents(z, self.support, width, difference, weights)
-        else:
-            np.subtract(z, self.support, out=difference)
-            np.divide(-np.einsum("ij,ij->i", difference, difference), width, out=weights)
-        np.exp(weights, out=weights)
-        np.multiply(self.alpha, weights, out=weights)
-        value = float(weights.sum()) + self.bias
-        gradient = -(weights @ difference) / self.delta ** 2 / self.scale
+        """(g(x), dg/dx) at one unscaled regressor."""
+        gradient = np.empty(self.layout.size)
+        value = linearise_dictionary(self.dictionary, np.asarray(x, float), gradient)
         return value, gradient
 
     # Online correction ----------------------------------------------------------
     def add(self, x: np.ndarray, target: float) -> bool:
         """Take one more sample (unscaled regressor x, increment target): True if it
-        joined the dictionary, False if the Schur-complement guard rejected it."""
-        if self.window == 0:
-            return False
-        if self.size == len(self._t):
-            self._forget_oldest_correction()
-        n = self.size
-        z = self.to_unit(np.asarray(x, float))
-        beta = self._kernel(z[None, :], self.support)[0]
-        forward_substitution(self._factor, beta, self._row, 0, n)
-        pivot = 1.0 + 1.0 / self.mu
-        schur = pivot - squared_norm(self._row, n)
-        if not schur > GUARD * pivot:
-            self.rejected += 1
-            return False
-        self._factor[n, :n], self._factor[n, n] = self._row[:n], math.sqrt(schur)
-        self._z[n], self._t[n] = z, target
-        self.size += 1
-        self.added += 1
-        self._forward_rows(n)
-        self._solve()
-        return True
-
-    def _forget_oldest_correction(self) -> None:
-        """Drop row/column `fixed` of H: the trailing block's factor becomes
-        chol(L22 L22^T + l l^T), l the dropped column below it (rank-1 update)."""
-        i, n = self.fixed, self.size
-        column = self._factor[i + 1:n, i].copy()
-        block = self._factor[i + 1:n, i + 1:n].copy()
-        for j in range(len(column)):  # the classic rank-1 Cholesky update
-            r = math.hypot(block[j, j], column[j])
-            c, s = r / block[j, j], column[j] / block[j, j]
-            block[j, j] = r
-            block[j + 1:, j] = (block[j + 1:, j] + s * column[j + 1:]) / c
-            column[j + 1:] = c * column[j + 1:] - s * block[j + 1:, j]
-        self._factor[i:n - 1, :i] = self._factor[i + 1:n, :i]
-        self._factor[i:n - 1, i:n - 1] = block
-        self._factor[n - 1, :] = 0.0
-        self._factor[n - 1, n - 1] = 1.0
-        self._z[i:n - 1], self._t[i:n - 1] = self._z[i + 1:n], self._t[i + 1:n]
-        self._z[n - 1], self._t[n - 1] = 0.0, 0.0
-        self.size -= 1
-        self.forgotten += 1
-        self._forward_rows(i)  # the rows from the dropped one on moved
+        joined the dictionary, False if the Schur-complement guard rejected it (or the
+        model has no window)."""
+        self.dictionary, accepted = add_sample(self.dictionary, np.asarray(x, float),
+                                               float(target))
+        return bool(accepted)
 
     @property
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """(unscaled regressors, increments) of the dictionary."""
-        return self.support * self.scale + self.offset, self._t[:self.size].copy()
+        return self.support * self.scale + self.offset, self.dictionary.t[:self.size].copy()
 
     def with_window(self, window: int) -> LSSVM:
         """A fresh solve on the current dictionary, its samples all fixed, with room
@@ -335,10 +472,12 @@ class LSSVM:
 
 
 def warm() -> None:
-    """Compile the solves now (or load them from numba's cache): a tiny fit and one
-    correction."""
+    """Compile the solves now (or load them from numba's cache): a tiny fit, one
+    correction and one linearisation."""
     regressors = np.array([[0.0, 0.0], [1.0, 0.5], [2.0, -0.5]])
-    fit(Layout(), regressors, np.zeros(3), 10.0, 1.0, window=1).add(np.array([1.5, 1.0]), 0.1)
+    model = fit(Layout(), regressors, np.zeros(3), 10.0, 1.0, window=1)
+    model.add(np.array([1.5, 1.0]), 0.1)
+    model.linearise(np.array([1.0, 0.0]))
 
 
 def unit_scaling(layout: Layout, regressors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -63,7 +63,8 @@ def warm(values: dict | None = None) -> None:
     """Compile the loop of core/run/fast_loop.py now, or load it from its cache beside that
     file, by a two-step run of `values` (default: the shipped seed000) with each
     controller kind that has compiled steps (with the on-board estimator as `values` have
-    it, for the kinds that use it: on, a signature of its own), and one of seed000 with the
+    it, for the kinds that use it: on, a signature of its own; with the kind's warm_up
+    overrides, a cheap run of it), and one of seed000 with the
     first kind without them that names a cheap run (its registry entry's warm_up: those
     kinds share one signature), by default also the shipped journeys' kinds (a journey's
     loop reads its tables: a signature of its own per kind); and the LSSVM's solves. Every
@@ -76,7 +77,8 @@ def warm(values: dict | None = None) -> None:
     for kind in fast_loop.compiled_kinds():
         simulate(apply_overrides(values, {
             "run.duration": duration, "controller.kind": kind,
-            "estimator.enabled": values["estimator.enabled"] and CONTROLLERS[kind].estimates}))
+            "estimator.enabled": values["estimator.enabled"] and CONTROLLERS[kind].estimates,
+            **dict(CONTROLLERS[kind].warm_up)}))
     cheap = next((component for component in CONTROLLERS.components.values()
                   if not component.steps and component.warm_up), None)
     if cheap is not None:
