@@ -2,6 +2,7 @@
 (numba's own faithfulness: the loop is one text), and against itself run in chunks of
 steps. tests/test_stages.py drives the nodes' stages against it."""
 
+import dataclasses
 import itertools
 from types import SimpleNamespace
 
@@ -10,6 +11,8 @@ import pytest
 
 from ato_nodes.core.run import fast_loop, loop, python_steps
 from ato_nodes.core.base import kernels
+from ato_nodes.core.config.components import CONTROLLERS
+from ato_nodes.core.control.stepped import SteppedController
 from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.config.schema import steps
@@ -125,12 +128,22 @@ COVERED = sorted(scenario_names())
                                         "plant.resistance_factor=1.3"]])
 @pytest.mark.slow
 def test_a_kind_without_compiled_steps_gives_the_python_loops_bits(monkeypatch, overrides):
-    """The GPC's own Python step called from the compiled loop, for each of its models."""
+    """A kind registered without steps (a plug-in's) has its controller's own step called
+    from the compiled loop (python_steps): here the GPC so registered, for each of its
+    models, against the Python loop and against the GPC's compiled steps."""
     values = apply_overrides(load_scenario("seed001-crh380al"), ["run.duration=120",
                                                                  *overrides])
+    stepped = simulate(values)
+    monkeypatch.setitem(CONTROLLERS.components, "gpc",
+                        dataclasses.replace(CONTROLLERS["gpc"], steps=None))
+    called, step = [], SteppedController.step
+    monkeypatch.setattr(SteppedController, "step",
+                        lambda *args: called.append(1) or step(*args))
     compiled, python = simulate(values), python_run(monkeypatch, values)
+    assert len(called) == 2 * len(python["t"])  # both loops called the controller's step
     for name in python:
         assert np.array_equal(compiled[name], python[name], equal_nan=True), name
+        assert np.array_equal(compiled[name], stepped[name], equal_nan=True), name
     assert not python_steps.RUNNING  # the run let go of its controller
 
 
@@ -223,10 +236,8 @@ def test_the_runs_the_python_loop_once_took_alone_run_compiled(monkeypatch, over
 def test_a_kind_registered_after_import_joins_the_dispatch(monkeypatch):
     """The steps are found by the type of the kind's state in the registry as it is when
     asked (compiled code asks while compiling): an outside plug-in's kind joins."""
-    from types import SimpleNamespace
     from typing import NamedTuple
 
-    from ato_nodes.core.config.components import CONTROLLERS
     from ato_nodes.core.control.stepped import ControllerSteps
 
     class LateState(NamedTuple):

@@ -50,7 +50,7 @@ RUNS = [
     ("seed003-maglev", ["run.duration=60"], None),  # the stepped approach, dead time
     ("seed002-hsr-ato", ["run.duration=120", "ladrc.plan_lead=15"], None),  # a line, limits
     ("seed004-metro-line", ["run.duration=150"], None),  # a journey: dwell, departure
-    ("seed001-crh380al", ["run.duration=30", "gpc.prediction=mechanistic"], None),  # Python
+    ("seed001-crh380al", ["run.duration=30", "gpc.prediction=mechanistic"], None),
     ("seed000-pid", ["run.duration=60"], {100: {"pid.kp": 80.0}, 300: {"pid.ki": 2.0}}),
     ("seed004-metro-ato", ["run.duration=60"], {0: {"ladrc.omega_c": 3.0},
                                                  250: {"ladrc.omega_o": 9.0}}),

@@ -104,9 +104,9 @@ class Component:
     steps, for controllers whose step is a plain function of NamedTuples: their
     core/control/stepped.ControllerSteps, which the compiled loop runs too
     (core/run/fast_loop.py); without it the compiled loop calls the kind's own Python
-    step. warm_up, for controllers without steps: the (parameter, value) overrides of a
-    cheap run of the kind (no file to read, short horizons), with which loop.warm()
-    compiles the signature of the loop that every such kind shares.
+    step. warm_up, for controllers: the (parameter, value) overrides of a cheap run of
+    the kind (no file to read, short horizons), with which loop.warm() compiles the
+    kind's loop (or the one signature that every kind without steps shares).
     estimates, for controllers: the kind uses the on-board estimator of the train
     (core/control/estimation.py) when estimator.enabled; a run that enables it for a kind
     that does not is refused.
