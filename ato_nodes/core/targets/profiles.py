@@ -384,14 +384,15 @@ class AtoCurve(Plan):
         self.cells: Cells | None = None  # set by _feasible
         self.feasible = (self._feasible(train, envelope_share, train_length)
                          if envelope_share > 0.0 else None)
-        self.cruise, self.notice = self._cruise(float(self.caps.max()), envelope_share)
-        self.speeds = self.curve(self.cruise)
-        self.planned_run_time = self.run_time(self.cruise)
+        self.cruise, self.notice, self.speeds, self.planned_run_time = self._cruise(
+            float(self.caps.max()), envelope_share)
 
-    def _cruise(self, top: float, share: float) -> tuple[float, str | None]:
+    def _cruise(self, top: float, share: float) -> tuple[float, str | None, np.ndarray, float]:
         """The lowest cruise speed that meets the line's planned time (bisection), or
-        `top` when even that misses it; and the notice of a planned time missed."""
-        planned, fastest = self.line.planned_run_time, self.run_time(top)
+        `top` when even that misses it; the notice of a planned time missed; the curve at
+        that cruise speed and its running time (each cruise speed's computed once)."""
+        planned, curve = self.line.planned_run_time, self.curve(top)
+        fastest = self.time_of(curve)
         if planned is None or fastest >= planned:
             notice = None
             if planned is not None and self.departure is not None \
@@ -400,15 +401,18 @@ class AtoCurve(Plan):
                           f"fastest ato curve (profile.ato.acceleration {self.acceleration:g} "
                           f"m/s^2, profile.envelope_share {share:g}) takes {fastest:.1f} s; "
                           f"driving minimum-time")
-            return top, notice
+            return top, notice, curve, fastest
         low, high = self.start_speed, top
         times = {top: fastest}  # once the interval stops shrinking, middle is low or high
         for _ in range(60):
             middle = 0.5 * (low + high)
             if middle not in times:
-                times[middle] = self.run_time(middle)
+                speeds = self.curve(middle)
+                times[middle] = self.time_of(speeds)
+                if times[middle] <= planned:  # the new high
+                    curve = speeds
             low, high = (middle, high) if times[middle] > planned else (low, middle)
-        return high, None
+        return high, None, curve, times[high]
 
     @staticmethod
     def _belt_limits(x: np.ndarray, line, train_length: float) -> np.ndarray:
