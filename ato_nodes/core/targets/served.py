@@ -138,7 +138,7 @@ class JourneyState(NamedTuple):
 START = JourneyState(0, math.nan, 0, 0.0)  # the first section, from the first departure at t = 0
 
 
-@jitable
+@jitable(inline=True)
 def section_table(journey: JourneyTable, section: int, level: int) -> PlanTable:
     """Curve `level` of section `section` as a PlanTable (a view of the journey's grid)."""
     curve = section * journey.levels + level
@@ -146,7 +146,7 @@ def section_table(journey: JourneyTable, section: int, level: int) -> PlanTable:
     return PlanTable(columns, False, True, True)
 
 
-@jitable
+@jitable(inline=True)
 def departure(journey: JourneyTable, state: JourneyState) -> float:
     """When a train that has arrived at its section's end leaves it, s."""
     return max(journey.departures[state.section],
@@ -183,7 +183,7 @@ def leaving(journey: JourneyTable, state: JourneyState) -> JourneyState:
                         departure(journey, state))
 
 
-@jitable
+@jitable(inline=True)
 def journey_speed(journey: JourneyTable, state: JourneyState, t: float, position: float
                   ) -> float:
     """The target at time t with the head at `position` (m along the line), m/s."""
@@ -212,7 +212,7 @@ def observed(journey: JourneyTable, state: JourneyState, t: float, position: flo
     return state
 
 
-@jitable
+@jitable(inline=True)
 def journey_limit(journey: JourneyTable, position: float) -> float:
     """The belt's limit with the head at `position`, m/s: that of the section it is on
     (the first before the journey, the last after it)."""
