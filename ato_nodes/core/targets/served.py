@@ -325,9 +325,9 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
                            tuple((name, values[name]) for name in TABLE_INPUTS))
 
 
-# A long journey's tables are tens of MB (seed002-journey's: 3 sections x 9 curves x 10^5
-# cells): a few kept, enough for a run's validation and simulation and a tuning's runs.
-@functools.lru_cache(maxsize=4)
+# A long journey's tables are tens of MB (seed002-journey's 61 MB: 3 sections x 9 curves
+# x 10^5 cells): two kept, enough for a run's validation and simulation, a tuning's runs.
+@functools.lru_cache(maxsize=2)
 def _journey_tables(timetable: Timetable, line, train, inputs: tuple
                     ) -> tuple[JourneyTable, str | None]:
     return new_journey_table(timetable, dict(inputs), line, train)
