@@ -59,11 +59,18 @@ def plan_table(positions, values, squared: bool = False, stops_at_end: bool = Fa
 @jitable
 def table_speed(table: PlanTable, position: float) -> float:
     """The plan's speed at `position`, m/s (as the plan's speed() gives it)."""
-    positions = table.grid[0]
-    if table.stops_at_end and position >= positions[len(positions) - 1]:
+    return rows_speed(table.grid[0], table.grid[1], table.squared, table.stops_at_end,
+                      position)
+
+
+@jitable(inline=True)
+def rows_speed(positions, values, squared: bool, stops_at_end: bool, position: float
+               ) -> float:
+    """table_speed of a table's rows (a journey's curve reads its rows in place)."""
+    if stops_at_end and position >= positions[len(positions) - 1]:
         return 0.0
-    value = interpolated(position, positions, table.grid[1])
-    return math.sqrt(max(0.0, value)) if table.squared else value
+    value = interpolated(position, positions, values)
+    return math.sqrt(max(0.0, value)) if squared else value
 
 
 @jitable

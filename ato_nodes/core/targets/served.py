@@ -53,7 +53,7 @@ from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
 from .profiles import (ATO_PARAMETERS, AtoCurve, DepartureRamp, PlanTable, ato_curve, cell_of,
-                       departing, departure_ramp, table_limit, table_speed)
+                       departing, departure_ramp, rows_speed, table_limit)
 from .restriction import SPEED_RESTRICTION, restricted_line
 from .timetable import Timetable, load_timetable, section_line
 
@@ -191,9 +191,12 @@ def journey_speed(journey: JourneyTable, state: JourneyState, t: float, position
         if t < departure(journey, state):
             return 0.0
         state = leaving(journey, state)
-    table = section_table(journey, state.section, state.level)
+    # the curve's rows read in place: contiguous, unlike section_table's columns
+    curve = state.section * journey.levels + state.level
+    first, end = journey.bounds[curve], journey.bounds[curve + 1]
     return departing(journey.departure, t - state.left,
-                     table_speed(table, position - journey.stops[state.section]))
+                     rows_speed(journey.grid[0, first:end], journey.grid[1, first:end], False,
+                                True, position - journey.stops[state.section]))
 
 
 @jitable
