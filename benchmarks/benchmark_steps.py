@@ -1,13 +1,19 @@
 #!/usr/bin/env python3
-"""In-process cost per simulated step of every shipped scenario (or those named): prints
+"""In-process cost of every shipped scenario (or those named), in two columns: prints
 figures, asserts nothing.
 
     python benchmarks/benchmark_steps.py [SCENARIO ...] [--seconds 300] [--repeats 3]
 
-Each run is cut to --seconds of simulated time (the whole run where shorter), run once
-to warm up (loading the compiled loop, building the plan), then timed --repeats times in
-the same process; the median per step is printed, with whether the run was compiled.
---python times the same loop run as Python (simulate(compiled=False)).
+us/step: simulate() of the run, cut to --seconds of simulated time (the whole run where
+shorter), per step, with its plan already built (a warm-up run loads the compiled loop
+and builds the plan, which every later run of the same inputs reads from the process's
+cache of plans): the loop, and the stages' construction and the series around it; the
+median of --repeats timed runs, with whether the loop was compiled. --python times the
+same loop run as Python (simulate(compiled=False)).
+
+plan ms: building the run's plan anew (the profile's run context's plan, the caches of
+plans emptied first: core/config/context.py forget_plans), the median of --repeats; the
+first build of each scenario, which loads its compiled planning kernels, is not timed.
 """
 
 from __future__ import annotations
@@ -18,9 +24,12 @@ import time
 import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.context import RunContext, forget_plans
 from ato_nodes.core.config.scenario import apply_overrides, prepare, scenario_names
+from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run import fast_loop
 from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.train.line import line_of
 
 
 def per_step(values: dict, repeats: int, compiled: bool) -> tuple[float, int]:
@@ -32,6 +41,18 @@ def per_step(values: dict, repeats: int, compiled: bool) -> tuple[float, int]:
         simulate(values, compiled=compiled)
         times.append(time.perf_counter() - started)
     return statistics.median(times) / steps, steps
+
+
+def plan_seconds(values: dict, repeats: int) -> float:
+    """Median seconds of building the run's plan anew, `repeats` times after a warm-up."""
+    line = line_of(values)
+    times = []
+    for _ in range(repeats + 1):
+        forget_plans()
+        started = time.perf_counter()
+        _ = RunContext(NodeValues("profile", values), line).plan
+        times.append(time.perf_counter() - started)
+    return statistics.median(times[1:])
 
 
 def main() -> None:
@@ -49,12 +70,13 @@ def main() -> None:
                 "run.duration": min(args.seconds, values["run.duration"])})
     except ScenarioError as exc:
         _cli.fail(str(exc))
-    print(f"{'scenario':24s} {'us/step':>9s}  steps  loop")
+    print(f"{'scenario':24s} {'us/step':>9s}  steps  loop      {'plan ms':>8s}")
     for name, values in runs.items():
         compiled = not args.python and fast_loop.AVAILABLE
         seconds, steps = per_step(values, args.repeats, not args.python)
-        print(f"{name:24s} {seconds * 1e6:9.2f} {steps:6d}  {'compiled' if compiled else 'Python'}",
-              flush=True)
+        planning = plan_seconds(values, args.repeats)
+        print(f"{name:24s} {seconds * 1e6:9.2f} {steps:6d}  "
+              f"{'compiled' if compiled else 'Python  '}  {planning * 1e3:8.1f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ import pytest
 
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.config.scenario import load_scenario
-from ato_nodes.core.targets import profiles
+from ato_nodes.core.targets import curve_passes, profiles
 from ato_nodes.core.targets.profiles import StepProfile, TableProfile
 from ato_nodes.core.base.units import KMH
 from ato_nodes.core.config.schema import defaults
@@ -77,8 +77,8 @@ def test_the_feasibility_passes_compiled_or_not_agree_bit_for_bit(scenario):
     cells, train = curve.cells, curve.cells.train
     x = curve.positions
     results = []
-    for forward, backward in ((profiles.forward_pass, profiles.backward_pass),
-                              (profiles._forward_pass, profiles._backward_pass)):
+    for forward, backward in ((curve_passes.forward_pass, profiles.backward_pass),
+                              (curve_passes.forward_pass_of, profiles._backward_pass)):
         squared = curve.caps ** 2
         squared[0] = curve.start_speed ** 2
         forward(squared, 0, x, cells.powered, cells.line_resistance, train.envelope,

@@ -19,6 +19,7 @@ from ..base.errors import ScenarioError
 import numpy as np
 
 from ..targets.horizons import ProfileSettings, plan_horizon, plan_speed_limit
+from ..targets import profiles, served, timetable
 from ..targets.profiles import (NO_RAMP, DepartureRamp, departing, departure_ramp,
                                 feasible_plan, plan_table)
 from ..targets.served import START
@@ -39,6 +40,20 @@ def ato_train(values) -> TrainParameters:
     reading = values["train.mass_reading"]
     return nominal if reading <= 1.0 else dataclasses.replace(nominal,
                                                               mass=reading * nominal.mass)
+
+
+# The process's caches of built plans, each keyed by what its plans are built from: the
+# plan a run's validation builds is the one its simulation reads, and runs that share a
+# plan (a tuning's candidates, a set of trains run again) share it.
+PLAN_CACHES = (profiles._ato_curve, profiles.feasible_plan, profiles._driven_again,
+               served._journey_tables, timetable._minimum_running_time)
+
+
+def forget_plans() -> None:
+    """Empty PLAN_CACHES: the next run builds its plan anew (what
+    benchmarks/benchmark_steps.py times as the plan's cost)."""
+    for cache in PLAN_CACHES:
+        cache.cache_clear()
 
 
 class RunContext:

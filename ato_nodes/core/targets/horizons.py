@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from ..base.kernels import jitable
+from ..base.kernels import jitable, overload
 from ..train.line import LineTables, speed_limit
 from .profiles import DepartureRamp, PlanTable, departing, table_limit, table_speed
 from .served import START, JourneyState, JourneyTable, journey_limit, journey_speed, observed
@@ -99,14 +99,33 @@ def plan_horizon(settings: ProfileSettings, journey: JourneyTable | None, state:
         horizon[i] = plan_target(settings, journey, state, t, position)
 
 
-@jitable
 def plan_target(settings: ProfileSettings, journey: JourneyTable | None, state: JourneyState,
                 t: float, position: float) -> float:
     """A position-indexed plan's target: a journey's in its state, else the table's under
     the departure ramp."""
-    if journey is not None:  # pruned while compiling a run that is not a journey
-        return journey_speed(journey, state, t, position)
+    target = table_target if journey is None else journey_target
+    return target(settings, journey, state, t, position)
+
+
+@jitable(inline=True)
+def journey_target(settings: ProfileSettings, journey: JourneyTable, state: JourneyState,
+                   t: float, position: float) -> float:
+    return journey_speed(journey, state, t, position)
+
+
+@jitable(inline=True)
+def table_target(settings: ProfileSettings, journey: None, state: JourneyState, t: float,
+                 position: float) -> float:
     return departing(settings.departure, t, table_speed(settings.plan, position))
+
+
+if overload is not None:  # compiled code chooses while compiling, and inlines the choice:
+    # a call handed the journey counts the references of its eight arrays in and out, 21
+    # times a step
+    @overload(plan_target, inline="always", strict=False)
+    def _chosen_target(settings, journey, state, t, position):
+        from numba.core import types  # (numba is there: overload is)
+        return table_target if isinstance(journey, types.NoneType) else journey_target
 
 
 @jitable

@@ -19,6 +19,9 @@ from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
 from ..train.line import Line
 from ..train.plant import TrainParameters, basic_resistance, force_limits
+from .curve_passes import (ROUNDING_WIDTH, CurveGrid, capped_curve, forward_pass,
+                           interpolated_in, round_corners, rounded_curve, running_time,
+                           shaped_curve, sloped)
 
 SEED000_PARAMETERS = (
     param("profile.seed000.cycle", 1200.0, "T of eq. 25, s", PROFILE_NODES, 1.0, 1e6),
@@ -56,11 +59,18 @@ def plan_table(positions, values, squared: bool = False, stops_at_end: bool = Fa
 @jitable
 def table_speed(table: PlanTable, position: float) -> float:
     """The plan's speed at `position`, m/s (as the plan's speed() gives it)."""
-    positions = table.grid[0]
-    if table.stops_at_end and position >= positions[len(positions) - 1]:
+    return rows_speed(table.grid[0], table.grid[1], table.squared, table.stops_at_end,
+                      position)
+
+
+@jitable(inline=True)
+def rows_speed(positions, values, squared: bool, stops_at_end: bool, position: float
+               ) -> float:
+    """table_speed of a table's rows (a journey's curve reads its rows in place)."""
+    if stops_at_end and position >= positions[len(positions) - 1]:
         return 0.0
-    value = interpolated(position, positions, table.grid[1])
-    return math.sqrt(max(0.0, value)) if table.squared else value
+    value = interpolated(position, positions, values)
+    return math.sqrt(max(0.0, value)) if squared else value
 
 
 @jitable
@@ -110,15 +120,8 @@ def interpolated(x: float, points, values) -> float:
     if x < points[0]:
         return values[0]
     j = cell_of(points, x)
-    if points[j] == x:
-        return values[j]
-    slope = (values[j + 1] - values[j]) / (points[j + 1] - points[j])
-    result = slope * (x - points[j]) + values[j]
-    if result != result:  # numpy tries the other end, then a flat segment's value
-        result = slope * (x - points[j + 1]) + values[j + 1]
-        if result != result and values[j] == values[j + 1]:
-            result = values[j]
-    return result
+    x0, x1, y0, y1 = points[j], points[j + 1], values[j], values[j + 1]
+    return interpolated_in(x, x0, x1, y0, y1, sloped(x0, x1, y0, y1))
 
 
 @dataclass(frozen=True)
@@ -147,30 +150,6 @@ class Seed000Profile(Plan):
         if t < 3 * T / 2:
             return min(v * (1.0 - math.exp(-(t - T + self.t1) / 160.0)), self.cruise_high)
         return max(v * (1.0 - math.exp(-(3 * T / 2 + 480.0 - t) / 160.0)), 0.0)
-
-
-ROUNDING_WIDTH = 20  # samples per averaging window of round_corners
-
-
-def moving_means(samples: np.ndarray, width: int, after: float, leads) -> list[np.ndarray]:
-    """Means over `width` samples of a curve sampled evenly, one array per lead: the
-    window of sample i ends `lead` samples after it (0: the past; width // 2 of an odd
-    width: centred). Before its start the curve holds its first value, after its end
-    `after`."""
-    padded = np.concatenate((np.full(width, samples[0]), samples, np.full(width, after)))
-    sums = np.concatenate(([0.0], np.cumsum(padded)))
-    i = np.arange(len(samples))
-    return [(sums[i + width + lead + 1] - sums[i + lead + 1]) / width for lead in leads]
-
-
-def round_corners(samples: np.ndarray, width: int, after: float) -> np.ndarray:
-    """A speed curve sampled evenly in time, its acceleration made continuous: the mean
-    over `width` samples centred where it falls, over the past where it rises, so it
-    brakes earlier and accelerates later than the corners, never the other way (the
-    lower of the two means; the curve before its start holds its first value, after its
-    end `after`). An acceleration step of da becomes a ramp of da / (width * tick)."""
-    past, centred = moving_means(samples, width, after, (0, width // 2))
-    return np.minimum(past, centred)
 
 
 @functools.lru_cache(maxsize=8)
@@ -412,14 +391,15 @@ class AtoCurve(Plan):
         self.cells: Cells | None = None  # set by _feasible
         self.feasible = (self._feasible(train, envelope_share, train_length)
                          if envelope_share > 0.0 else None)
-        self.cruise, self.notice = self._cruise(float(self.caps.max()), envelope_share)
-        self.speeds = self.curve(self.cruise)
-        self.planned_run_time = self.run_time(self.cruise)
+        self.cruise, self.notice, self.speeds, self.planned_run_time = self._cruise(
+            float(self.caps.max()), envelope_share)
 
-    def _cruise(self, top: float, share: float) -> tuple[float, str | None]:
+    def _cruise(self, top: float, share: float) -> tuple[float, str | None, np.ndarray, float]:
         """The lowest cruise speed that meets the line's planned time (bisection), or
-        `top` when even that misses it; and the notice of a planned time missed."""
-        planned, fastest = self.line.planned_run_time, self.run_time(top)
+        `top` when even that misses it; the notice of a planned time missed; the curve at
+        that cruise speed and its running time (each cruise speed's computed once)."""
+        planned, curve = self.line.planned_run_time, self.curve(top)
+        fastest = self.time_of(curve)
         if planned is None or fastest >= planned:
             notice = None
             if planned is not None and self.departure is not None \
@@ -428,12 +408,18 @@ class AtoCurve(Plan):
                           f"fastest ato curve (profile.ato.acceleration {self.acceleration:g} "
                           f"m/s^2, profile.envelope_share {share:g}) takes {fastest:.1f} s; "
                           f"driving minimum-time")
-            return top, notice
+            return top, notice, curve, fastest
         low, high = self.start_speed, top
+        times = {top: fastest}  # once the interval stops shrinking, middle is low or high
         for _ in range(60):
             middle = 0.5 * (low + high)
-            low, high = (middle, high) if self.run_time(middle) > planned else (low, middle)
-        return high, None
+            if middle not in times:
+                speeds = self.curve(middle)
+                times[middle] = self.time_of(speeds)
+                if times[middle] <= planned:  # the new high
+                    curve = speeds
+            low, high = (middle, high) if times[middle] > planned else (low, middle)
+        return high, None, curve, times[high]
 
     @staticmethod
     def _belt_limits(x: np.ndarray, line, train_length: float) -> np.ndarray:
@@ -465,46 +451,34 @@ class AtoCurve(Plan):
                         np.cbrt(vp ** 3 + 3.0 * a * vp * np.maximum(distance - knee, 0.0)))
 
     def curve(self, cruise: float) -> np.ndarray:
-        """The target at every grid point for a cruise speed, m/s."""
+        """The target at every grid point for a cruise speed, m/s (curve_passes: the
+        feasible curve capped at the cruise speed where the share can hold it, falling
+        from it as the forward pass does where it cannot, until back on the cap; rounded,
+        then held to the coasting from each neutral section's start)."""
         if self.feasible is None:
             speeds = self._fixed_rates(cruise)
             return self._rounded(speeds) if self.jerk > 0.0 else speeds
-        speeds = self._capped(cruise)
         if self.jerk <= 0.0:
-            return speeds
-        return self._forward(self._rounded(speeds), self.cells.neutral_entries)
+            return capped_curve(self.grid, cruise)
+        return shaped_curve(self.grid, cruise, *self._rounding)
 
-    def _capped(self, cruise: float) -> np.ndarray:
-        """The feasible curve capped at `cruise`, where the share can hold the cruise speed;
-        where it cannot (a neutral section, or a grade too steep for the share at that
-        speed) the curve falls from the cruise speed as the forward pass of _feasible
-        does, until it is back on the cap."""
-        cells, speeds = self.cells, np.minimum(self.feasible, cruise)
-        traction = cells.share * cells.train.force_limits(cruise)[1]
-        held = (np.where(cells.powered, traction, 0.0) - cells.train.resistance(cruise)
-                - cells.line_resistance)
-        falls = (speeds >= cruise) & (held < 0.0)
-        starts = np.flatnonzero(falls & ~np.concatenate(([False], falls[:-1])))
-        return self._forward(speeds, starts)
-
-    def _forward(self, speeds: np.ndarray, starts) -> np.ndarray:
-        """The forward pass of _feasible again from each cell of `starts`, kept under
-        `speeds`, until it meets them on a powered cell: the cap at a cruise speed (or
-        the rounding's centred mean at a neutral section) would hold a speed the share
-        (or the section) does not give. (The speeds the passes leave alone come back
-        as they were: sqrt(x * x) is x in binary floating point.)"""
-        squared = speeds ** 2
-        for first in starts:
-            self._forward_from(squared, int(first), to_end=False)
-        return np.sqrt(squared)
-
-    def _forward_from(self, squared: np.ndarray, first: int, to_end: bool) -> None:
-        """forward_pass on the grid with the cells' train and share."""
+    @functools.cached_property
+    def grid(self) -> CurveGrid:
+        """What the passes of the capped curves read (the curve with a share only)."""
         cells, train = self.cells, self.cells.train
-        forward_pass(squared, first, self.positions, cells.powered, cells.line_resistance,
-                     train.envelope, train.davis_a, train.davis_b, train.davis_c, train.xi,
-                     cells.share, self.acceleration, self.power_speed, self.start_speed ** 2,
-                     to_end)
+        return CurveGrid(self.positions, self.feasible, cells.powered, cells.line_resistance,
+                         cells.neutral_entries, self.limits - self.margin / 2,
+                         self._stop_curve, train.envelope, train.davis_a, train.davis_b,
+                         train.davis_c, train.xi, cells.share, self.acceleration,
+                         self.deceleration, self.power_speed, self.start_speed ** 2)
+
+    @functools.cached_property
+    def _rounding(self) -> tuple[float, int]:
+        """(tick, width) of _rounded: the tick of the curve in time, s (ROUNDING_WIDTH of
+        them over T), and W in ticks, odd."""
+        tick = max(self.acceleration, self.deceleration) / self.jerk / ROUNDING_WIDTH
+        return tick, 2 * math.ceil((self.acceleration + self.deceleration) / self.jerk / tick
+                                   / 2) + 1
 
     def _fixed_rates(self, cruise: float) -> np.ndarray:
         """In run-up distance d(v) the acceleration curve from any point grows by one
@@ -532,7 +506,9 @@ class AtoCurve(Plan):
                            np.flatnonzero(~on & np.concatenate(([True], on[:-1]))), train, share)
         squared = self.caps ** 2
         squared[0] = self.start_speed ** 2
-        self._forward_from(squared, 0, to_end=True)
+        forward_pass(squared, 0, x, on, line_resistance, train.envelope, train.davis_a,
+                     train.davis_b, train.davis_c, train.xi, share, self.acceleration,
+                     self.power_speed, self.start_speed ** 2, True)
         stopping = self.stopping(x[-1] - x) ** 2 if self.stop_jerk > 0.0 else squared
         backward_pass(squared, x, stopping, line_resistance, train.envelope, train.davis_a,
                       train.davis_b, train.davis_c, train.xi, share, self.deceleration)
@@ -552,50 +528,10 @@ class AtoCurve(Plan):
         [-b, a] (round_corners' means of the curve do) changes its acceleration by at most
         (a + b) / W = jerk, whatever the curve does. Centred, it stays under a concave
         corner, so braking still starts no later than the turn. Only around the turns
-        (`_turn_weights`): elsewhere round_corners' ramps already keep the jerk, and a
+        (curve_passes.turn_weights): elsewhere round_corners' ramps already keep the jerk, and a
         curve without such a turn keeps round_corners' bits."""
-        x = self.positions
-        times = np.concatenate(([0.0], np.cumsum(2.0 * np.diff(x) / (speeds[:-1] + speeds[1:]))))
-        tick = max(self.acceleration, self.deceleration) / self.jerk / ROUNDING_WIDTH
-        grid = np.arange(0.0, times[-1] + tick / 2, tick)
-        timed = np.interp(grid, times, speeds)
-        cornered = round_corners(timed, ROUNDING_WIDTH, 0.0)
-        width = 2 * math.ceil((self.acceleration + self.deceleration) / self.jerk / tick / 2) + 1
-        weights = self._turn_weights(timed, tick, width)
-        if weights is None:
-            rounded = np.interp(times, grid, cornered)
-        else:
-            smoothed = moving_means(cornered, width, 0.0, (width // 2,))[0]
-            turned = np.interp(times, grid, cornered + weights * (smoothed - cornered))
-            # The stop as round_corners rounds it: the wider mean would pass over the eased
-            # stop, a convex curve, by stop_jerk W^2 / 24.
-            rounded = np.minimum(turned, np.maximum(self._stop_curve,
-                                                    np.interp(times, grid, cornered)))
-        rounded = np.minimum(rounded, self.limits - self.margin / 2)
-        rounded[0], rounded[-1] = speeds[0], 0.0
-        return rounded
-
-    def _turn_weights(self, timed: np.ndarray, tick: float, width: int) -> np.ndarray | None:
-        """Where the second mean of _rounded applies, per tick of the curve in time: 1
-        within T + W of a turn from traction (accelerating) into braking (at least half
-        the service deceleration) less than W apart, so that round_corners' ramps there
-        are averaged whole, falling to 0 over a further W where round_corners' curve is
-        straight (the two agree); None without a turn. A fall where the share cannot hold
-        the speed on a climb brakes more gently and is not a turn: its mean would ask
-        more than the share."""
-        accelerations = np.diff(timed) / tick
-        braking = accelerations < -0.5 * self.deceleration
-        ticks = np.arange(len(accelerations))
-        last_traction = np.maximum.accumulate(np.where(accelerations > 0.0, ticks, -1))
-        entries = np.flatnonzero(braking & ~np.concatenate(([False], braking[:-1])))
-        centres = [(entry + last_traction[entry]) / 2.0 for entry in entries
-                   if last_traction[entry] >= 0 and entry - last_traction[entry] < width]
-        if not centres:
-            return None
-        reach = ROUNDING_WIDTH + width
-        samples = np.arange(len(timed))
-        distance = np.min(np.abs(samples[:, None] - np.array(centres)[None, :]), axis=1)
-        return np.clip((reach + width - distance) / width, 0.0, 1.0)
+        return rounded_curve(self.positions, speeds, self.limits - self.margin / 2,
+                             self._stop_curve, self.deceleration, *self._rounding)
 
     @functools.cached_property
     def _stop_curve(self) -> np.ndarray:
@@ -622,11 +558,12 @@ class AtoCurve(Plan):
 
     def time_of(self, v: np.ndarray) -> float:
         """The running time of the speeds `v` on this curve's grid (one of its curves), s."""
-        cells = 2.0 * np.diff(self.positions) / (v[:-1] + v[1:])
+        cells = float(running_time(self.positions, v))
         if self.departure is None:
-            return float(np.sum(cells))
-        eased = 0.5 * cells[-1] if self.stop_jerk > 0.0 else 0.0
-        return float(np.sum(cells)) + self.departure + eased
+            return cells
+        x = self.positions
+        eased = 0.5 * (2.0 * (x[-1] - x[-2]) / (v[-2] + v[-1])) if self.stop_jerk > 0.0 else 0.0
+        return cells + self.departure + eased
 
     def speed(self, t: float, position: float = 0.0) -> float:
         if position >= self.positions[-1]:
@@ -646,34 +583,6 @@ class AtoCurve(Plan):
         """The limit that applies to the train with its head at `position`, m/s."""
         cell = np.searchsorted(self.positions, position, side="right") - 1
         return float(self.limits[min(max(cell, 0), len(self.limits) - 1)])
-
-
-def _forward_pass(squared, first, x, powered, line_resistance, envelope, davis_a, davis_b,
-                  davis_c, xi, share, acceleration, power_speed, start, to_end) -> None:
-    """The forward pass of AtoCurve._feasible and _forward from cell `first`, in place on
-    squared speeds: each next cell the lower of its own value and what the planned
-    acceleration, or the share of the traction envelope against the resistance
-    (train.net_traction's terms), gives, at least `start`; it ends where it meets the
-    cells' values on a powered cell, unless `to_end`. Compiled when numba is installed
-    (the feasible curve steps through every cell; a long line's capped curve falls
-    over thousands of cells, for each of the bisection's cruise speeds)."""
-    v2 = squared[first]
-    for i in range(first, len(x) - 1):
-        v = math.sqrt(v2)
-        traction = force_limits(v, envelope)[1] if powered[i] else 0.0
-        net = share * traction - basic_resistance(v, davis_a, davis_b, davis_c) \
-            - line_resistance[i]
-        planned = acceleration if v <= power_speed else acceleration * power_speed / v
-        v2 = max(v2 + 2.0 * min(planned, xi * net) * (x[i + 1] - x[i]), start)
-        if v2 < squared[i + 1]:
-            squared[i + 1] = v2
-        elif powered[i + 1] and not to_end:
-            return
-        else:
-            v2 = squared[i + 1]
-
-
-forward_pass = compiled(_forward_pass) or _forward_pass
 
 
 def _backward_pass(squared, x, stopping, line_resistance, envelope, davis_a, davis_b, davis_c,

@@ -42,6 +42,7 @@ functions in Python and compiled code (core/run/fast_loop.py), to the same bits.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import NamedTuple
 
@@ -52,8 +53,7 @@ from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
 from .profiles import (ATO_PARAMETERS, AtoCurve, DepartureRamp, PlanTable, ato_curve, cell_of,
-                       departing, departure_ramp, plan_table,
-                       table_limit, table_speed)
+                       departing, departure_ramp, rows_speed, table_limit)
 from .restriction import SPEED_RESTRICTION, restricted_line
 from .timetable import Timetable, load_timetable, section_line
 
@@ -138,7 +138,7 @@ class JourneyState(NamedTuple):
 START = JourneyState(0, math.nan, 0, 0.0)  # the first section, from the first departure at t = 0
 
 
-@jitable
+@jitable(inline=True)
 def section_table(journey: JourneyTable, section: int, level: int) -> PlanTable:
     """Curve `level` of section `section` as a PlanTable (a view of the journey's grid)."""
     curve = section * journey.levels + level
@@ -146,7 +146,7 @@ def section_table(journey: JourneyTable, section: int, level: int) -> PlanTable:
     return PlanTable(columns, False, True, True)
 
 
-@jitable
+@jitable(inline=True)
 def departure(journey: JourneyTable, state: JourneyState) -> float:
     """When a train that has arrived at its section's end leaves it, s."""
     return max(journey.departures[state.section],
@@ -183,7 +183,7 @@ def leaving(journey: JourneyTable, state: JourneyState) -> JourneyState:
                         departure(journey, state))
 
 
-@jitable
+@jitable(inline=True)
 def journey_speed(journey: JourneyTable, state: JourneyState, t: float, position: float
                   ) -> float:
     """The target at time t with the head at `position` (m along the line), m/s."""
@@ -191,9 +191,12 @@ def journey_speed(journey: JourneyTable, state: JourneyState, t: float, position
         if t < departure(journey, state):
             return 0.0
         state = leaving(journey, state)
-    table = section_table(journey, state.section, state.level)
+    # the curve's rows read in place: contiguous, unlike section_table's columns
+    curve = state.section * journey.levels + state.level
+    first, end = journey.bounds[curve], journey.bounds[curve + 1]
     return departing(journey.departure, t - state.left,
-                     table_speed(table, position - journey.stops[state.section]))
+                     rows_speed(journey.grid[0, first:end], journey.grid[1, first:end], False,
+                                True, position - journey.stops[state.section]))
 
 
 @jitable
@@ -212,7 +215,7 @@ def observed(journey: JourneyTable, state: JourneyState, t: float, position: flo
     return state
 
 
-@jitable
+@jitable(inline=True)
 def journey_limit(journey: JourneyTable, position: float) -> float:
     """The belt's limit with the head at `position`, m/s: that of the section it is on
     (the first before the journey, the last after it)."""
@@ -307,7 +310,34 @@ def catch_up_curves(on_time: AtoCurve, fastest: AtoCurve, levels: int
             [on_time.planned_run_time, *(fastest.time_of(speeds) for speeds in faster)])
 
 
+# What a journey's tables are built from besides its timetable, line and train: its
+# parameters, the ato curve's and the shared ones the curves read (new_journey_table reads
+# the values of these alone, so a value it would read besides fails loudly, uncached).
+TABLE_INPUTS = tuple(sorted({*(spec.name for spec in (*JOURNEY_PARAMETERS, SPEED_RESTRICTION,
+                                                      *ATO_PARAMETERS)),
+                             "profile.envelope_share", "profile.jerk", "profile.departure_jerk",
+                             "plant.length"}))
+
+
 def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTable, str | None]:
+    """new_journey_table, once per process for each distinct timetable, line, train (all
+    three compared by their contents) and TABLE_INPUTS values: the plan a run's validation
+    built is the one its simulation reads, and so are a tuning's candidates' (their gains
+    are not its inputs). Never changed by a caller (JourneyPlan only reads it)."""
+    return _journey_tables(timetable, line, train,
+                           tuple((name, values[name]) for name in TABLE_INPUTS))
+
+
+# A long journey's tables are tens of MB (seed002-journey's 61 MB: 3 sections x 9 curves
+# x 10^5 cells): two kept, enough for a run's validation and simulation, a tuning's runs.
+@functools.lru_cache(maxsize=2)
+def _journey_tables(timetable: Timetable, line, train, inputs: tuple
+                    ) -> tuple[JourneyTable, str | None]:
+    return new_journey_table(timetable, dict(inputs), line, train)
+
+
+def new_journey_table(timetable: Timetable, values, line, train
+                      ) -> tuple[JourneyTable, str | None]:
     """The sections' ato curves on `line` for `train`, each on time for its running time
     in the timetable less the recovery (with profile.ato.on_time) and its faster curves
     (profile.journey.catch_up), under the run's speed restrictions
@@ -315,7 +345,7 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
     cannot meet, in one line."""
     levels = 1 + values["profile.journey.catch_up"]
     line = restricted_line(values, line)
-    tables, times, notices = [], [], []
+    curves, times, notices = [], [], []
     scheduled = [section.running_time - values["profile.journey.recovery"]
                  for section in timetable.sections]
     for section, planned in zip(timetable.sections, scheduled, strict=True):
@@ -326,16 +356,15 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
             notices.append(f"{section.origin} - {section.destination}: {curve.notice}")
         speeds, section_times = (catch_up_curves(curve, fastest_curve(values, own, train), levels)
                                  if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
-        tables += [plan_table(curve.positions, level, stops_at_end=True, limits=curve.limits)
-                   for level in speeds]
+        curves += [(curve.positions, level, curve.limits) for level in speeds]
         times.append(section_times)
     dwells = {station.name: station.dwell for station in line.stations}
     stops = timetable.stops
     leaving_at = [stop.departure - stops[0].departure for stop in stops[1:-1]]
+    bounds = np.cumsum([0] + [len(positions) for positions, _, _ in curves], dtype=np.int64)
     return JourneyTable(
-        grid=np.concatenate([table.grid for table in tables], axis=1),
-        bounds=np.cumsum([0] + [table.grid.shape[1] for table in tables], dtype=np.int64),
-        levels=levels, times=np.array(times), scheduled=np.array(scheduled),
+        grid=stacked(curves, bounds), bounds=bounds, levels=levels, times=np.array(times),
+        scheduled=np.array(scheduled),
         stops=np.array([stop.position for stop in stops]),
         departures=np.array([*leaving_at, math.inf]),
         dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
@@ -344,6 +373,16 @@ def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTab
         catch_up_after=float(values["profile.journey.catch_up_after"]),
         departure=departure_ramp(values, train, values["profile.ato.start_speed"])), \
         " | ".join(notices) or None
+
+
+def stacked(curves: list[tuple], bounds: np.ndarray) -> np.ndarray:
+    """The rows (positions, speeds, limits) of each curve one after another, curve c in
+    columns bounds[c]:bounds[c + 1] (written once: a long journey's are tens of MB)."""
+    grid = np.empty((3, bounds[-1]))
+    for c, rows in enumerate(curves):
+        for row, values in enumerate(rows):
+            grid[row, bounds[c]:bounds[c + 1]] = values
+    return grid
 
 
 def fastest_curve(values, line, train) -> AtoCurve:

@@ -105,22 +105,27 @@ class Timetable:
 def load_timetable(path: str | Path) -> Timetable:
     """A timetable file on the line its `line:` names, checked against that line (not
     yet against a train: see check_minimum_times)."""
-    fields = _fields(path, yamlfile.read_text(path, "timetable file"))
+    text = yamlfile.read_text(path, "timetable file")
+    fields = _fields(path, text)
     line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
     try:
         line = load_line(line_file)
     except ScenarioError as exc:  # the file the user gave, then what is wrong with its line
         raise node_error(path, fields["line"], f"line: {exc}") from None
-    return _timetable(path, fields, line, line_file)
+    return timetable_on(text, path, line, line_file)
 
 
+# Cached by the file's text (and the line's contents): a run's validation, profile and
+# controller each read the timetable, ~15 ms of YAML each; a Timetable is immutable.
+@functools.lru_cache(maxsize=16)
 def timetable_on(text: str, path: str | Path, line: Line, line_file: str) -> Timetable:
     """A timetable from its text (a bag's copy of the file at `path`) on `line`, the line
     the run drove (`line_file` names it), whatever the text's `line:` names now."""
     return _timetable(path, _fields(path, text), line, line_file)
 
 
-def _fields(path, text: str) -> dict[str, yaml.Node]:
+@functools.lru_cache(maxsize=16)
+def _fields(path, text: str) -> dict[str, yaml.Node]:  # read only: shared by its callers
     yamlfile.check_structure(text, str(path))
     fields = mapping_fields(path, yaml.compose(text), TOP_KEYS,
                             "a timetable file is a mapping (line, train, stops, load)")
