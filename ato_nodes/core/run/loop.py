@@ -67,7 +67,8 @@ def warm(values: dict | None = None) -> None:
     overrides, a cheap run of it), and one of seed000 with the
     first kind without them that names a cheap run (its registry entry's warm_up: those
     kinds share one signature), by default also the shipped journeys' kinds (a journey's
-    loop reads its tables: a signature of its own per kind); and the LSSVM's solves. Every
+    loop reads its tables: a signature of its own per kind) and seed 002's strategy driven
+    again for a weighed train; and the LSSVM's solves. Every
     other run of a kind calls the loop with the same argument types, so these compilations
     serve them all, in every process of this checkout."""
     warm_journeys = values is None  # setup's: a tuning warms its own run's kind
@@ -88,7 +89,17 @@ def warm(values: dict | None = None) -> None:
             **dict(cheap.warm_up)}))
     if warm_journeys:
         _warm_journeys()
+        _warm_replanned_strategy()
     lssvm.warm()
+
+
+def _warm_replanned_strategy() -> None:
+    """A two-step run of seed 002's strategy driven again for a heavier weighed train: the
+    switching strategy's compiled runs (core/targets/strategy.py), which a study of that
+    scenario's trains and its scripts call in every process."""
+    strategy = load_scenario("seed002-hsr-ato")
+    simulate(apply_overrides(strategy, {"run.duration": 2 * strategy["run.period"],
+                                        "plant.mass_factor": 1.1}))
 
 
 def _warm_journeys() -> None:
