@@ -105,22 +105,6 @@ def _scored(series: dict[str, np.ndarray], parameters: dict | None
     indices.update({key: last_stop[key] for key in stop_indices})
     indices["journey"] = {"timetable": name, **journey_record(journey)}
     return indices, journey
-    name = Path(parameters[TIMETABLE]).name
-    stop_indices = [key for key in STOP_INDICES if key in indices]
-    try:
-        timetable = run_timetable(parameters)
-        if timetable is None:
-            raise ScenarioError(f"the timetable {name} is neither kept in the bag nor on "
-                                "this machine")
-        journey = run_journey(series, parameters, timetable)
-    except ScenarioError as exc:
-        indices.update(dict.fromkeys(stop_indices, math.nan))
-        indices["journey"] = {"timetable": name, "error": str(exc)}
-        return indices
-    last_stop = last_stop_indices(journey, timetable.line.planned_run_time)
-    indices.update({key: last_stop[key] for key in stop_indices})
-    indices["journey"] = {"timetable": name, **journey_record(journey)}
-    return indices
 
 
 # The worst station of a journey run, as studies count it (inf: a station missed or not
