@@ -21,6 +21,7 @@ import psutil  # noqa: E402  (a dependency of distributed)
 
 from ato_nodes.studies.tuning import COMPILING  # noqa: E402
 from commands import invocation
+from dask_cluster import scheduler_and_workers
 
 pytestmark = pytest.mark.integration
 
@@ -72,28 +73,15 @@ def cluster_tuning(directory: Path, out: Path):
     """A scheduler (on loopback) and two workers as separate processes, as the README
     starts them, and a 60-evaluation tuning on them into `out`, 12 evaluations in;
     every one of these processes still running at the end is killed."""
-    address_file = directory / "scheduler.json"
-    processes = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--scheduler-file",
-                                   str(address_file), "--no-dashboard", "--port", "0",
-                                   "--host", "127.0.0.1"],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    try:
-        deadline = time.monotonic() + 60
-        while not address_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        address = json.loads(address_file.read_text())["address"]
-        processes += [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
-                                        "--no-nanny", "--no-dashboard"], cwd=directory,
-                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                      for _ in range(2)]
-        processes.append(start_tuning(out, "--cluster", address))
-        wait_for_evaluations(processes[-1], out, 12)
-        yield ClusterTuning(address, processes[0], processes[1:3], processes[-1])
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-                process.wait()
+    with scheduler_and_workers(directory) as (address, scheduler, workers):
+        tuning = start_tuning(out, "--cluster", address)
+        try:
+            wait_for_evaluations(tuning, out, 12)
+            yield ClusterTuning(address, scheduler, workers, tuning)
+        finally:
+            if tuning.poll() is None:
+                tuning.kill()
+                tuning.wait()
 
 
 def start_tuning(out: Path, *extra: str, evaluations: int = 60) -> subprocess.Popen:

@@ -4,7 +4,6 @@ separate processes; a worker killed mid-study changes nothing (its samples run a
 a scheduler that dies, or a Ctrl-C, ends the study in one line with its finished
 samples kept for --resume; compare_scenarios.py's stack runs go on the workers."""
 
-import contextlib
 import json
 import os
 import selectors
@@ -20,6 +19,7 @@ pytest.importorskip("distributed")
 import psutil  # noqa: E402  (a dependency of distributed)
 
 from commands import invocation, script  # noqa: E402
+from dask_cluster import scheduler_and_workers  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
@@ -66,33 +66,6 @@ def test_a_local_cluster_gives_the_pool_s_rows(tmp_path):
     rows = [sorted((tmp_path / name / "samples.csv").read_text().splitlines())
             for name in ("pool", "cluster")]
     assert rows[0] == rows[1] and len(rows[0]) == 21
-
-
-@contextlib.contextmanager
-def scheduler_and_workers(directory: Path):
-    """A scheduler (on loopback) and two workers as separate processes, as
-    docs/reference.md starts them: (address, scheduler, workers); every one still
-    running at the end is killed."""
-    address_file = directory / "scheduler.json"
-    processes = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--scheduler-file",
-                                   str(address_file), "--no-dashboard", "--port", "0",
-                                   "--host", "127.0.0.1"],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
-    try:
-        deadline = time.monotonic() + 60
-        while not address_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        address = json.loads(address_file.read_text())["address"]
-        processes += [subprocess.Popen([str(BIN / "dask"), "worker", address, "--nthreads", "1",
-                                        "--no-nanny", "--no-dashboard"], cwd=directory,
-                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                      for _ in range(2)]
-        yield address, processes[0], processes[1:]
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-                process.wait()
 
 
 def test_a_worker_killed_mid_study_changes_nothing(tmp_path):
