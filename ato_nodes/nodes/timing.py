@@ -4,11 +4,11 @@ With it, each node writes FOLDER/ROLE.json as it exits: for each part of its loo
 lockstep wait, the takes, the handling of each per-step input, each topic's publishes,
 the bag writes, the executor's housekeeping passes) the wall and thread-CPU nanoseconds
 summed and the count, and the CPU time of the whole process (DDS's threads included),
-from the run's 'start' to its 'finished' as the node hears them (another node than the
-plant may hear 'start' a few steps late: over a long run, the figures per step are what
-a step costs). `benchmarks/benchmark.py --profile` prints them per step. The parts are
-wrapped in place before the node spins, so a node without the variable runs exactly its
-usual code.
+from the run's 'start' (or the node's first per-step input, if that comes first) to its
+'finished' as the node hears them (another node than the plant may hear 'start' a few
+steps late: over a long run, the figures per step are what a step costs).
+`benchmarks/benchmark.py --profile` prints them per step. The parts are wrapped in
+place before the node spins, so a node without the variable runs exactly its usual code.
 """
 
 from __future__ import annotations
@@ -53,16 +53,30 @@ class _NodeTiming:
     def wrap(self, owner, attribute: str, name: str) -> None:
         setattr(owner, attribute, _timing(getattr(owner, attribute), self.part(name)))
 
+    def _note(self, word: str, steps: int = 0) -> None:
+        """The totals as the loop's `word` ('start', 'finished') is first met."""
+        if word not in self.loop:
+            self.loop[word] = (time.process_time_ns(), steps,
+                               {name: list(totals) for name, totals in self.parts.items()})
+
     def noting_the_loop(self, handle: Callable) -> Callable:
-        """The run events' handler `handle`, noting the totals at 'start' and 'finished'."""
+        """The run events' handler `handle`, noting the totals at 'start' and 'finished'
+        (the first of each only: a 'start' noted again after 'finished' would turn the
+        loop inside out)."""
         def handling(msg) -> None:
             word, _, argument = msg.data.partition(" ")
-            # the first of each only: a 'start' noted again after 'finished' (seen once, a
-            # recorder's loop CPU negative in a 5 s run) would turn the loop inside out
-            if word in ("start", "finished") and word not in self.loop:
-                self.loop[word] = (time.process_time_ns(),
-                                   int(argument.split()[0]) if word == "finished" else 0,
-                                   {name: list(totals) for name, totals in self.parts.items()})
+            if word in ("start", "finished"):
+                self._note(word, int(argument.split()[0]) if word == "finished" else 0)
+            handle(msg)
+        return handling
+
+    def noting_a_step(self, handle: Callable) -> Callable:
+        """A per-step input's handler `handle`, noting the loop's start at its first
+        message if the node has not heard 'start' yet: run events of different nodes
+        arrive in no fixed order, and a 'start' delivered late (seen: a recorder's after
+        the plant's 'finished', its loop CPU negative) would leave the loop unbounded."""
+        def handling(msg) -> None:
+            self._note("start")
             handle(msg)
         return handling
 
@@ -93,7 +107,9 @@ def install(node, shared: dict[str, tuple[object, str]]) -> None:
     names = {subscription: topic.name for subscription, topic in node._incoming}
     names[node.events_in] = node.topics["events"].name
     node.lockstep_inputs[:] = [
-        (subscription, _timing(callback, timing.part(f"handle {names[subscription]}")), wakes)
+        (subscription, _timing(callback if subscription is node.events_in
+                               else timing.noting_a_step(callback),
+                               timing.part(f"handle {names[subscription]}")), wakes)
         for subscription, callback, wakes in node.lockstep_inputs]
     events = next(index for index, (subscription, _, _) in enumerate(node.lockstep_inputs)
                   if subscription is node.events_in)
