@@ -6,11 +6,9 @@ Ctrl-C and a scheduler that dies end the tuning in one line, the log kept for --
 import contextlib
 import json
 import os
-import selectors
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import NamedTuple
 
@@ -21,6 +19,7 @@ import psutil  # noqa: E402  (a dependency of distributed)
 
 from ato_nodes.studies.tuning import COMPILING  # noqa: E402
 from commands import invocation
+from progress_lines import read_progress_until
 from dask_cluster import scheduler_and_workers
 
 pytestmark = pytest.mark.integration
@@ -96,14 +95,8 @@ def wait_for_evaluations(tuner: subprocess.Popen, out: Path, count: int) -> None
     """Until evaluations.jsonl has `count` lines, reading the progress line the tuner
     prints after each one it logs (no fixed sleep); it must still be running then."""
     log = out / "evaluations.jsonl"
-    deadline = time.monotonic() + 300
-    with selectors.DefaultSelector() as selector:
-        selector.register(tuner.stderr, selectors.EVENT_READ)
-        while not log.exists() or len(log.read_text().splitlines()) < count:
-            assert time.monotonic() < deadline and tuner.poll() is None, \
-                "the tuning ended before it could be stopped"
-            if selector.select(timeout=deadline - time.monotonic()):
-                tuner.stderr.readline()
+    read_progress_until(tuner, lambda: log.exists() and len(log.read_text().splitlines())
+                        >= count)
 
 
 def messages(stderr: str) -> list[str]:

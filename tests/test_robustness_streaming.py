@@ -5,10 +5,8 @@ refusing a study whose settings changed."""
 
 import json
 import os
-import selectors
 import signal
 import subprocess
-import time
 from pathlib import Path
 
 import psutil
@@ -18,6 +16,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies.robustness import COLUMNS, draw_train
 from ato_nodes.studies.samples import SampleFile, write_json_with_rows
 from commands import invocation, one_line_exit_2, script
+from progress_lines import read_progress_until
 
 ROOT = Path(__file__).resolve().parents[1]
 RANGES = {"plant.mass_factor": (0.85, 1.3), "plant.resistance_factor": (0.8, 1.2),
@@ -109,20 +108,13 @@ def stop_after(process: subprocess.Popen, out: Path, count: int, number: int
     must still be running then: SIGINT to its process group, as a terminal's Ctrl-C
     (its workers get it too), SIGKILL to its process alone. (Its stderr, the worker
     processes it had.)"""
-    deadline = time.monotonic() + 120
-    with selectors.DefaultSelector() as selector:
-        selector.register(process.stderr, selectors.EVENT_READ)
-        lines = []
-        while rows(out) < count:
-            assert time.monotonic() < deadline and process.poll() is None, lines
-            if selector.select(timeout=deadline - time.monotonic()):
-                lines.append(process.stderr.readline())
-        workers = psutil.Process(process.pid).children(recursive=True)
-        if number == signal.SIGINT:
-            os.killpg(process.pid, number)
-        else:
-            process.send_signal(number)
-        _, rest = process.communicate(timeout=120)
+    lines = read_progress_until(process, lambda: rows(out) >= count, 120)
+    workers = psutil.Process(process.pid).children(recursive=True)
+    if number == signal.SIGINT:
+        os.killpg(process.pid, number)
+    else:
+        process.send_signal(number)
+    _, rest = process.communicate(timeout=120)
     return "".join(lines) + rest, workers
 
 

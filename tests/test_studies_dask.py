@@ -6,11 +6,9 @@ samples kept for --resume; compare_scenarios.py's stack runs go on the workers."
 
 import json
 import os
-import selectors
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -19,6 +17,7 @@ pytest.importorskip("distributed")
 import psutil  # noqa: E402  (a dependency of distributed)
 
 from commands import invocation, script  # noqa: E402
+from progress_lines import read_progress_until  # noqa: E402
 from dask_cluster import scheduler_and_workers  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -46,14 +45,8 @@ def wait_for_rows(process: subprocess.Popen, out: Path, count: int) -> None:
     """Until samples.csv has `count` rows, reading the progress line the study prints
     after each tenth of its samples (no fixed sleep); it must still be running then."""
     path = out / "samples.csv"
-    deadline = time.monotonic() + 300
-    with selectors.DefaultSelector() as selector:
-        selector.register(process.stderr, selectors.EVENT_READ)
-        while not path.exists() or len(path.read_text().splitlines()) - 1 < count:
-            assert time.monotonic() < deadline and process.poll() is None, \
-                "the study ended before it could be stopped"
-            if selector.select(timeout=deadline - time.monotonic()):
-                process.stderr.readline()
+    read_progress_until(process, lambda: path.exists() and len(path.read_text().splitlines())
+                        - 1 >= count)
 
 
 def messages(stderr: str) -> list[str]:
