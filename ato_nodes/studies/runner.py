@@ -31,8 +31,10 @@ from ato_nodes.studies.backend import Backend
 MAX_WORKERS = 64      # processes of a pool: more than the machine's cores only share them
 MAX_SAMPLES = 10_000  # runs of a study (robustness.py: samples.csv and its report)
 MAX_SEED = 2**31 - 1  # a study's seed, as the schema's (plant.noise_seed and the others)
+MAX_EVALUATIONS = 1_000_000  # a league's tuning budget per kind
 COUNT_BOUNDS = {"samples": (1, MAX_SAMPLES), "workers": (1, MAX_WORKERS), "seed": (0, MAX_SEED),
-                "seeds": (0, MAX_SEED), "population": (2, MAX_SAMPLES)}
+                "seeds": (0, MAX_SEED), "population": (2, MAX_SAMPLES),
+                "trains": (1, MAX_SAMPLES), "tune": (0, MAX_EVALUATIONS)}
 
 
 def check_counts(**counts: int | Sequence[int]) -> None:
