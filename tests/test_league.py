@@ -5,6 +5,9 @@ cannot run says why in its row; bad input is refused in one line."""
 import csv
 import dataclasses
 import json
+import os
+import signal
+import subprocess
 
 import pytest
 
@@ -13,7 +16,8 @@ from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.studies.league import (LeagueSettings, check_kinds, markdown, prepare_entries,
                                       registered_kinds, table)
 from ato_nodes.studies.robustness import FACTORS, SEEDS
-from commands import one_line_exit_2, script
+from commands import ROOT, invocation, one_line_exit_2, script
+from progress_lines import read_progress_until
 
 SCENARIO = "seed004-metro-ato"
 
@@ -110,3 +114,32 @@ def test_a_league_tunes_each_kind_alike_and_runs_them_over_the_same_trains(tmp_p
     assert json.loads((out / "league.json").read_text()) == report
     other = script("league.py", *command[:-2], "--seed", "2", "--out", out)
     one_line_exit_2(other, "other settings")
+
+
+def trains_done(out) -> int:
+    path = out / "trains-pid" / "samples.csv"
+    return len(path.read_text().splitlines()) - 1 if path.exists() else 0
+
+
+@pytest.mark.slow
+def test_an_interrupted_league_keeps_its_runs_and_the_same_command_ends_it_as_one_run(
+        tmp_path):
+    command = [SCENARIO, "--kinds", "pid", "linear_adrc", "--tune", "6", "--trains", "300",
+               "--set", "run.duration=40", "--workers", "2", "--out"]
+    whole = script("league.py", *command, tmp_path / "whole", timeout=900)
+    assert whole.returncode == 0, whole.stderr
+    out = tmp_path / "stopped"
+    process = subprocess.Popen([*invocation("league.py"), *command, str(out)], cwd=ROOT,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    lines = read_progress_until(process, lambda: trains_done(out) >= 30, 600)
+    os.killpg(process.pid, signal.SIGINT)  # a terminal's Ctrl-C: its workers get it too
+    _, rest = process.communicate(timeout=120)
+    assert process.returncode == 130, "".join(lines) + rest
+    assert [line for line in rest.splitlines() if not line.startswith("trains ")] == [
+        f"interrupted; every finished evaluation and train is in {out}; the same command "
+        "continues"]
+    assert trains_done(out) >= 30 and not (out / "league.json").exists()
+    again = script("league.py", *command, out, timeout=900)
+    assert again.returncode == 0, again.stderr
+    assert (out / "league.json").read_text() == (tmp_path / "whole" / "league.json").read_text()

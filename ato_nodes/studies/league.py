@@ -211,8 +211,8 @@ class League:
                              f"failed ({summary['failed_evaluations']})")
             return
         entry.values = apply_overrides(entry.values, summary["best_params"])
-        entry.tuning = {key: summary[key] for key in
-                        ("best_fitness", "best_is_feasible", "best_params", "best_at_bounds")}
+        entry.tuning = {key: summary[key] for key in ("fitness", "best_fitness",
+                        "best_is_feasible", "best_params", "best_at_bounds")}
 
     def run_trains(self, entries: Sequence[Entry]) -> dict[str, SampleStudy]:
         """Every kind that can run over the league's trains, each kind's rows streamed
@@ -267,11 +267,13 @@ def table(entries: Sequence[Entry], studies: dict[str, SampleStudy]) -> list[dic
 
 def markdown(rows: Sequence[dict[str, Any]]) -> str:
     """The league as a Markdown table: a row per kind, a kind that cannot run saying why
-    in its first cell."""
+    in its first cell; a tuned kind's best fitness (on the scenario's own train) last."""
     ran = [row for row in rows if "summary" in row]
     counts = [text for _, _, text in WITHIN if any(text in row["within"] for row in ran)]
     cells = [(key, stat) for key, stat in CELLS if any(key in row["summary"] for row in ran)]
-    headings = ["controller", *counts, *(f"{HEADINGS[key]} {stat}" for key, stat in cells)]
+    tuned = next((row["tuning"]["fitness"] for row in ran if "tuning" in row), None)
+    headings = ["controller", *counts, *(f"{HEADINGS[key]} {stat}" for key, stat in cells),
+                *([f"tuning's best {tuned}"] if tuned else [])]
     lines = ["| " + " | ".join(headings) + " |", "|---" * len(headings) + "|"]
     for row in rows:
         if "summary" not in row:
@@ -281,8 +283,17 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
                      else "-" for text in counts]
             texts += [f"{row['summary'][key][stat]:.4g}" if key in row["summary"] else "-"
                       for key, stat in cells]
+            texts += [tuning_text(row.get("tuning"))] if tuned else []
         lines.append("| " + " | ".join([row["label"], *texts]).replace("\n", " ") + " |")
     return "\n".join(lines)
+
+
+def tuning_text(tuning: dict[str, Any] | None) -> str:
+    """A tuned kind's best fitness on the scenario's own train, or that it missed the
+    requirements."""
+    if tuning is None:
+        return "-"
+    return f"{tuning['best_fitness']:.4g}" if tuning["best_is_feasible"] else "infeasible"
 
 
 def plot(entries: Sequence[Entry], studies: dict[str, SampleStudy], path: Path,
