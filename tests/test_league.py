@@ -83,9 +83,11 @@ def test_a_directory_that_holds_something_else_is_refused(tmp_path):
 
 
 def draws(path) -> list[dict]:
+    """Each train's draw, in sample order (the rows are in the order they finished)."""
     with path.open() as handle:
-        return [{name: row[name] for name in ("sample", *FACTORS, *SEEDS)}
+        rows = [{name: row[name] for name in ("sample", *FACTORS, *SEEDS)}
                 for row in csv.DictReader(handle)]
+    return sorted(rows, key=lambda row: int(row["sample"]))
 
 
 @pytest.mark.slow
