@@ -76,10 +76,12 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(tmp_path, argum
     assert not out.exists()
 
 
-def test_a_directory_that_holds_something_else_is_refused(tmp_path):
+def test_a_directory_or_file_that_holds_something_else_is_refused(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
-    one_line_exit_2(script("league.py", SCENARIO, "--out", tmp_path), "other than a league")
+    for out in (tmp_path, tmp_path / "notes.txt"):
+        one_line_exit_2(script("league.py", SCENARIO, "--out", out), "other than a league")
     assert [path.name for path in tmp_path.iterdir()] == ["notes.txt"]
+    assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
 def draws(path) -> list[dict]:

@@ -160,6 +160,13 @@ def kind_entry(base: dict[str, Any], kind: str, given: dict[str, Any], tune: int
     return entry
 
 
+def empty_directory(path: Path) -> bool:
+    try:
+        return not any(path.iterdir())
+    except OSError:  # a file, or a directory this process cannot read
+        return False
+
+
 class League:
     """A league's output directory, opened before anything runs: a new one, or one that
     holds a league of the same settings under the same conditions (continued); anything
@@ -171,7 +178,7 @@ class League:
         self.described = jsontext.dumps(
             {**described, "conditions": conditions_digest(base, described)}, indent=2)
         settings_file = out / SETTINGS
-        if out.exists() and not settings_file.exists() and any(out.iterdir()):
+        if out.exists() and not settings_file.exists() and not empty_directory(out):
             raise ScenarioError(f"{out} holds something other than a league; use a new --out")
         if settings_file.exists():
             check_same_settings(out, settings_file, self.described, "league",
