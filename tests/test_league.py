@@ -46,7 +46,7 @@ def test_a_tuned_kind_starts_at_its_shipped_gains_and_an_untuned_one_keeps_the_s
 def test_a_gain_given_goes_to_its_kind_alone():
     _, (pid, ladrc) = prepare_entries(LeagueSettings(
         SCENARIO, ("pid", "linear_adrc"), sets=("pid.kp=123", "run.duration=50")))
-    assert pid.label == "pid (given gains)" and pid.values["pid.kp"] == 123
+    assert pid.label == "pid (shipped gains; pid.kp=123)" and pid.values["pid.kp"] == 123
     assert ladrc.values["pid.kp"] == SPEC_BY_NAME["pid.kp"].default
     assert pid.values["run.duration"] == ladrc.values["run.duration"] == 50
 

@@ -33,6 +33,7 @@ from ato_nodes.studies.backend import Backend, Progress
 from ato_nodes.studies.directory import (check_same_settings, conditions_digest, hold_directory,
                                          name_holder)
 from ato_nodes.studies.robustness import COLUMNS, INDICES, RANGES, WITHIN, run_sample, summarise
+from ato_nodes.studies.runner import short_value
 from ato_nodes.studies.samples import SampleStudy
 from ato_nodes.studies.tuning import (DEFAULT_ALGORITHM, PENALTY, Objective, SearchSpace, Tuner,
                                       TuningSettings)
@@ -83,7 +84,7 @@ class LeagueSettings:
 class Entry:
     """A kind's row: how its gains were chosen, its run's values, or why it cannot run."""
     kind: str
-    gains: str  # "tuned N", "scenario's gains", "given gains", "shipped gains"
+    gains: str  # "tuned N", "scenario's gains" or "shipped gains", then any given: "; NAME=VALUE"
     values: dict[str, Any] | None = None
     reason: str = ""  # one line, when values is None
     tuning: dict[str, Any] = field(default_factory=dict)  # the tuning's best, when tuned
@@ -146,8 +147,10 @@ def kind_entry(base: dict[str, Any], kind: str, given: dict[str, Any], tune: int
     start at the shipped ones unless given (the scenario's own kind would otherwise
     start at gains tuned on this very scenario)."""
     ours = kind == base[CONTROLLERS.kind_parameter.name]
-    gains = (f"tuned {tune}" if tune else "given gains" if given
-             else "scenario's gains" if ours else "shipped gains")
+    gains = f"tuned {tune}" if tune else "scenario's gains" if ours else "shipped gains"
+    if given:
+        gains += "; " + ", ".join(f"{name}={short_value(name, value)}"
+                                  for name, value in given.items())
     entry = Entry(kind, gains)
     overrides = {CONTROLLERS.kind_parameter.name: kind, **given}
     if tune:

@@ -66,9 +66,9 @@ SHORT_VALUE = 16  # characters of an override's value a row's label shows whole
 def labels(variants: Sequence[Variant]) -> list[str]:
     """Each variant's row label, short and without machine paths: the scenario's stem
     (a file's name without its suffix) and each override as NAME=VALUE, joined by ':' as
-    the command line takes them; a file's value shown by its file name, any other value
-    longer than SHORT_VALUE cut short. Labels that coincide name their scenario file's folder,
-    then their place in the list (#N): each is unique."""
+    the command line takes them; a file's value shown by its file name, a number in six
+    digits, any other value longer than SHORT_VALUE cut short. Labels that coincide name
+    their scenario file's folder, then their place in the list (#N): each is unique."""
     short = [_short_label(variant, folder=False) for variant in variants]
     short = [_short_label(variant, folder=True) if short.count(label) > 1 else label
              for variant, label in zip(variants, short, strict=True)]
@@ -83,12 +83,13 @@ def _short_label(variant: Variant, folder: bool) -> str:
         name = f"{scenario.parent.name}/{name}"
     overrides = (variant.overrides.items() if isinstance(variant.overrides, Mapping)
                  else (text.partition("=")[::2] for text in variant.overrides))
-    return ":".join([name, *(f"{key.strip()}={_short_value(key.strip(), value)}"
+    return ":".join([name, *(f"{key.strip()}={short_value(key.strip(), value)}"
                              for key, value in overrides)])
 
 
-def _short_value(name: str, value: Any) -> str:
-    text = str(value).strip()
+def short_value(name: str, value: Any) -> str:
+    """A parameter's value as a label shows it (see labels())."""
+    text = f"{value:g}" if isinstance(value, float) else str(value).strip()
     if name in FILE_PARAMETERS and text:
         return Path(text).name
     return text if len(text) <= SHORT_VALUE else text[:SHORT_VALUE - 3] + "..."
