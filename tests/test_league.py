@@ -147,3 +147,16 @@ def test_an_interrupted_league_keeps_its_runs_and_the_same_command_ends_it_as_on
     again = script("league.py", *command, out, timeout=900)
     assert again.returncode == 0, again.stderr
     assert (out / "league.json").read_text() == (tmp_path / "whole" / "league.json").read_text()
+
+
+@pytest.mark.slow
+def test_a_league_on_a_dask_cluster_gives_the_league_run_here(tmp_path):
+    command = [SCENARIO, "--kinds", "pid", "linear_adrc", "--tune", "4", "--trains", "3",
+               "--set", "run.duration=20"]
+    here = script("league.py", *command, "--out", tmp_path / "here", timeout=900)
+    assert here.returncode == 0, here.stderr
+    cluster = script("league.py", *command, "--cluster", "local:2", "--out",
+                     tmp_path / "cluster", timeout=900)
+    assert cluster.returncode == 0, cluster.stderr
+    assert (tmp_path / "cluster" / "league.json").read_text() == (
+        tmp_path / "here" / "league.json").read_text()
