@@ -25,13 +25,13 @@ from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.studies.runner import COUNT_BOUNDS, check_counts
-from ato_nodes.studies.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
-                                      TuningSettings)
+from ato_nodes.studies.tuning import (DEFAULT_ALGORITHM, FITNESS, PENALTY, Requirement,
+                                      SearchSpace, Tuner, TuningLost, TuningSettings)
 
 
 def parse_args() -> argparse.Namespace:
     parser = cli.argument_parser(__doc__)
-    parser.add_argument("--algorithm", default="bas-pso", choices=sorted(ALGORITHMS))
+    parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, choices=sorted(ALGORITHMS))
     parser.add_argument("--scenario", default="seed000")
     parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",
                         help="parameters to tune and their bounds (repeatable; default: the "
