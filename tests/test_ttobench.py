@@ -339,3 +339,9 @@ def test_the_table_command_refuses_a_bad_file_with_one_line_and_exit_2(tmp_path)
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.splitlines() == [
         f"error: {path}: speed limits entry 2: the speed limit 0 km/h must be above 0"]
+
+
+def test_a_number_too_large_for_a_float_is_one_line(tmp_path):
+    text = json.dumps(track_document()).replace("[500.0, 36]", "[500.0, 1" + "0" * 400 + "]")
+    with pytest.raises(ScenarioError, match=r"speed limits entry 2: must be a finite number"):
+        load_track(write(tmp_path, text))

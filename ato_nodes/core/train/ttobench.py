@@ -33,6 +33,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import reprlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -59,7 +60,7 @@ def read_json(path: str | Path, what: str) -> Any:
         keys = [key for key, _ in pairs]
         twice = next((key for key in keys if keys.count(key) > 1), None)
         if twice is not None:
-            raise ScenarioError(f"{path}: key {twice!r} is given twice")
+            raise ScenarioError(f"{path}: key {reprlib.repr(twice)} is given twice")
         return dict(pairs)
 
     def no_constant(name):
@@ -84,7 +85,7 @@ class Fields:
             raise ScenarioError(f"{path}: a TTOBench {what} file is a JSON object")
         unknown = sorted(set(document) - {"metadata", *required, *optional})
         if unknown:
-            raise ScenarioError(f"{path}: unknown field {unknown[0]!r}")
+            raise ScenarioError(f"{path}: unknown field {reprlib.repr(unknown[0])}")
         missing = next((name for name in ("metadata", *required) if name not in document),
                        None)
         if missing is not None:
@@ -96,15 +97,21 @@ class Fields:
 
     def object(self, field: str, value: Any) -> dict:
         if not isinstance(value, dict):
-            raise self.error(field, f"must be a JSON object, not {value!r}")
+            raise self.error(field, f"must be a JSON object, not {reprlib.repr(value)}")
         return value
 
     def number(self, field: str, value: Any) -> float:
-        """`value` as a float: a finite JSON number (not true/false)."""
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value):
-            raise self.error(field, f"must be a finite number, not {value!r}")
-        return float(value)
+        """`value` as a float: a finite JSON number (not true/false; an integer too large
+        for a float is not finite)."""
+        number = math.nan
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            try:
+                number = float(value)
+            except OverflowError:
+                pass
+        if not math.isfinite(number):
+            raise self.error(field, f"must be a finite number, not {reprlib.repr(value)}")
+        return number
 
     def metadata(self, extra: tuple[str, ...] = ()) -> dict:
         """The metadata with its required text fields checked: id (letters, digits,
@@ -114,11 +121,12 @@ class Fields:
             if not isinstance(metadata.get(key), str):
                 raise self.error("metadata", f"{key!r} must be given as text")
         if not IDENTIFIER.fullmatch(metadata["id"]):
-            raise self.error("metadata", f"id {metadata['id']!r} must be letters, digits "
-                             "and underscores")
+            raise self.error("metadata", f"id {reprlib.repr(metadata['id'])} must be "
+                             "letters, digits and underscores")
         if metadata["library version"] not in VERSIONS:
-            raise self.error("metadata", f"library version {metadata['library version']!r} "
-                             f"is not one read here ({', '.join(VERSIONS)})")
+            version = reprlib.repr(metadata["library version"])
+            raise self.error("metadata", f"library version {version} is not one read here "
+                             f"({', '.join(VERSIONS)})")
         return metadata
 
     def quantity(self, field: str, unit: str, low: float = -math.inf,
@@ -151,7 +159,7 @@ class Fields:
         for number, row in enumerate(rows, 1):
             if not isinstance(row, list) or len(row) != len(units):
                 raise self.error(f"{field} entry {number}", f"must be a list of "
-                                 f"{len(units)} ({', '.join(units)}), not {row!r}")
+                                 f"{len(units)} ({', '.join(units)}), not {reprlib.repr(row)}")
         return rows
 
 # ---------------------------------------------------------------------- tracks ----
@@ -334,7 +342,7 @@ def _radius(fields: Fields, name: str, value: Any) -> float:
             and math.isfinite(value) and value != 0:
         return float(value)
     raise fields.error(name, f'a radius is a number other than 0, or "{STRAIGHT}", not '
-                       f"{value!r}")
+                       f"{reprlib.repr(value)}")
 
 
 def _tunnels(fields: Fields, length: float) -> tuple[Tunnel, ...]:
@@ -427,8 +435,9 @@ class Journey:
     def check_on(self, track: Track) -> None:
         """ScenarioError (one line) unless the journey is `track`'s and lies on it."""
         if track.id != self.track_id:
-            raise ScenarioError(f"{self.path}: metadata: associated track {self.track_id!r} "
-                                f"is not {track.path}'s ({track.id!r})")
+            raise ScenarioError(f"{self.path}: metadata: associated track "
+                                f"{reprlib.repr(self.track_id)} is not {track.path}'s "
+                                f"({reprlib.repr(track.id)})")
         beyond = next((point for point in self.points if point.position > track.length), None)
         if beyond is not None:
             raise ScenarioError(f"{self.path}: timing points: {beyond.position:g} m is beyond "
@@ -444,8 +453,9 @@ def load_journey(path: str | Path, track: Track | None = None) -> Journey:
                     ())
     metadata = fields.metadata(("associated track",))
     if not metadata["id"].startswith(metadata["associated track"] + "_"):
-        raise fields.error("metadata", f"id {metadata['id']!r} must start with the associated "
-                           f"track {metadata['associated track']!r} and an underscore")
+        raise fields.error("metadata", f"id {reprlib.repr(metadata['id'])} must start with "
+                           f"the associated track {reprlib.repr(metadata['associated track'])} "
+                           "and an underscore")
     rows = fields.table("timing points", TIMING_UNITS)
     points = tuple(_timing_point(fields, f"timing points entry {number}", row)
                    for number, row in enumerate(rows, 1))
