@@ -26,6 +26,10 @@ How the library's quantities map onto the project's (docs/reference.md "TTOBench
   plant.mass_factor scales all three with the weight (air drag too); a loaded TTOBench
   train is instead plant.mass at the loaded mass with specific_davis() at that mass,
   which keeps the library's absolute coefficients (Train.davis).
+* Envelopes: traction the library's force and power, the brake the blended one
+  (regenerative plus pneumatic), each capped at the comfort limit of the effective mass
+  (Train.traction_envelope, Train.brake_envelope); what the library leaves out of a
+  train (length, comfort limits) is SUPPLEMENTS', each with its source.
 """
 
 from __future__ import annotations
@@ -57,11 +61,12 @@ def read_json(path: str | Path, what: str) -> Any:
     text = yamlfile.read_text(path, what)
 
     def unique(pairs):
-        keys = [key for key, _ in pairs]
-        twice = next((key for key in keys if keys.count(key) > 1), None)
-        if twice is not None:
+        document = dict(pairs)
+        if len(document) < len(pairs):
+            seen: set[str] = set()
+            twice = next(key for key, _ in pairs if key in seen or seen.add(key))
             raise ScenarioError(f"{path}: key {reprlib.repr(twice)} is given twice")
-        return dict(pairs)
+        return document
 
     def no_constant(name):
         raise ScenarioError(f"{path}: {name} is not a number (JSON has no {name})")
@@ -494,9 +499,12 @@ def _check_points(fields: Fields, points: tuple[TimingPoint, ...]) -> None:
     if len(points) < 2 or not points[0].stopping or not points[-1].stopping:
         raise fields.error("timing points", "at least two, the first and the last stopping "
                            "points (both speed constraints 0)")
+    earliest = None  # the latest lower time constraint of the points before
     for number in range(2, len(points) + 1):
         before, point = points[number - 2], points[number - 1]
         name = f"timing points entry {number}"
+        if before.earliest is not None:
+            earliest = before.earliest if earliest is None else max(earliest, before.earliest)
         if point.position < before.position:
             raise fields.error(name, f"{point.position:g} m is before {before.position:g} m "
                                "(positions must not decrease)")
@@ -504,8 +512,6 @@ def _check_points(fields: Fields, points: tuple[TimingPoint, ...]) -> None:
         if pair and not (point.stopping and before.stopping):
             raise fields.error(name, f"shares {point.position:g} m with the point before: "
                                "only an arrival and a departure stopping point may")
-        earliest = max((p.earliest for p in points[:number - 1] if p.earliest is not None),
-                       default=None)
         if earliest is not None and point.latest is not None and point.latest < earliest:
             raise fields.error(name, f"its upper time constraint {point.latest:g} s is before "
                                f"an earlier point's lower one ({earliest:g} s)")
@@ -742,12 +748,12 @@ def _tunnel_coefficients(fields: Fields) -> tuple[tuple[float, float], ...]:
     """(cross section m^2, coefficient N/(m/s)^2) of each row, cross sections above 0 and
     each once, coefficients at least 0."""
     units = {"cross section": "m^2", "coefficient": "kN/(km/h)^2"}
-    coefficients: list[tuple[float, float]] = []
+    coefficients: dict[float, float] = {}
     for number, row in enumerate(fields.table("tunnel resistance", units), 1):
         name = f"tunnel resistance entry {number}"
         area, coefficient = (fields.number(name, value) for value in row)
-        if not area > 0.0 or coefficient < 0.0 or area in dict(coefficients):
+        if not area > 0.0 or coefficient < 0.0 or area in coefficients:
             raise fields.error(name, "the cross section must be above 0 and given once, the "
                                "coefficient at least 0")
-        coefficients.append((area, coefficient * KN / KMH ** 2))
-    return tuple(coefficients)
+        coefficients[area] = coefficient * KN / KMH ** 2
+    return tuple(coefficients.items())
