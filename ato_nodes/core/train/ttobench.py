@@ -559,8 +559,11 @@ class Supplement:
     source: str
 
 
-# The one place for what the library leaves out (docs/reference.md "TTOBench files").
-# A comfort limit the library gives wins; with none here either, the envelope alone bounds.
+# What the library leaves out of a train, in one place (docs/reference.md "TTOBench
+# files"): its length and comfort limits where the file gives none, here, with the source
+# (a limit the file gives wins; with none here either, the envelope alone bounds); the
+# brake envelope's shape, Train.brake_envelope's stated rule; dead time, actuator lag and
+# pantograph offset, none given: the schema's defaults.
 SUPPLEMENTS = {
     "CN_Beijing_Subway": Supplement(
         118.0, 1.0, 1.0, "the project's metro-b preset (msg_config/trains/metro-b.yaml: the "
