@@ -569,11 +569,12 @@ SUPPLEMENTS = {
         118.0, 1.0, 1.0, "the project's metro-b preset (msg_config/trains/metro-b.yaml: the "
         "6-car B-type metro of this line, public figures): length 118 m, |a| <= 1 m/s^2"),
     "CH_Stadler_KISS_SBB": Supplement(
-        150.0, None, None, "length 150 m: the 6-car SBB RABe 511 (KISS) over couplers, the "
-        "operator's published figure (an estimate until checked against the library's)"),
+        150.0, None, None, "length 150 m: the 6-car SBB RABe 511 (KISS), an assumption (the "
+        "commonly quoted length, not checked against a published source)"),
     "NL_Intercity_VIRM6": Supplement(
-        162.1, None, None, "length 162.1 m: the 6-car NS VIRM over couplers, the operator's "
-        "published figure (an estimate); no acceleration limit: the envelope's "
+        162.1, None, None, "length 162.1 m: the 6-car NS VIRM, an assumption (the commonly "
+        "quoted length, not checked against a published source); no acceleration limit: the "
+        "envelope's "
         "213.9 kN / 414.5 t = 0.52 m/s^2 binds first"),
 }
 
