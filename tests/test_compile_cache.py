@@ -1,8 +1,8 @@
 """The compiled loop's cache follows what changed (core/base/kernels.py): each signature's
 machine code is keyed by the sources it is built from, the loop's modules and the
 controller kind's, wherever the kind lives. A process finding them unchanged loads the
-loop; an edited plug-in is compiled again (its new constant in the new bits), and another
-kind's signature stays cached."""
+loop; an edited plug-in is compiled again (its new constant in the new bits), another
+kind's signature stays cached, and a process without the plug-ins still reads the cache."""
 
 import importlib
 import json
@@ -83,6 +83,13 @@ print(json.dumps({"ran": outcome, "compiled": Compiled.kinds}))
 '''
 
 
+# A short run of the shipped PID, compiled, in a process that has no plug-in.
+SHIPPED = """from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.loop import simulate
+simulate(apply_overrides(load_scenario("seed000"), ["controller.kind=pid", "run.duration=1"]))
+"""
+
+
 def run_plug_ins(directory: Path, cache: Path) -> tuple[dict, str]:
     """A new process running gain_a as the PID and gain_b as the discrete ADRC."""
     done = subprocess.run([sys.executable, str(directory / "runner.py"),
@@ -116,6 +123,13 @@ def test_an_edited_plug_in_is_compiled_again_and_the_other_kind_stays_cached(tmp
     assert edited["ran"]["gain_b"] == cold["ran"]["gain_b"]
     # gain_a's entry built from its old source was replaced: one per signature
     assert len(list(cache.rglob("fast_loop._steps_source.*.nbc"))) == 2
+    # the index names the plug-ins' classes by text: a process without them reads it
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shipped = subprocess.run([sys.executable, "-c", SHIPPED], capture_output=True, text=True,
+                             timeout=900, cwd=elsewhere,
+                             env={**os.environ, "NUMBA_CACHE_DIR": str(cache)})
+    assert shipped.returncode == 0, shipped.stderr
 
 
 def loop_signature(kind: str) -> tuple:
