@@ -72,16 +72,18 @@ def main() -> None:
                         help="the module of ato_nodes/core edited before the second process "
                              "(default control/pid.py)")
     args = parser.parse_args()
-    if not (ROOT / "ato_nodes" / "core" / args.module).is_file():
-        _cli.fail(f"--module: no ato_nodes/core/{args.module}")
+    core = ROOT / "ato_nodes" / "core"
+    module = (core / args.module).resolve()
+    if not (module.is_file() and module.suffix == ".py" and module.is_relative_to(core)):
+        _cli.fail(f"--module: no module ato_nodes/core/{args.module}")
     with tempfile.TemporaryDirectory() as scratch:
         copy = Path(scratch)
         shutil.copytree(ROOT / "ato_nodes", copy / "ato_nodes",
                         ignore=shutil.ignore_patterns("__pycache__"))
         (copy / "msg_config").symlink_to(ROOT / "msg_config")  # the shipped scenarios
         report("cold (an empty cache)", *warm(copy))
-        with (copy / "ato_nodes" / "core" / args.module).open("a") as module:
-            module.write("# an edit\n")
+        with (copy / module.relative_to(ROOT)).open("a") as edited:
+            edited.write("# an edit\n")
         report(f"after an edit of core/{args.module}", *warm(copy))
         report("a second process (the cache)", *warm(copy))
     print("(one measurement each, on this machine as loaded at the time)")
