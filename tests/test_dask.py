@@ -17,7 +17,7 @@ import pytest
 pytest.importorskip("distributed")
 import psutil  # noqa: E402  (a dependency of distributed)
 
-from ato_nodes.studies.tuning import COMPILING  # noqa: E402
+from ato_nodes.core.base.kernels import COMPILING  # noqa: E402
 from commands import invocation
 from progress_lines import read_progress_until
 from dask_cluster import scheduler_and_workers
@@ -102,7 +102,7 @@ def wait_for_evaluations(tuner: subprocess.Popen, out: Path, count: int) -> None
 def messages(stderr: str) -> list[str]:
     """stderr without the progress lines (and the note of a compilation)."""
     return [line for line in stderr.splitlines()
-            if not line.startswith("iteration ") and line != COMPILING]
+            if not line.startswith(("iteration ", COMPILING))]
 
 
 def test_separate_scheduler_and_workers_survive_a_killed_worker(tmp_path):

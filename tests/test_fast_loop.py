@@ -273,27 +273,6 @@ def test_a_line_run_in_one_step_chunks_gives_the_bits_of_a_run_in_one_call(monke
         assert np.array_equal(whole[name], chunked[name]), name
 
 
-def test_a_change_to_any_core_source_drops_the_compiled_cache(tmp_path):
-    """numba itself only compares the compiled function's own file with its cache; the
-    loop inlines formulas from the whole core."""
-    source = tmp_path / "module.py"
-    namespace = {}
-    exec(compile("def looped():\n    pass\n", str(source), "exec"), namespace)
-    looped = namespace["looped"]
-    cache = tmp_path / "__pycache__"
-    cache.mkdir()
-    machine_code = [cache / "module.looped-1.py311.nbi", cache / "module.looped-1.py311.1.nbc"]
-    for path in machine_code:
-        path.write_text("compiled")
-    (cache / "module.looped.sources").write_text(kernels.sources_digest())
-    kernels._drop_stale_cache(looped)
-    assert all(path.exists() for path in machine_code)  # the same sources: kept
-    (cache / "module.looped.sources").write_text("the digest of other sources")
-    kernels._drop_stale_cache(looped)
-    assert not any(path.exists() for path in machine_code)
-    assert (cache / "module.looped.sources").read_text() == kernels.sources_digest()
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["seed004-metro-ato", "seed002-hsr", "hsr-neutral-ato"])
 def test_a_plan_table_gives_the_plans_own_speeds_and_limits_compiled(scenario):

@@ -50,7 +50,6 @@ from ato_nodes.core.run.scoring import score_series
 
 DEFAULT_ALGORITHM = "bas-pso"  # tune.py's, and the league's for every kind
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
-COMPILING = "compiling the simulation kernels (once per checkout)"
 
 
 @dataclass(frozen=True)
@@ -487,7 +486,7 @@ class Tuner:
         load it (forked, or from the cache beside the source) instead of compiling it
         each."""
         if self.progress:
-            with kernels.announced(COMPILING):
+            with kernels.announced():
                 warm(self.values)
         else:
             warm(self.values)
@@ -529,7 +528,7 @@ class Tuner:
             return
         done = len(self.log.done)
         total = self.settings.evaluations
-        eta = (time.monotonic() - self.started) / max(self.fresh, 1) * (total - done)
+        eta = (time.monotonic() - self.paced) / max(self.fresh, 1) * (total - done)
         iteration = max(0, done - self.initial_evaluations) // self.evaluations_per_iteration
         pruned = f"  pruned {self.pruned / max(self.fresh, 1):4.0%}" if self.prune else ""
         line = (f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}"
@@ -544,6 +543,7 @@ class Tuner:
         s = self.settings
         if self.in_process_pool:
             self._warm_kernels()
+        self.paced = time.monotonic()  # the ETA's pace is the candidates', not a compilation's
         try:
             with self._backend() as backend:
                 result = optimize(s.algorithm,

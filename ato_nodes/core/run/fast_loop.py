@@ -27,8 +27,9 @@ kind, compiled once per kind (and once for all the kinds without compiled steps;
 more per kind for journeys, whose tables are an argument of their own, None in other
 runs, so that their loops compile without a journey's code; once more per kind with the
 on-board estimator on, whose settings and state are None in the kind's when it is off,
-core/control/estimation.py) and cached on disk (numba keys its cache by the argument
-types; loop.warm() compiles them all).
+core/control/estimation.py) and cached on disk, each signature keyed by its argument
+types and the sources it is built from: the loop's modules and its kind's, not the other
+kinds' (_loop_sources, core/base/kernels.py); loop.warm() compiles them all.
 
 A run is computed in chunks of steps, each one call of the loop lasting about
 CHUNK_SECONDS, so that simulate() can check its deadline between them (a step at 10000
@@ -45,7 +46,7 @@ from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
-from ..base.kernels import AVAILABLE, compiled, jitable, overload
+from ..base.kernels import AVAILABLE, Sources, compiled, jitable, overload
 from ..config.components import CONTROLLERS
 from ..control.limiter import LimiterSettings
 from ..control.stepped import ControllerSteps
@@ -292,4 +293,33 @@ def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant
     row[column.command] = command
 
 
-_steps = compiled(_steps_source)
+def _loop_sources(signature: tuple) -> Sources:
+    """What the loop's `signature` compiles in besides the loop's modules and their
+    imports: the modules of the controller kind whose state its LoopState holds (its
+    steps', its state's, its factory's), wherever they live; every other kind's modules are
+    kept apart (a kind's code enters its own signatures only, through the registry)."""
+    loop = next(argument for argument in signature
+                if getattr(argument, "instance_class", None) is LoopState)
+    state = loop.types[LoopState._fields.index("controller")].instance_class
+    kinds = {kind: component for kind, component in CONTROLLERS.components.items()
+             if component.steps and component.steps.state_type is state}
+    own = _modules_of(steps_of(state), *kinds.values())
+    apart = set().union(*map(_modules_of, CONTROLLERS.components.values())) - own
+    journey = (", a journey's" if any(getattr(argument, "instance_class", None) is JourneyTable
+                                      for argument in signature) else "")
+    what = (f"the loop for controller {', '.join(sorted(kinds))}{journey}" if kinds else
+            f"the loop for the controllers without compiled steps{journey}")
+    return Sources(what, tuple(sorted(own)), frozenset(apart))
+
+
+def _modules_of(*parts) -> set[str]:
+    """The modules of a kind's ControllerSteps or registry entry (factory, steps, state)."""
+    found = set()
+    for part in parts:
+        steps = getattr(part, "steps", part)
+        for code in (getattr(part, "factory", None), *(steps or ())):
+            found.add(getattr(code, "__module__", None))
+    return found - {None}
+
+
+_steps = compiled(_steps_source, _loop_sources)

@@ -60,17 +60,18 @@ def _series(rows, extras, horizons, names: tuple[str, ...]) -> dict[str, np.ndar
 
 
 def warm(values: dict | None = None) -> None:
-    """Compile the loop of core/run/fast_loop.py now, or load it from its cache beside that
-    file, by a two-step run of `values` (default: the shipped seed000) with each
-    controller kind that has compiled steps (with the on-board estimator as `values` have
-    it, for the kinds that use it: on, a signature of its own; with the kind's warm_up
-    overrides, a cheap run of it), and one of seed000 with the
-    first kind without them that names a cheap run (its registry entry's warm_up: those
-    kinds share one signature), by default also the shipped journeys' kinds (a journey's
-    loop reads its tables: a signature of its own per kind) and seed 002's strategy driven
-    again for a weighed train; and the LSSVM's solves. Every
-    other run of a kind calls the loop with the same argument types, so these compilations
-    serve them all, in every process of this checkout."""
+    """Compile the loop of core/run/fast_loop.py now, or load it from its cache, by a
+    two-step run of `values` (default: the shipped seed000) with each controller kind
+    that has compiled steps (with the on-board estimator as `values` have it, for the
+    kinds that use it: on, a signature of its own; with the kind's warm_up overrides, a
+    cheap run of it), and one of seed000 with the first kind without them that names a
+    cheap run (its registry entry's warm_up: those kinds share one signature), by default
+    also the shipped journeys' kinds (a journey's loop reads its tables: a signature of
+    its own per kind) and seed 002's strategy driven again for a weighed train; and the
+    LSSVM's solves. Every other run of a kind calls the loop with the same argument
+    types, so these compilations serve them all, in every process of this checkout,
+    until a source a signature is built from changes (core/base/kernels.py: that
+    signature alone is then compiled again)."""
     warm_journeys = values is None  # setup's: a tuning warms its own run's kind
     values = load_scenario("seed000") if values is None else values
     shortest = SPEC_BY_NAME["run.duration"].low
