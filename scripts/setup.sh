@@ -33,7 +33,8 @@ echo "setup: installing ato_nodes from this checkout, editable"
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e . \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
 # Compiled now (one loop per controller kind), the in-process loop is loaded from its
-# cache (ato_nodes/core/run/__pycache__)
-# by every later run, tuning worker and test instead of being compiled by the first.
-echo "setup: compiling the simulation kernels (once per checkout)"
-.venv/bin/python -c "from ato_nodes.core.run import loop; loop.warm()"
+# cache by every later run, tuning worker and test instead of being compiled by the
+# first; each compilation says what it compiles, why and how long it took.
+echo "setup: compiling the simulation kernels that are not cached yet"
+.venv/bin/python -c "from ato_nodes.core.base import kernels; from ato_nodes.core.run import loop
+with kernels.announced(): loop.warm()"
