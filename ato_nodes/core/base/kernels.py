@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import io
+import pickle
 import sys
 from contextlib import contextmanager
 from pathlib import Path
@@ -54,11 +56,58 @@ def jitable(function=None, *, inline: bool = False):
 
 def compiled(function):
     """`function` compiled by numba (machine code cached on disk beside the source, and
-    recompiled when any core source changed), or None without numba."""
+    recompiled when any core source changed; for the signatures of the core's own types
+    only, CoreCache), or None without numba."""
     if not AVAILABLE:
         return None
     _drop_stale_cache(function)
-    return numba.njit(cache=True, nogil=True)(function)
+    dispatcher = numba.njit(cache=True, nogil=True)(function)
+    dispatcher._cache = CoreCache(function)
+    return dispatcher
+
+
+# The packages whose classes a signature cached on disk may hold: the core's (its sources
+# are in sources_digest()) and those of numba and numpy (numba's index keys its version).
+CACHED_PACKAGES = frozenset({"ato_nodes", "numba", "numpy", "builtins"})
+
+
+class _Classes(pickle.Pickler):
+    """Notes the module of every class a pickled object holds."""
+
+    def __init__(self):
+        super().__init__(io.BytesIO())
+        self.modules: set[str] = set()
+
+    def reducer_override(self, obj):
+        if isinstance(obj, type):
+            self.modules.add(obj.__module__)
+        return NotImplemented
+
+
+def cacheable(signature) -> bool:
+    """Whether a compiled signature is made of the core's, numba's and numpy's types
+    alone (not of a plug-in's: core/config/plugins.py)."""
+    classes = _Classes()
+    classes.dump(signature)
+    return all(module.partition(".")[0] in CACHED_PACKAGES for module in classes.modules)
+
+
+if AVAILABLE:
+    from numba.core.caching import FunctionCache
+
+    class CoreCache(FunctionCache):
+        """numba's on-disk cache for the signatures cacheable() allows; a plug-in's kind
+        is compiled in each process that runs it instead. Its classes in the index shared
+        by every process of the checkout would stop each process without the plug-in
+        from loading any entry (the index is unpickled whole), and a change of its
+        sources would not drop the machine code compiled from the old ones."""
+
+        def load_overload(self, sig, target_context):
+            return super().load_overload(sig, target_context) if cacheable(sig) else None
+
+        def save_overload(self, sig, data):
+            if cacheable(sig):
+                super().save_overload(sig, data)
 
 
 CORE = Path(__file__).resolve().parents[1]  # ato_nodes/core

@@ -175,9 +175,7 @@ class Registry:
         joins `role.kind`'s choices."""
         if component.kind in self.components:
             raise ValueError(f"{self.role} kind {component.kind} is registered already")
-        # a new mapping, not the same one changed: a loop over the kinds that builds a run
-        # (which may load a plug-in) goes on over those it started with
-        self.components = {**self.components, component.kind: component}
+        self.components[component.kind] = component
         self.kind_parameter = self._kind_parameter()
 
     def shipped(self) -> Registry:

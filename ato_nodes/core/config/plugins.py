@@ -21,6 +21,7 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import re
+import sys
 from collections.abc import Iterable, Mapping
 
 from ..base.errors import ScenarioError
@@ -43,7 +44,8 @@ KIND_NAME = re.compile(r"[a-z][a-z0-9_]*")
 _LOADED: dict[str, tuple[Component, ...]] = {}
 _PROVIDERS: dict[tuple[str, str], str] = {}
 _IN_USE: set[str] = set()
-_INSTALLED: list[bool] = []  # [True] once the entry points are loaded
+_PENDING: list[tuple[str, str]] = []  # the entry points (reference, role) not loaded yet
+_READ: list[bool] = []  # [True] once the entry points are read
 
 
 def references(text: str) -> tuple[str, ...]:
@@ -73,24 +75,41 @@ def in_use() -> tuple[str, ...]:
 
 
 def load(named: Iterable[str], schema_names: Mapping[str, object]) -> bool:
-    """Import and register the installed plug-ins (once) and those `named`; True if a
-    kind joined a registry. `schema_names`: the schema's parameter names now (a plug-in's
-    may not be one of them). ScenarioError (one line) for a plug-in refused."""
+    """Import and register the installed plug-ins (those not yet) and those `named`; True
+    if a kind joined a registry. `schema_names`: the schema's parameter names now (a
+    plug-in's may not be one of them). ScenarioError (one line) for a plug-in refused: an
+    installed one refused stays pending, so every later load says it again."""
+    if not _READ:
+        _PENDING.extend(installed())
+        _READ.append(True)
     joined_any = False
-    if not _INSTALLED:
-        for reference, role in installed():
-            joined_any |= _load(reference, schema_names, role)
-        _INSTALLED.append(True)
+    for reference, role in list(_PENDING):
+        if _initializing(reference):  # it imports ato_nodes as it starts: joins next time
+            continue
+        joined_any |= _load(reference, schema_names, role)
+        _PENDING.remove((reference, role))
     for reference in named:
         joined_any |= _load(reference, schema_names, None)
     return joined_any
 
 
+def _initializing(reference: str) -> bool:
+    """The reference's module, or a package of it, is being imported now (a process whose
+    first import is the plug-in: it imports ato_nodes, whose schema loads the installed
+    plug-ins)."""
+    parts = reference.partition(":")[0].split(".")
+    for depth in range(1, len(parts) + 1):
+        spec = getattr(sys.modules.get(".".join(parts[:depth])), "__spec__", None)
+        if getattr(spec, "_initializing", False):
+            return True
+    return False
+
+
 def installed() -> list[tuple[str, str]]:
     """(reference, role) of each entry point of ENTRY_POINT_GROUPS, in name order."""
-    found = []
+    found, points = [], importlib.metadata.entry_points()  # read once (every dist)
     for role, group in ENTRY_POINT_GROUPS.items():
-        for point in sorted(importlib.metadata.entry_points(group=group), key=lambda p: p.name):
+        for point in sorted(points.select(group=group), key=lambda p: p.name):
             found.append((point.value.replace(" ", ""), role))
     return found
 

@@ -212,6 +212,12 @@ def load_plugins(named: str | tuple[str, ...] = ()) -> None:
         SPEC_BY_NAME.update({spec.name: spec for spec in SPECS})
 
 
+try:  # the installed plug-ins' kinds join as the schema is built: every process has them
+    load_plugins()
+except ScenarioError:
+    pass  # said again, in one line, by the first run this process checks (load_plugins)
+
+
 def run_plugins(values) -> str:
     """run.plugins's text for a run: the plug-ins it names, and those whose kinds it
     uses."""
