@@ -211,3 +211,72 @@ def test_a_dask_worker_without_the_plugin_is_named_in_one_line():
     assert "\n" not in line and line.startswith("Dask worker tcp://10.0.0.2:4000 cannot import")
     assert "plug_nowhere" in line
     check_plugins(SimpleNamespace(run=None), ())  # no plug-ins: no question asked
+
+
+@pytest.mark.slow
+def test_the_smc_example_tracks_closer_than_the_pid_with_the_compiled_bits_of_python():
+    """examples/ato-smc, installed (scripts/setup.sh): its kind found by its entry point."""
+    from ato_nodes.api import score
+    values = prepare("seed000", ["run.duration=120", "controller.kind=smc"])
+    assert values["run.plugins"] == "ato_smc:SMC"
+    compiled, python = simulate(values), simulate(values, compiled=False)
+    for name in python:
+        np.testing.assert_array_equal(compiled[name], python[name], err_msg=name)
+    assert {"sliding_surface", "switching"} <= set(python)
+    pid = prepare("seed000", ["run.duration=120", "controller.kind=pid"])
+    assert score(python, values)["max_abs_error_kmh"] < score(simulate(pid), pid)[
+        "max_abs_error_kmh"]
+
+
+@pytest.mark.slow
+def test_the_smc_example_is_tuned_in_process_and_studied_over_three_trains(tmp_path):
+    tuned = script("tune", "--scenario", "seed000", "--set", "controller.kind=smc", "--set",
+                   "run.duration=20", "--in-process", "--algorithm", "pso", "--evaluations", "4",
+                   "--population", "2", "--out", tmp_path / "tune")
+    assert tuned.returncode == 0, tuned.stderr
+    assert "tuning the default search space: smc.integral_weight=" in tuned.stdout
+    best = (tmp_path / "tune" / "best.yaml").read_text()
+    assert "run.plugins: ato_smc:SMC" in best and "smc.gain" in best
+    studied = script("robustness.py", "seed000", "--set", "controller.kind=smc", "--set",
+                     "run.duration=20", "--samples", "3", "--out", tmp_path / "robust")
+    assert studied.returncode == 0, studied.stderr
+    assert "3 samples" in studied.stdout
+
+
+@pytest.mark.integration
+def test_a_plugin_on_pythonpath_runs_through_the_stack_and_its_bag_names_it(
+        plugin_folder, tmp_path, monkeypatch):
+    """The nodes import the run's plug-in (run.plugins in their parameter file) before they
+    read their parameters; the bag keeps it, so a resimulation imports it again, and says
+    in one line that it is missing where it is."""
+    write(plugin_folder, "plug_stack", plugin_source("stacked"))
+    bag = tmp_path / "bag"
+    run = script("run_stack", "--plugin", "plug_stack", "--set", "controller.kind=stacked",
+                 "--set", "stacked.kp=90", "--duration", "30", "--quiet", "--out", bag)
+    assert run.returncode == 0, run.stderr
+    from ato_nodes.bags.bagio import read_parameters, read_series
+    parameters = read_parameters(bag)
+    assert parameters["run.plugins"] == "plug_stack" and parameters["stacked.kp"] == 90.0
+    values = prepare("seed000", ["controller.kind=stacked", "stacked.kp=90", "run.duration=30"])
+    expected, recorded = simulate(values, compiled=False), read_series(bag)
+    for name in ("command", "speed", "error"):
+        np.testing.assert_array_equal(recorded[name], expected[name], err_msg=name)
+    again = script("score_bag", bag, "--resimulate", "--json")
+    assert again.returncode == 0 and '"resimulated_identical": true' in again.stdout
+    monkeypatch.delenv("PYTHONPATH")
+    missing = script("score_bag", bag, "--resimulate")
+    one_line_exit_2(missing, "plug_stack", "cannot import")
+
+
+@pytest.mark.integration
+def test_the_smc_example_runs_through_the_stack_bit_identical_to_in_process(tmp_path):
+    from ato_nodes.bags.bagio import read_parameters, read_series
+    values = prepare("seed004-metro", ["controller.kind=smc", "run.duration=60"])
+    run = script("run_stack", "--scenario", "seed004-metro", "--set", "controller.kind=smc",
+                 "--duration", "60", "--quiet", "--out", tmp_path / "bag")
+    assert run.returncode == 0, run.stderr
+    assert read_parameters(tmp_path / "bag")["run.plugins"] == "ato_smc:SMC"
+    expected, recorded = simulate(values), read_series(tmp_path / "bag")
+    for name, series in expected.items():
+        if name != "t":
+            np.testing.assert_array_equal(recorded[name], series, err_msg=name)

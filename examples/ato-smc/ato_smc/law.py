@@ -11,8 +11,9 @@ ff = a_r / xi + w0(r) (the nominal-model feedforward the PID uses: the planned
 acceleration a_r from the horizon and the Davis resistance w0 at r), the equivalent
 term lambda * e / xi makes ds/dt = -xi * k * sat(s / phi) - d: s is driven into the
 boundary layer |s| < phi, where the saturation is linear (no chattering), and held
-there against a disturbance up to xi * k. The integral stops while the limiter cuts the
-command (conditional integration: no wind-up at saturation or a jerk limit).
+there against a disturbance up to xi * k. The integral grows only inside the boundary
+layer and while the limiter lets the command through (conditional integration: no
+wind-up while s is being reached, at saturation or at a jerk limit).
 """
 
 from __future__ import annotations
@@ -24,12 +25,12 @@ from ato_nodes.plugin import (CONTROLLER_NODES, ControllerSteps, LimiterSettings
                               settings)
 
 PARAMETERS = (
-    param("smc.integral_weight", 0.1, "lambda: weight of the error's integral in the sliding "
+    param("smc.integral_weight", 0.5, "lambda: weight of the error's integral in the sliding "
           "surface s = e + lambda * integral(e), and of the equivalent term lambda e / xi, 1/s",
           CONTROLLER_NODES, 0.0, 100.0),
-    param("smc.gain", 20.0, "k: switching gain, the command that drives s into the boundary "
+    param("smc.gain", 100.0, "k: switching gain, the command that drives s into the boundary "
           "layer (holds against disturbances up to xi k), N/kN", CONTROLLER_NODES, 0.0, 1e6),
-    param("smc.boundary", 0.2, "phi: boundary layer of the saturation sat(s / phi), m/s",
+    param("smc.boundary", 1.0, "phi: boundary layer of the saturation sat(s / phi), m/s",
           CONTROLLER_NODES, 1e-6, 100.0),
     param("smc.feedforward", 1.0, "weight of the nominal-model feedforward (planned "
           "acceleration and basic resistance), 0 = off", CONTROLLER_NODES, 0.0, 2.0),
@@ -82,7 +83,8 @@ def smc_step(settings: SMCSettings, state: SMCState, target: float, measured: fl
     equivalent = g.integral_weight * error / train.xi
     raw = feedforward + equivalent + switching
     u = limit_command(raw, target, measured, last, limits)
-    integral = state.integral + h * error if u == raw else state.integral
+    inside = -1.0 < ratio < 1.0
+    integral = state.integral + h * error if inside and u == raw else state.integral
     return u, (surface, feedforward, equivalent, switching), SMCState(integral)
 
 
