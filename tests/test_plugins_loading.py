@@ -280,3 +280,18 @@ def test_the_smc_example_runs_through_the_stack_bit_identical_to_in_process(tmp_
     for name, series in expected.items():
         if name != "t":
             np.testing.assert_array_equal(recorded[name], series, err_msg=name)
+
+
+@pytest.mark.slow
+def test_a_dask_worker_that_cannot_import_the_studys_plugin_is_named_before_any_run(
+        plugin_folder, tmp_path, monkeypatch):
+    from dask_cluster import scheduler_and_workers
+    write(plugin_folder, "plug_far", plugin_source("far"))
+    monkeypatch.delenv("PYTHONPATH")  # the workers' environment: without it
+    with scheduler_and_workers(tmp_path) as (address, _, _):
+        monkeypatch.setenv("PYTHONPATH", str(plugin_folder))
+        result = script("robustness.py", "seed000", "--plugin", "plug_far", "--set",
+                        "controller.kind=far", "--set", "run.duration=5", "--samples", "3",
+                        "--cluster", address, "--out", tmp_path / "study")
+    one_line_exit_2(result, "Dask worker tcp://127.0.0.1:", "plug_far", "cannot import")
+    assert not (tmp_path / "study").exists()
