@@ -295,3 +295,41 @@ def test_a_dask_worker_that_cannot_import_the_studys_plugin_is_named_before_any_
                         "--cluster", address, "--out", tmp_path / "study")
     one_line_exit_2(result, "Dask worker tcp://127.0.0.1:", "plug_far", "cannot import")
     assert not (tmp_path / "study").exists()
+
+
+@pytest.mark.slow
+def test_a_plugins_compiled_kind_is_cached_apart_and_compiled_again_when_its_sources_change(
+        plugin_folder, monkeypatch):
+    """Each in a process of its own, as the disk cache serves them: the plug-in's kind
+    gives the Python loop's bits after its law changed (no machine code of the old law
+    loaded), and a process without the plug-in still loads the shipped kinds' code."""
+    import subprocess
+    write(plugin_folder, "plug_cached", plugin_source("cached"))
+    code = ("from ato_nodes.api import prepare, simulate; import numpy as np; "
+            "v = prepare('seed000', {}); c, p = simulate(v), simulate(v, compiled=False); "
+            "print(all(np.array_equal(c[k], p[k]) for k in p), repr(c['command'][-1]))")
+    kind = "['run.plugins=plug_cached', 'controller.kind=cached', 'run.duration=2']"
+
+    def run(overrides: str) -> list[str]:
+        done = subprocess.run([sys.executable, "-c", code.format(overrides)], cwd=ROOT,
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.split()
+
+    same, first = run(kind)
+    law = plugin_folder / "plug_cached.py"
+    law.write_text(law.read_text().replace("settings.kp * error", "2.0 * settings.kp * error"))
+    same_again, second = run(kind)
+    assert same == same_again == "True" and first != second
+    monkeypatch.delenv("PYTHONPATH")
+    assert run("['run.duration=2']")[0] == "True"
+
+
+def test_an_override_names_a_plugin_whose_kind_the_same_overrides_choose(plugin_folder):
+    write(plugin_folder, "plug_late", plugin_source("late"))
+    values = prepare("seed000", ["run.plugins=plug_late", "controller.kind=late",
+                                 "run.duration=1"])
+    assert values["late.kp"] == 50.0 and values["run.plugins"] == "plug_late"
+    again = prepare("seed000", {"run.plugins": "plug_late", "controller.kind": "late",
+                                "late.kp": 7.0, "run.duration": 1.0})
+    assert again["late.kp"] == 7.0

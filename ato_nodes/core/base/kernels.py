@@ -56,58 +56,14 @@ def jitable(function=None, *, inline: bool = False):
 
 def compiled(function):
     """`function` compiled by numba (machine code cached on disk beside the source, and
-    recompiled when any core source changed; for the signatures of the core's own types
-    only, CoreCache), or None without numba."""
+    recompiled when any core source changed; a plug-in's signatures in files of their own,
+    CoreCache), or None without numba."""
     if not AVAILABLE:
         return None
     _drop_stale_cache(function)
     dispatcher = numba.njit(cache=True, nogil=True)(function)
     dispatcher._cache = CoreCache(function)
     return dispatcher
-
-
-# The packages whose classes a signature cached on disk may hold: the core's (its sources
-# are in sources_digest()) and those of numba and numpy (numba's index keys its version).
-CACHED_PACKAGES = frozenset({"ato_nodes", "numba", "numpy", "builtins"})
-
-
-class _Classes(pickle.Pickler):
-    """Notes the module of every class a pickled object holds."""
-
-    def __init__(self):
-        super().__init__(io.BytesIO())
-        self.modules: set[str] = set()
-
-    def reducer_override(self, obj):
-        if isinstance(obj, type):
-            self.modules.add(obj.__module__)
-        return NotImplemented
-
-
-def cacheable(signature) -> bool:
-    """Whether a compiled signature is made of the core's, numba's and numpy's types
-    alone (not of a plug-in's: core/config/plugins.py)."""
-    classes = _Classes()
-    classes.dump(signature)
-    return all(module.partition(".")[0] in CACHED_PACKAGES for module in classes.modules)
-
-
-if AVAILABLE:
-    from numba.core.caching import FunctionCache
-
-    class CoreCache(FunctionCache):
-        """numba's on-disk cache for the signatures cacheable() allows; a plug-in's kind
-        is compiled in each process that runs it instead. Its classes in the index shared
-        by every process of the checkout would stop each process without the plug-in
-        from loading any entry (the index is unpickled whole), and a change of its
-        sources would not drop the machine code compiled from the old ones."""
-
-        def load_overload(self, sig, target_context):
-            return super().load_overload(sig, target_context) if cacheable(sig) else None
-
-        def save_overload(self, sig, data):
-            if cacheable(sig):
-                super().save_overload(sig, data)
 
 
 CORE = Path(__file__).resolve().parents[1]  # ato_nodes/core
@@ -141,6 +97,93 @@ def _drop_stale_cache(function) -> None:
         stamp.write_text(digest)
     except OSError:
         pass
+
+
+# The packages whose classes a signature may hold and still be cached in the function's
+# own index: the core's (its sources are in sources_digest()), numba's and numpy's (numba's
+# index keys its version). A signature that holds another package's (a plug-in's kind,
+# core/config/plugins.py) is cached in an index of its own beside it (CoreCache).
+CORE_PACKAGES = frozenset({"ato_nodes", "numba", "numpy", "builtins"})
+
+
+class _Classes(pickle.Pickler):
+    """Notes the module of every class a pickled object holds."""
+
+    def __init__(self):
+        super().__init__(io.BytesIO())
+        self.modules: set[str] = set()
+
+    def reducer_override(self, obj):
+        if isinstance(obj, type):
+            self.modules.add(obj.__module__)
+        return NotImplemented
+
+
+def foreign_packages(signature) -> tuple[str, ...]:
+    """The packages besides CORE_PACKAGES whose classes a compiled signature holds."""
+    classes = _Classes()
+    classes.dump(signature)
+    return tuple(sorted({module.partition(".")[0] for module in classes.modules}
+                        - CORE_PACKAGES))
+
+
+def packages_digest(packages: tuple[str, ...]) -> str | None:
+    """sha256 over the sources of `packages` (each package's folder, or its one module),
+    None if one has no source file to read."""
+    digest = hashlib.sha256()
+    for name in packages:
+        source = getattr(sys.modules.get(name), "__file__", None)
+        if source is None:
+            return None
+        source = Path(source)
+        files = sorted(source.parent.rglob("*.py")) if source.name == "__init__.py" \
+            else [source]
+        for path in files:
+            digest.update(f"{name}/{path.relative_to(source.parent)}".encode() + b"\0"
+                          + path.read_bytes())
+    return digest.hexdigest()
+
+
+if AVAILABLE:
+    from numba.core.caching import FunctionCache, IndexDataCacheFile
+
+    class CoreCache(FunctionCache):
+        """numba's on-disk cache of a compiled function, with the signatures that hold
+        another package's classes (a plug-in's settings and state) in an index of their
+        own per set of packages, stamped with those packages' sources. In the function's
+        own index, shared by every process of the checkout, such a signature would stop
+        each process without the plug-in from loading any entry (numba unpickles the
+        index whole), and a change of the plug-in's sources would not drop the machine
+        code compiled from the old ones. Both kinds of files are dropped with the core's
+        (_drop_stale_cache)."""
+
+        def __init__(self, py_func):
+            super().__init__(py_func)
+            self._beside: dict[tuple[str, ...], IndexDataCacheFile | None] = {}
+
+        def _file_for(self, sig) -> IndexDataCacheFile | None:
+            packages = foreign_packages(sig)
+            if not packages:
+                return self._cache_file
+            if packages not in self._beside:
+                stamp = packages_digest(packages)
+                self._beside[packages] = None if stamp is None else IndexDataCacheFile(
+                    self._cache_path, f"{self._impl.filename_base}-{'-'.join(packages)}", stamp)
+            return self._beside[packages]
+
+        def _load_overload(self, sig, target_context):
+            cache_file = self._file_for(sig)
+            if not self._enabled or cache_file is None:
+                return None
+            data = cache_file.load(self._index_key(sig, target_context.codegen()))
+            return None if data is None else self._impl.rebuild(target_context, data)
+
+        def _save_overload(self, sig, data):
+            cache_file = self._file_for(sig)
+            if not self._enabled or cache_file is None or not self._impl.check_cachable(data):
+                return
+            self._impl.locator.ensure_cache_path()
+            cache_file.save(self._index_key(sig, data.codegen), self._impl.reduce(data))
 
 
 @contextmanager

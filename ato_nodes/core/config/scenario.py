@@ -306,8 +306,9 @@ def apply_overrides(values: dict[str, Any],
 def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
                 ) -> dict[str, Any]:
     """apply_overrides() without the validation of the whole."""
-    load_plugins(values["run.plugins"])  # the run's own (in a study's worker: not yet)
+    load_plugins(values.get("run.plugins", ""))  # the run's own (a study's worker: not yet)
     named = _plugins_overridden(overrides)
+    values = {**defaults(), **values}  # with the defaults of plug-ins loaded since
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
@@ -323,8 +324,8 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
             overrides[name] = resolve_file(overrides[name], [Path.cwd()])
     merged = {**values, **overrides}
     if named:  # added to the run's own
-        merged["run.plugins"] = plugins.joined((*plugins.references(values["run.plugins"]),
-                                                *named))
+        merged["run.plugins"] = plugins.joined((*plugins.references(
+            values.get("run.plugins", "")), *named))
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
         merged.update(train_preset(overrides["plant.train"]))
         merged.update(overrides)

@@ -201,7 +201,7 @@ if len(SPEC_BY_NAME) != len(SPECS):
 
 
 def load_plugins(named: str | tuple[str, ...] = ()) -> None:
-    """Import the installed plug-ins (once per process) and those `named` (run.plugins's
+    """Import the installed plug-ins (those not imported yet) and those `named` (run.plugins's
     text, or references), and add their kinds' parameters to the schema.
     ScenarioError (one line) for a plug-in refused."""
     if isinstance(named, str):
