@@ -333,3 +333,24 @@ def test_an_override_names_a_plugin_whose_kind_the_same_overrides_choose(plugin_
     again = prepare("seed000", {"run.plugins": "plug_late", "controller.kind": "late",
                                 "late.kp": 7.0, "run.duration": 1.0})
     assert again["late.kp"] == 7.0
+
+
+@pytest.mark.integration
+def test_nodes_started_alone_import_the_plugins_their_parameter_file_names(plugin_folder,
+                                                                           tmp_path):
+    """`python -m ato_nodes.nodes.NODE --ros-args --params-file FILE`, no launcher: each
+    node reads run.plugins first, then the plug-in's parameters as its own."""
+    from test_plugins_stack import failed_nodes, start_nodes_directly
+
+    from ato_nodes.bags.bagio import read_parameters, read_series
+    write(plugin_folder, "plug_alone", plugin_source("alone"))
+    scenario = tmp_path / "alone.yaml"
+    scenario.write_text("/**:\n  ros__parameters:\n    run.plugins: plug_alone\n"
+                        "    run.duration: 10.0\ncontroller:\n  ros__parameters:\n"
+                        "    controller.kind: alone\n    alone.kp: 70.0\n")
+    codes, errors, _ = start_nodes_directly(scenario, tmp_path / "bag", tmp_path / "r.json")
+    assert set(codes.values()) == {0}, failed_nodes(codes, errors)
+    assert read_parameters(tmp_path / "bag")["alone.kp"] == 70.0
+    values = prepare(str(scenario))
+    np.testing.assert_array_equal(read_series(tmp_path / "bag")["command"],
+                                  simulate(values, compiled=False)["command"])
