@@ -4,7 +4,7 @@ package, in one import (docs/plugins.md; examples/ato-smc/ is a worked example).
 A plug-in module declares `PLUGIN_API` (the version of this interface it is written
 for; another is refused) and `COMPONENTS`, its kinds, each a Component with its `role`:
 
-    from ato_nodes.plugin import PLUGIN_API, Component, Output, param  # noqa
+    from ato_nodes.plugin import Component, Output, param
     PLUGIN_API = 1
     COMPONENTS = (Component("smc", "sliding-mode speed control", PARAMETERS, factory,
                             OUTPUTS, steps=SMC_STEPS, role="controller"),)
@@ -23,7 +23,9 @@ what limit_command() takes, `outputs` the kind's declared outputs in order. The
 (context.train.constants(): TrainConstants, with basic_resistance for its Davis
 resistance). A run names its plug-ins (a scenario's `plugins: [my_pkg.smc]`, the
 commands' `--plugin my_pkg.smc`) or an installed package declares them as entry points
-(groups `ato_nodes.controllers`, `ato_nodes.profiles`); load() imports them here.
+(groups `ato_nodes.controllers`, `ato_nodes.profiles`); load() imports them here (a
+script that imports its plug-in before anything of ato_nodes calls it before it reads the
+registries; a run's check does it anyway).
 """
 
 from ato_nodes.core.base.errors import ScenarioError
