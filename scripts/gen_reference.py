@@ -74,7 +74,8 @@ def generated() -> str:
     lines = [BEGIN]
     for group, specs in groups.items():
         lines += ["", f"#### `{group}.*`", "", *table(specs)]
-    lines += ["", *kinds(PROFILES), "", *kinds(CONTROLLERS), "", END]
+    # the shipped kinds only: a plug-in's, installed or loaded, are its own documentation's
+    lines += ["", *kinds(PROFILES.shipped()), "", *kinds(CONTROLLERS.shipped()), "", END]
     return "\n".join(lines)
 
 
@@ -87,7 +88,7 @@ def with_tables(text: str, name: str) -> str:
 
 
 def main() -> None:
-    parser = _cli.argument_parser(__doc__)
+    parser = _cli.argument_parser(__doc__, plugins=False)
     action = parser.add_mutually_exclusive_group(required=True)
     action.add_argument("--check", action="store_true", help="exit 1 if the tables are stale")
     action.add_argument("--write", action="store_true", help="rewrite the tables in place")

@@ -32,6 +32,12 @@ echo "setup: installing the pinned packages of requirements.txt into .venv (ROS 
 echo "setup: installing ato_nodes from this checkout, editable"
 .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e . \
   2> >(grep -v "^WARNING: Location .* is ignored" >&2)
+# The worked example of a plug-in (docs/plugins.md), editable: its kind `smc` is found by
+# its entry point in every process of the venv (the nodes, tuning and study workers), and
+# the tests drive it end to end.
+echo "setup: installing the example plug-in examples/ato-smc (controller kind smc), editable"
+.venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps \
+  -e examples/ato-smc 2> >(grep -v "^WARNING: Location .* is ignored" >&2)
 # Compiled now (one loop per controller kind), the in-process loop is loaded from its
 # cache by every later run, tuning worker and test instead of being compiled by the
 # first; each compilation says what it compiles, why and how long it took.

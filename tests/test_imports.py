@@ -149,6 +149,7 @@ PACKAGE_ROOMS_BELOW = {
     "core": set(),
     "results": {"core"},
     "api": {"core", "results"},
+    "plugin": {"core"},
     "bags": {"core", "results"},
     "reports": {"core", "results", "bags"},
     "launcher": {"core", "results", "bags"},

@@ -35,7 +35,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.config.schema import SPEC_BY_NAME, steps, upgraded
+from ato_nodes.core.config.schema import SPEC_BY_NAME, load_plugins, steps, upgraded
 from ato_nodes.core.run.last_stop import planned_steps
 from ato_nodes.core.run.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
 from ato_nodes.core.base.topics import topic_map
@@ -418,6 +418,10 @@ def read_parameters(bag: str | Path) -> dict | None:
         raise BagError(f"{where} are not JSON ({exc})") from None
     if not isinstance(values, dict):
         raise BagError(f"{where} are a JSON {type(values).__name__}, not an object")
+    try:  # the run's plug-ins first: their kinds' parameters are checked as the others
+        load_plugins(_checked_value("run.plugins", values.get("run.plugins", ""), where))
+    except ScenarioError as exc:
+        raise BagError(f"{bag}: the run's plug-ins: {exc}") from None
     try:  # a bag recorded before the linear ADRC's modes holds their switches
         return {name: _checked_value(name, value, where)
                 for name, value in upgraded(values).items()}

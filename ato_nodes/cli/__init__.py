@@ -45,13 +45,36 @@ def _interrupted_while_starting(signum, frame) -> None:
     os._exit(130)
 
 
-def argument_parser(doc: str) -> argparse.ArgumentParser:
+def argument_parser(doc: str, plugins: bool = True) -> argparse.ArgumentParser:
     """A command's parser from its module docstring: the first paragraph, whole, as the
-    description; the rest (usage examples) as the epilog, as written."""
+    description; the rest (usage examples) as the epilog, as written. With `plugins`,
+    its --plugin option (PluginOption)."""
     description, _, rest = doc.strip().partition("\n\n")
-    return argparse.ArgumentParser(description=textwrap.fill(" ".join(description.split()), 79),
-                                   epilog=rest,
-                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=textwrap.fill(" ".join(description.split()), 79), epilog=rest,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    if plugins:
+        parser.add_argument("--plugin", action=PluginOption, metavar="MODULE",
+                            help="import a plug-in's controller or profile kinds (MODULE or "
+                                 "MODULE:ATTRIBUTE; docs/plugins.md) before anything is "
+                                 "read (repeatable)")
+    return parser
+
+
+class PluginOption(argparse.Action):
+    """--plugin MODULE: the plug-in imported (and checked) as the option is read, so the
+    scenario, --set and --params that follow know its kinds; the runs that use them name
+    it in run.plugins, and every process of theirs imports it. A plug-in refused is one
+    line, exit 2, before anything starts."""
+
+    def __call__(self, parser, namespace, value, option_string=None) -> None:
+        from ato_nodes.core.base.errors import ScenarioError
+        from ato_nodes.core.config.schema import load_plugins
+        try:
+            load_plugins((value,))
+        except ScenarioError as exc:
+            fail(f"--plugin: {exc}")
+        setattr(namespace, self.dest, [*(getattr(namespace, self.dest) or []), value])
 
 
 def fail(message: str, status: int = 2) -> None:

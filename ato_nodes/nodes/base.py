@@ -33,7 +33,8 @@ from ato_nodes.core.base import yamlfile
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.faults import parse_fault
 from ato_nodes.core.config.scenario import complete, parameter_spec, train_preset
-from ato_nodes.core.config.schema import SPEC_BY_NAME, NodeValues, ParamSpec, for_node
+from ato_nodes.core.config.schema import (SPEC_BY_NAME, NodeValues, ParamSpec, for_node,
+                                          load_plugins)
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.base.topics import Topic, topic_map
 from ato_nodes.nodes.timing import install as install_timing
@@ -207,6 +208,10 @@ class AtoNode(Node):
         set to what the node needs and, like every other, fixed for the run."""
         overrides = self._parameter_overrides
         where = ", ".join(str(path) for path in parameter_files()) or "--ros-args"
+        # first, the run's plug-ins (and the installed ones): their kinds' parameters are
+        # then the schema's
+        named = overrides.get("run.plugins")
+        load_plugins(SPEC_BY_NAME["run.plugins"].check(named.value, where) if named else "")
         for name in sorted(set(overrides) - set(SPEC_BY_NAME) - set(RCLPY_PARAMETERS)):
             parameter_spec(name, overrides[name].value, where)  # refused as a scenario's
         given = {spec.name: spec.check(overrides[spec.name].value, self.role)

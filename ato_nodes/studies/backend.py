@@ -67,11 +67,25 @@ def open_cluster(spec: str):
         client = Client(cluster)
         from ato_nodes.studies.dask_workers import StopsAreTheStudys
         client.register_plugin(StopsAreTheStudys())
-        return client, cluster
+        return _with_plugins(client, cluster)
     try:
-        return Client(spec, timeout=10), None
+        return _with_plugins(Client(spec, timeout=10), None)
     except OSError as exc:
         raise ScenarioError(f"--cluster {spec}: no scheduler answers ({exc})") from None
+
+
+def _with_plugins(client, cluster):
+    """(client, cluster) once every worker imports the study's plug-ins; else closed and
+    ScenarioError (one line, dask_workers.check_plugins)."""
+    from ato_nodes.studies.dask_workers import check_plugins
+    try:
+        check_plugins(client)
+    except BaseException:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+        raise
+    return client, cluster
 
 
 @contextlib.contextmanager

@@ -18,6 +18,12 @@ from typing import Any, Callable, Protocol, runtime_checkable
 from .errors import ScenarioError
 from .spec import ParamSpec, param
 
+# The version of the interface a plug-in's kinds are written against (ato_nodes/plugin.py):
+# a plug-in declares the one it was written for (PLUGIN_API = ...), and a plug-in that
+# declares another is refused. 1: ControllerSteps start(settings, state, target, measured,
+# horizon), step(settings, state, target, measured, horizon, last, limits), target r_k.
+PLUGIN_API = 1
+
 
 @dataclass(slots=True)
 class ControllerOutput:
@@ -112,7 +118,8 @@ class Component:
     kind's loop (or the one signature that every kind without steps shares).
     estimates, for controllers: the kind uses the on-board estimator of the train
     (core/control/estimation.py) when estimator.enabled; a run that enables it for a kind
-    that does not is refused.
+    that does not is refused. role: the registry a plug-in's kind joins, "controller" or
+    "profile" (a shipped kind's is its registry's; core/config/plugins.py).
     """
 
     kind: str
@@ -126,6 +133,7 @@ class Component:
     steps: Any = None  # ControllerSteps: what the Python and the compiled loop run
     warm_up: tuple[tuple[str, Any], ...] = ()  # overrides of a cheap run (controllers)
     estimates: bool = False  # controllers: uses the on-board estimator (estimator.enabled)
+    role: str = ""  # plug-ins: "controller" or "profile", the registry it joins
 
     @property
     def live_parameters(self) -> tuple[str, ...]:
@@ -150,14 +158,31 @@ class Registry:
 
     def __init__(self, role: str, default: str, nodes: tuple[str, ...],
                  components: tuple[Component, ...]):
-        self.role, self.nodes = role, nodes
+        self.role, self.nodes, self.default = role, nodes, default
+        self.shipped_kinds = tuple(component.kind for component in components)
         self.components = {component.kind: component for component in components}
         if len(self.components) != len(components) or default not in self.components:
             raise ValueError(f"{role} registry: duplicate kinds or unknown default {default!r}")
-        self.kind_parameter = param(
-            f"{role}.kind", default, f"{role} kind: " + "; ".join(
-                f"{c.kind} ({c.description})" for c in components), nodes,
+        self.kind_parameter = self._kind_parameter()
+
+    def _kind_parameter(self) -> ParamSpec:
+        return param(f"{self.role}.kind", self.default, f"{self.role} kind: " + "; ".join(
+            f"{c.kind} ({c.description})" for c in self.components.values()), self.nodes,
             choices=tuple(self.components))
+
+    def add(self, component: Component) -> None:
+        """Register a plug-in's kind (core/config/plugins.py checks it first): its kind
+        joins `role.kind`'s choices."""
+        if component.kind in self.components:
+            raise ValueError(f"{self.role} kind {component.kind} is registered already")
+        self.components[component.kind] = component
+        self.kind_parameter = self._kind_parameter()
+
+    def shipped(self) -> Registry:
+        """The kinds shipped with the package, without any plug-in's (the reference's
+        tables)."""
+        return Registry(self.role, self.default, self.nodes,
+                        tuple(self.components[kind] for kind in self.shipped_kinds))
 
     def __getitem__(self, kind: str) -> Component:
         try:

@@ -4,7 +4,9 @@ complete, checked values of a run.
 Scenario files are ROS 2 parameter files (node name -> ros__parameters, with
 `/**` for the parameters several nodes share), so the same file feeds
 `--params-file` and the in-process simulation. Everything is checked here,
-before any process starts; every problem is one ScenarioError line.
+before any process starts; every problem is one ScenarioError line. The plug-ins a run
+names (a file's `plugins:` and run.plugins, an override's run.plugins) are imported in a
+first pass, before anything else is read: their kinds' parameters are then the schema's.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
 from ..train.line import line_of
+from . import plugins
 from .components import CONTROLLERS
 from .context import RunContext
 from .faults import parse_fault
@@ -33,7 +36,9 @@ from .schema import (
     SPECS,
     NodeValues,
     defaults,
+    load_plugins,
     retired,
+    run_plugins,
     shared,
     unused,
 )
@@ -117,12 +122,22 @@ def _loaded(name_or_file: str, chain: tuple[Path, ...] = ()) -> tuple[dict[str, 
     base = document.pop("base", None)
     if base is not None and not isinstance(base, str):
         raise ScenarioError(f"{path}: base must be a preset, a scenario or a file, not {base!r}")
+    # the base first: its plug-ins' kinds may be what this file sets parameters of
+    base_values = None if base is None else _loaded(str(resolve_base(base, path)),
+                                                    (*chain, path.resolve()))[0]
+    named = _plugins_named(path, document)
+    try:
+        load_plugins(named)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{path}: {exc}") from None
     given = _given_values(path, document)
-    if base is None:
+    if named or base_values is not None and base_values["run.plugins"]:
+        given["run.plugins"] = plugins.joined((*named, *plugins.references(
+            base_values["run.plugins"] if base_values is not None else "")))
+    if base_values is None:
         values = complete(given, [path.parent], str(path))
         check_not_derived(given, values, str(path))
         return values, str(path)
-    base_values, _ = _loaded(str(resolve_base(base, path)), (*chain, path.resolve()))
     for name in FILE_PARAMETERS:
         if given.get(name):
             given[name] = resolve_file(given[name], [path.parent])
@@ -145,6 +160,23 @@ def resolve_base(base: str, path: Path) -> Path:
         return resolve_scenario(base)
     raise ScenarioError(f"{path}: unknown base {base!r}; presets: {', '.join(preset_names())}; "
                         f"scenarios: {', '.join(scenario_names())}")
+
+
+def _plugins_named(path: Path, document: dict) -> tuple[str, ...]:
+    """The plug-ins a scenario file names (`document` without its base): its top-level
+    `plugins:` list (taken out of `document`) and its `/**` run.plugins (a file given
+    to the nodes themselves says it so: ROS reads no `plugins:`)."""
+    listed = document.pop("plugins", None) or []
+    if not isinstance(listed, list) or not all(isinstance(name, str) for name in listed):
+        raise ScenarioError(f"{path}: plugins must be a list of modules, e.g. "
+                            f"plugins: [my_pkg.smc], not {listed!r}")
+    section = document.get("/**")
+    given = _flatten(section["ros__parameters"]).get("run.plugins", "") if isinstance(
+        section, dict) and isinstance(section.get("ros__parameters"), dict) else ""
+    spec = SPEC_BY_NAME["run.plugins"]
+    named = [*plugins.references(spec.check(", ".join(listed), f"{path}: plugins")),
+             *plugins.references(spec.check(given, str(path)))]
+    return tuple(dict.fromkeys(named))
 
 
 def _given_values(path: Path, document: dict) -> dict[str, Any]:
@@ -274,6 +306,9 @@ def apply_overrides(values: dict[str, Any],
 def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
                 ) -> dict[str, Any]:
     """apply_overrides() without the validation of the whole."""
+    load_plugins(values.get("run.plugins", ""))  # the run's own (a study's worker: not yet)
+    named = _plugins_overridden(overrides)
+    values = {**defaults(), **values}  # with the defaults of plug-ins loaded since
     if isinstance(overrides, dict):
         checked = {}
         for name, value in overrides.items():
@@ -288,6 +323,9 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
         if overrides.get(name):
             overrides[name] = resolve_file(overrides[name], [Path.cwd()])
     merged = {**values, **overrides}
+    if named:  # added to the run's own
+        merged["run.plugins"] = plugins.joined((*plugins.references(
+            values.get("run.plugins", "")), *named))
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
         merged.update(train_preset(overrides["plant.train"]))
         merged.update(overrides)
@@ -295,6 +333,23 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
     # go back to their defaults: a run holds only defaults for the kinds it does not use
     merged.update({name: SPEC_BY_NAME[name].default for name in unused(merged)})
     return merged
+
+
+def _plugins_overridden(overrides: list[str] | dict[str, Any]) -> tuple[str, ...]:
+    """The plug-ins an override's run.plugins names, imported before the other overrides
+    are read (they may set the plug-ins' parameters)."""
+    where = "override" if isinstance(overrides, dict) else "--set"
+    if isinstance(overrides, dict):
+        given = overrides.get("run.plugins", "")
+    else:
+        given = ", ".join(text.partition("=")[2] for text in overrides
+                          if text.partition("=")[0].strip() == "run.plugins")
+    named = plugins.references(SPEC_BY_NAME["run.plugins"].check(given, where))
+    try:
+        load_plugins(named)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    return named
 
 
 # Set by the launcher (ato_nodes.launcher.launch.Stack) for every run it starts, from the command's
@@ -395,6 +450,8 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
     if values["run.duration"] < values["run.period"]:
         raise ScenarioError(f"{where}: run.duration must be at least one run.period")
     try:
+        load_plugins(values["run.plugins"])
+        values = {**values, "run.plugins": run_plugins(values)}
         values = weighed(values)
         parse_fault(values["run.fault"])
         Requirement.parse_list(values["report.require"], "report.require")
@@ -417,6 +474,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
             CommandLimiter.from_values(controller_values))
     except ScenarioError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
+    plugins.note_in_use(plugins.references(values["run.plugins"]))
     return values
 
 

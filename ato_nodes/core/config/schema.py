@@ -5,7 +5,9 @@ choices, a description (with its unit) and the nodes that declare it. The
 run, line, plant and orchestration parameters are listed here; each
 controller and profile kind brings its own group through its registry entry
 (core/config/components.py). A parameter declared by several nodes is shared: a
-scenario gives it under `/**`, so every node sees the same value.
+scenario gives it under `/**`, so every node sees the same value. A plug-in's kinds
+(core/config/plugins.py) join the schema when they are loaded (load_plugins): SPECS and
+SPEC_BY_NAME are updated in place.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from ..control.adrc import RETIRED_SWITCHES, retired_switch, switches_as_modes
 from ..control.estimation import PARAMETERS as ESTIMATOR_PARAMETERS
 from ..control.limiter import LIMITER_PARAMETERS
 from ..scoring.indices import RunningIndex
-from .components import CONTROLLERS, PROFILES
+from . import plugins
+from .components import CONTROLLERS, PROFILES, REGISTRIES
 
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 LOOP_NODES = ("profile", "plant", "controller")
@@ -33,6 +36,11 @@ BANDS_FORM = TextForm(rf"\s*|{_BAND}(?:,{_BAND})*",
                       "numbers of km/h separated by commas, e.g. '0.05, 0.4'")
 
 BASE: tuple[ParamSpec, ...] = (
+    param("run.plugins", "", "the plug-ins the run's nodes import before they read their "
+          "other parameters (core/config/plugins.py): modules of controller or profile kinds "
+          "from outside the package; a scenario's `plugins:` and --plugin add to it, and the "
+          "plug-ins of the kinds the run uses (installed ones too) are added when it is "
+          "checked, so a bag names them", NODES, form=plugins.REFERENCES_FORM),
     param("run.period", 0.05, "control period and lockstep step, s", NODES, 1e-4, 10.0),
     param("run.duration", 2400.0, "simulated run length, s", NODES, 1e-3, 1e7),
     param("run.last_stop_hold", 0.0, "a journey's run (profile.kind journey) ends once its "
@@ -179,10 +187,44 @@ BASE: tuple[ParamSpec, ...] = (
           "tracking error ('' = none)", LOOP_NODES, form=BANDS_FORM),
 )
 
-SPECS: tuple[ParamSpec, ...] = (*BASE, *PROFILES.parameters(), *CONTROLLERS.parameters())
+
+def _all_specs() -> list[ParamSpec]:
+    return [*BASE, *PROFILES.parameters(), *CONTROLLERS.parameters()]
+
+
+# Lists and a dict updated in place when a plug-in's kinds join (load_plugins), so that
+# every module that imported them sees the plug-ins' parameters.
+SPECS: list[ParamSpec] = _all_specs()
 SPEC_BY_NAME = {spec.name: spec for spec in SPECS}
 if len(SPEC_BY_NAME) != len(SPECS):
     raise ValueError("a parameter name is defined twice in the schema")
+
+
+def load_plugins(named: str | tuple[str, ...] = ()) -> None:
+    """Import the installed plug-ins (those not imported yet) and those `named` (run.plugins's
+    text, or references), and add their kinds' parameters to the schema.
+    ScenarioError (one line) for a plug-in refused."""
+    if isinstance(named, str):
+        named = plugins.references(named)
+    if plugins.load(named, SPEC_BY_NAME):
+        SPECS[:] = _all_specs()
+        SPEC_BY_NAME.clear()
+        SPEC_BY_NAME.update({spec.name: spec for spec in SPECS})
+
+
+try:  # the installed plug-ins' kinds join as the schema is built: every process has them
+    load_plugins()
+except ScenarioError:
+    pass  # said again, in one line, by the first run this process checks (load_plugins)
+
+
+def run_plugins(values) -> str:
+    """run.plugins's text for a run: the plug-ins it names, and those whose kinds it
+    uses."""
+    used = (plugins.provider(role, values[registry.kind_parameter.name])
+            for role, registry in REGISTRIES.items())
+    return plugins.joined((*plugins.references(values["run.plugins"]),
+                           *(reference for reference in used if reference)))
 # resolved to absolute paths
 FILE_PARAMETERS = ("profile.table.file", "profile.strategy.file", "line.file", "gpc.model",
                    "profile.journey.timetable")
@@ -231,6 +273,9 @@ class NodeValues(dict):
     error, in the node and in simulate() alike."""
 
     def __init__(self, node: str, values: dict[str, Any]):
+        # a process that builds a stage from a run's values imports its plug-ins first
+        # (a study's worker, a resimulation): its kinds are known wherever it runs
+        load_plugins(values.get("run.plugins", ""))
         for name in RETIRED_NAMES & values.keys():  # values written for an older schema
             raise ScenarioError(f"{node}: {retired(name, values[name])}")
         super().__init__({spec.name: values[spec.name] for spec in for_node(node, values)})
