@@ -82,7 +82,7 @@ def smc_step(settings: SMCSettings, state: SMCState, target: float, measured: fl
     switching = g.gain * (ratio if -1.0 < ratio < 1.0 else (1.0 if ratio > 0.0 else -1.0))
     equivalent = g.integral_weight * error / train.xi
     raw = feedforward + equivalent + switching
-    u = limit_command(raw, target, measured, last, limits)
+    u = limit_command(raw, tracked, measured, last, limits)
     inside = -1.0 < ratio < 1.0
     integral = state.integral + h * error if inside and u == raw else state.integral
     return u, (surface, feedforward, equivalent, switching), SMCState(integral)
