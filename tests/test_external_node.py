@@ -1,0 +1,128 @@
+"""A user's own node in place of the project's controller (docs/external-nodes.md):
+started by run_stack.py --external, or by the user in the domain it prints; its series
+bit for bit those of the same law in-process; a node that never joins named in one line
+and nothing of it left running."""
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ato_nodes.bags.bagio import read_parameters, read_series
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.launcher.launch import node_environment
+from commands import invocation, one_line_exit_2
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN_STACK = invocation("run_stack")
+PID_NODE = [sys.executable, str(ROOT / "tests" / "data" / "external_pid.py")]
+# The PID tracking r_k (a preview of 0: the target the helper hands the law is the one
+# the project's controller tracks), on seed 000's target, with sensor noise
+PID_RUN = ["controller.kind=pid", "controller.preview=0", "run.duration=20",
+           "plant.speed_noise=0.05"]
+
+
+def stack_command(bag: Path, domain, *arguments) -> list[str]:
+    return [*RUN_STACK, "--scenario", "seed000", "--out", str(bag), "--quiet",
+            "--domain-id", str(domain.domain_id), *(f"--set={item}" for item in PID_RUN),
+            *arguments]
+
+
+def assert_series_equal_in_process(bag: Path) -> None:
+    expected = simulate(apply_overrides(load_scenario("seed000"), PID_RUN))
+    recorded = read_series(bag)
+    for name, series in expected.items():
+        if name != "t":
+            np.testing.assert_array_equal(recorded[name], series, err_msg=name)
+    assert {"proportional", "integral"} <= set(recorded)  # its named outputs, recorded
+
+
+@pytest.mark.integration
+def test_an_external_controller_started_by_run_stack_gives_the_in_process_bits(
+        tmp_path, ros_domain):
+    bag = tmp_path / "bag"
+    done = subprocess.run(stack_command(bag, ros_domain, "--external", "controller", "--",
+                                        *PID_NODE),
+                          capture_output=True, text=True, timeout=180, cwd=tmp_path,
+                          **ros_domain.handed_down())
+    assert done.returncode == 0, done.stderr
+    assert_series_equal_in_process(bag)
+    assert read_parameters(bag)["controller.external"] == "tests/data/external_pid.py"
+
+
+@pytest.mark.integration
+def test_without_a_command_the_run_says_where_and_waits_for_the_users_node(
+        tmp_path, ros_domain):
+    bag = tmp_path / "bag"
+    stack = subprocess.Popen(stack_command(bag, ros_domain, "--external", "controller"),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             cwd=tmp_path, **ros_domain.handed_down())
+    try:
+        said = ""
+        while "waiting" not in said:
+            said = stack.stderr.readline()
+            assert said, "run_stack.py ended without saying where to start the node"
+        domain = re.search(r"ROS_DOMAIN_ID=(\d+)", said).group(1)
+        arguments = shlex.split(said.split("the arguments ", 1)[1].split(" (")[0])
+        assert int(domain) == ros_domain.domain_id and "--params-file" in arguments
+        node = subprocess.run([*PID_NODE, *arguments], env=node_environment(int(domain)),
+                              capture_output=True, text=True, timeout=180)
+        assert node.returncode == 0, node.stderr
+        assert stack.wait(timeout=60) == 0, stack.stderr.read()
+    finally:
+        if stack.poll() is None:
+            stack.kill()
+    assert_series_equal_in_process(bag)
+
+
+def alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.integration
+def test_an_external_node_that_never_joins_is_named_in_one_line_and_nothing_of_it_stays(
+        tmp_path, ros_domain):
+    pids = tmp_path / "pids"
+    # a command that leaves a child of its own behind, neither ever a ROS node
+    silent = [sys.executable, "-c", "import subprocess, sys, time; child = subprocess.Popen("
+              "['sleep', '600']); open(sys.argv[1], 'w').write(f'{child.pid}'); time.sleep(600)",
+              str(pids)]
+    done = subprocess.run(stack_command(tmp_path / "bag", ros_domain,
+                                        "--set=supervisor.ready_timeout=2", "--external",
+                                        "controller", "--", *silent),
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                          **ros_domain.handed_down())
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if "error" in line]
+    assert line.startswith("error: nodes not ready after 2 s: controller"), line
+    assert "(the external controller never announced 'ready controller'" in line
+    child = int(pids.read_text())
+    deadline = time.monotonic() + 10  # reaped by init once killed
+    while alive(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not alive(child)
+
+
+@pytest.mark.parametrize("arguments, words", [
+    (["--external", "plant", "--", "true"], ["--external plant", "controller or profile"]),
+    (["--external", "controller", "--", "no-such-command-here"], ["no-such-command-here",
+                                                                  "not found"]),
+    (["--", "true"], ["needs --external"]),
+])
+def test_a_bad_external_node_is_refused_in_one_line_before_anything_starts(
+        tmp_path, arguments, words):
+    done = subprocess.run([*RUN_STACK, "--out", str(tmp_path / "bag"), *arguments],
+                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    one_line_exit_2(done, *words)
+    assert not (tmp_path / "bag").exists()
+    assert os.listdir(tmp_path) == []
