@@ -403,7 +403,7 @@ class Stack:
             self.node_ended.clear()
             codes = {role: process.poll() for role, process in self.processes.items()}
             if codes["supervisor"] == 0 or (codes["supervisor"] is not None
-                                            and self.report_path.exists()):
+                                            and "failed" in self._report()):
                 return self._finish()
             for role, process in self.processes.items():  # frozen: SIGSTOP, a debugger
                 if _stopped(process.pid):
@@ -460,6 +460,10 @@ class Stack:
             return repair(self.bag).describe()
         except RepairError as exc:
             return f"bag not repaired: {exc}"
+
+    def _report(self) -> dict:
+        """The supervisor's report ({} before it is written)."""
+        return json.loads(self.report_path.read_text()) if self.report_path.exists() else {}
 
     def _finish(self) -> RunOutcome:
         """The supervisor ended the run; the other nodes are exiting on 'shutdown'."""
