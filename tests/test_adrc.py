@@ -179,7 +179,7 @@ class TestNLSEF:
 
     def test_command_saturates_and_observer_sees_the_saturated_value(self):
         adrc = han_adrc(han_gains(), 0.05, CommandLimiter(-5.0, 5.0))
-        out = adrc.step(100.0, 0.0)
+        out = adrc.step(100.0, 0.0, [100.0])
         assert out.u == 5.0
         assert adrc.state.u_applied == 5.0
 

@@ -259,7 +259,7 @@ def test_a_kind_registered_after_import_joins_the_dispatch(monkeypatch):
                         SimpleNamespace(kind="late_kind", steps=late))
     assert fast_loop.steps_of(LateState) is late
     assert "late_kind" in fast_loop.compiled_kinds()
-    assert fast_loop.controller_start(None, LateState(), 1.0, 0.0) == LateState()
+    assert fast_loop.controller_start(None, LateState(), 1.0, 0.0, [1.0]) == LateState()
 
 
 @pytest.mark.parametrize("scenario", ["seed003-maglev", "seed002-hsr", "seed001-excitation"])

@@ -56,7 +56,7 @@ def drive(cut: bool, speed: float = 50.0, head: float = 700.0, steps: int = 160,
                           head, LINE)
     plant = PointMassTrain(train, PERIOD, 2, TrainState(position=head, speed=speed), LINE)
     pantograph, commands = [], []
-    adrc.start(speed + 20.0, speed)
+    adrc.start(speed + 20.0, speed, [speed + 20.0])
     for _ in range(steps):
         pantograph.append(plant.state.position - train.pantograph_offset)
         commands.append(adrc.step(plant.state.speed + 20.0, plant.state.speed,

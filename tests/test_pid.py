@@ -36,18 +36,18 @@ def test_feedforward_alone_follows_a_ramp_on_the_nominal_train():
     nominal = train()
     pid = PID(gains(kp=0.0, ki=0.0, kd=0.0), PERIOD, CommandLimiter(-1e6, 1e6), nominal)
     plant = PointMassTrain(nominal, PERIOD, substeps=4)
-    pid.start(0.0, 0.0)
+    pid.start(0.0, 0.0, [0.0])
     ramp = 0.5  # m/s^2
     for k in range(400):
         horizon = [ramp * k * PERIOD, ramp * (k + 1) * PERIOD]
-        out = pid.step(horizon[1], plant.state.speed, horizon)
+        out = pid.step(horizon[0], plant.state.speed, horizon)
         plant.step(out.u)
     assert plant.state.speed == pytest.approx(ramp * 400 * PERIOD, abs=0.02)
 
 
 def test_no_derivative_kick_on_a_target_step():
     pid = PID(gains(kd=100.0), PERIOD, CommandLimiter(-1e6, 1e6), train())
-    pid.start(0.0, 0.0)
+    pid.start(0.0, 0.0, [0.0])
     out = pid.step(10.0, 0.0, [10.0])
     assert out.extras[3] == 0.0  # derivative acts on the measurement only
     out = pid.step(10.0, 1.0, [10.0])
@@ -58,7 +58,7 @@ def test_no_derivative_kick_on_a_target_step():
 def test_back_calculation_keeps_the_integrator_from_winding_up(kt, bounded):
     pid = PID(gains(kp=10.0, ki=5.0, kt=kt, feedforward=0.0), PERIOD,
               CommandLimiter(-20.0, 20.0), train())
-    pid.start(0.0, 0.0)
+    pid.start(0.0, 0.0, [0.0])
     for _ in range(2000):  # 100 s saturated, 5 m/s short of the target
         out = pid.step(5.0, 0.0, [5.0])
     assert out.u == 20.0

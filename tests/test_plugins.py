@@ -139,3 +139,38 @@ def test_the_profile_sends_each_step_its_horizon_and_stairs_only_the_first_entry
     later = stage.on_position(100.0)[0]  # standing 100 m in: a stair one step above 0
     planned = stage.context.horizon(3, 100.0, 3)
     assert later[0] == stage.settings.approach_step < planned[0] and later[1:] == planned[1:]
+
+
+class _Recording:
+    """A controller that notes what the loop gives it and steps the kind it wraps."""
+
+    def __init__(self, controller, seen):
+        self.controller, self.seen = controller, seen
+
+    def start(self, target, measured, horizon):
+        self.seen.append(("start", target, list(horizon)))
+        self.controller.start(target, measured, horizon)
+
+    def step(self, target, measured, horizon):
+        self.seen.append(("step", target, list(horizon)))
+        return self.controller.step(target, measured, horizon)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_controller_is_given_r_k_as_its_target_and_the_horizon_whatever_the_preview(
+        monkeypatch, compiled):
+    """`target` is the plan's speed now (what the run records as its target), not the
+    preview's end: a kind that ignores the horizon tracks r_k even where a scenario
+    previews 9 steps (the -ato scenarios); the horizon is r_k .. r_k+N."""
+    seen = []
+    pid = CONTROLLERS.components["pid"]
+    monkeypatch.setitem(CONTROLLERS.components, "pid", dataclasses.replace(
+        pid, steps=None, factory=lambda *arguments: _Recording(pid.factory(*arguments), seen)))
+    run = values("seed004-metro-ato", "controller.kind=pid", "run.duration=20")
+    assert run["controller.preview"] == 9
+    series = simulate(run, compiled=compiled)
+    assert [what for what, _, _ in seen] == ["start"] + ["step"] * len(series["t"])
+    targets = np.array([target for _, target, _ in seen[1:]])
+    np.testing.assert_array_equal(targets, series["target"])
+    assert {len(horizon) for _, _, horizon in seen} == {10}
+    assert all(target == horizon[0] for _, target, horizon in seen)

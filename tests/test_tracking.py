@@ -76,7 +76,7 @@ def test_the_linear_adrc_without_its_additions_is_the_papers_law():
     adrc = linear_adrc_of(gains, PERIOD, CommandLimiter(-1e6, 1e6), metro(),
                           on_board_estimator(defaults(), PERIOD))
     z1 = z2 = u_prev = 0.0
-    adrc.start(1.0, 0.5)
+    adrc.start(1.0, 0.5, [1.0])
     z1 = 0.5
     for k in range(50):
         target, measured = 1.0 + 0.05 * k, 0.5 + 0.04 * k

@@ -243,7 +243,7 @@ def test_the_discrete_adrc_follows_the_printed_equations_for_one_step():
         b01=0.8, b02=0.2, b03=0.01, b1=30.0, b2=50.0, b0=2e-4)
     controller = SteppedController(DISCRETE_ADRC_STEPS, DiscreteADRCSettings(g, 0.1),
                                    CommandLimiter(-1e9, 1e9))
-    controller.start(1.0, 1.0)
+    controller.start(1.0, 1.0, [1.0])
     controller.state = controller.state._replace(z2=0.05, z3=0.002, u_applied=10.0)
     out = controller.step(2.0, 1.2, [2.0])
     e = 1.0 - 1.2

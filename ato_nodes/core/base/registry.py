@@ -35,13 +35,16 @@ class Controller(Protocol):
     it reports besides the command is declared by the entry's `outputs`, and what it
     carries from step to step (for a live change of gains) by its `state_paths`."""
 
-    def start(self, target: float, measured: float) -> None:
-        """Initialise the state from the first target and measured speed, m/s."""
+    def start(self, target: float, measured: float, horizon: Sequence[float]) -> None:
+        """Initialise the state from the first step's target r_0, measured speed and
+        horizon r_0 .. r_N (m/s)."""
 
-    def step(self, target: float, measured: float, horizon: Sequence[float] | None
+    def step(self, target: float, measured: float, horizon: Sequence[float]
              ) -> ControllerOutput:
-        """The command for one period: `target` the speed to track (m/s), `measured`
-        the sensor's speed (m/s), `horizon` the plan's targets r_k .. r_k+N."""
+        """The command for one period: `target` the plan's speed now, r_k (m/s),
+        `measured` the sensor's speed (m/s), `horizon` the plan's targets r_k .. r_k+N
+        (N = controller.preview; horizon[0] is `target`). A kind that tracks ahead reads
+        horizon[-1] itself: `target` means r_k whatever the preview."""
 
 
 @runtime_checkable

@@ -154,8 +154,9 @@ BASE: tuple[ParamSpec, ...] = (
     param("plant.initial_speed", 0.0, "speed at t = 0, m/s", PLANT_NODES, 0.0, 300.0),
     param("plant.initial_position", 0.0, "position at t = 0, m", PLANT_NODES, -1e7, 1e7),
     param("controller.preview", 0, "steps of target preview: the profile sends the controller "
-          "r_k .. r_k+N (the planned target; along the planned trajectory for position-indexed "
-          "targets) and the controller tracks r_k+N (0 = r_k, the papers' setting)",
+          "the horizon r_k .. r_k+N (the planned target; along the planned trajectory for "
+          "position-indexed targets); every kind is given r_k as its target and the horizon, "
+          "and the shipped kinds track its end r_k+N (0 = r_k, the papers' setting)",
           ("profile", "controller"), 0, MAX_PREVIEW),
     *LIMITER_PARAMETERS,
     *ESTIMATOR_PARAMETERS,

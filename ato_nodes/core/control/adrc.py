@@ -195,21 +195,22 @@ def nlsef(e1: float, e2: float, z2: float, gains: HanADRCGains, h: float) -> flo
 
 @jitable
 def han_adrc_start(settings: HanADRCSettings, state: HanADRCState, target: float,
-                   measured: float) -> HanADRCState:
-    """The TD starts at the first target, the observer at the first measurement."""
-    return HanADRCState(measured, state.z2, state.z3, target, state.v2, state.u_applied)
+                   measured: float, horizon) -> HanADRCState:
+    """The TD starts at the first tracked target, the observer at the first measurement."""
+    return HanADRCState(measured, state.z2, state.z3, horizon[-1], state.v2, state.u_applied)
 
 
 @jitable
 def han_adrc_step(settings: HanADRCSettings, state: HanADRCState, target: float,
                   measured: float, horizon, last: float, limits: LimiterSettings):
-    """One step of Han's ADRC (ControllerSteps.step); outputs z1, z2, z3, v1, v2."""
-    g, h = settings.gains, settings.period
+    """One step of Han's ADRC (ControllerSteps.step), tracking the horizon's end r_k+N;
+    outputs z1, z2, z3, v1, v2."""
+    g, h, tracked = settings.gains, settings.period, horizon[-1]
     z1, z2, z3 = eso_update(state.z1, state.z2, state.z3, measured, state.u_applied, g.beta1,
                             g.beta2, g.beta3, g.b0, g.delta, h)
-    v1, v2 = td_update(state.v1, state.v2, target, g.r0, g.h0, h)
+    v1, v2 = td_update(state.v1, state.v2, tracked, g.r0, g.h0, h)
     u0 = nlsef(v1 - z1, v2 - z2, z2, g, h)
-    u = limit_command((u0 - z3) / g.b0, target, measured, last, limits)
+    u = limit_command((u0 - z3) / g.b0, tracked, measured, last, limits)
     return u, (z1, z2, z3, v1, v2), HanADRCState(z1, z2, z3, v1, v2, u)
 
 
@@ -300,8 +301,9 @@ class DiscreteADRCState(NamedTuple):
 
 @jitable
 def discrete_adrc_start(settings: DiscreteADRCSettings, state: DiscreteADRCState,
-                        target: float, measured: float) -> DiscreteADRCState:
-    return DiscreteADRCState(measured, state.z2, state.z3, target, state.v2, state.u_applied)
+                        target: float, measured: float, horizon) -> DiscreteADRCState:
+    return DiscreteADRCState(measured, state.z2, state.z3, horizon[-1], state.v2,
+                             state.u_applied)
 
 
 @jitable
@@ -316,16 +318,16 @@ def discrete_adrc_step(settings: DiscreteADRCSettings, state: DiscreteADRCState,
     With the step folded into the gains, z2 is the speed change per step and z3
     its change per step, so the TD's v2 (m/s^2) enters e2 = v2 h - z2 in the same
     per-step unit (the paper leaves this implicit: our reading). The outputs z2
-    and z3 are converted back to m/s^2 and m/s^3."""
-    g, h = settings.gains, settings.period
+    and z3 are converted back to m/s^2 and m/s^3. It tracks the horizon's end r_k+N."""
+    g, h, tracked = settings.gains, settings.period, horizon[-1]
     e = state.z1 - measured
     z1 = state.z1 + state.z2 - g.b01 * e
     z2 = state.z2 + state.z3 - g.b02 * fal(e, settings.alpha_z2, g.delta) \
         + g.b0 * state.u_applied
     z3 = state.z3 - g.b03 * fal(e, settings.alpha_z3, g.delta)
-    v1, v2 = td_update(state.v1, state.v2, target, g.r0, g.h0, h)
+    v1, v2 = td_update(state.v1, state.v2, tracked, g.r0, g.h0, h)
     u0 = g.b1 * fal(v1 - z1, g.alpha1, g.delta) + g.b2 * fal(v2 * h - z2, g.alpha2, g.delta)
-    u = limit_command(u0 - z3 / g.b0, target, measured, last, limits)
+    u = limit_command(u0 - z3 / g.b0, tracked, measured, last, limits)
     return u, (z1, z2 / h, z3 / (h * h), v1, v2), DiscreteADRCState(z1, z2, z3, v1, v2, u)
 
 
@@ -589,7 +591,7 @@ def target_past_preview(horizon, period: float, distance: float) -> float:
 
 @jitable
 def linear_adrc_start(settings: LinearADRCSettings, state: LinearADRCState, target: float,
-                      measured: float) -> LinearADRCState:
+                      measured: float, horizon) -> LinearADRCState:
     return LinearADRCState(measured, state.z2, state.observer_input, state.u_applied,
                            state.model, state.estimator)
 
@@ -617,7 +619,8 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     """First-order linear ADRC for the speed loop (the plant's true relative degree).
 
     ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by the input
-    b0 (F - w)), gains 2 omega_o and omega_o^2; with r the tracked target r_k+N and
+    b0 (F - w)), gains 2 omega_o and omega_o^2; with r the tracked target r_k+N (the
+    horizon's end) and
     v the speed estimate,
         u = (omega_c (r - v) + a_r - z2) / b0 + w_r.
     In the papers' setting F is the command, w = w_r = a_r = 0 and v = z1. With
@@ -635,7 +638,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     scale = on_board_scale(state.estimator)
     z1, z2 = linear_eso(settings, state, measured)
     ahead = len(horizon) - 1
-    speed, target = law_speed_and_target(settings, state, z1, z2, target, horizon, scale)
+    speed, target = law_speed_and_target(settings, state, z1, z2, horizon[-1], horizon, scale)
     law = (g.omega_c * (target - speed) - z2) / g.b0
     resistance = 0.0  # known to the observer over the coming period
     if g.feedforward:

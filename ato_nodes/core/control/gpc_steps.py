@@ -335,8 +335,8 @@ def first_move(settings: GPCSettings, hessian: np.ndarray, gradient: np.ndarray,
 
 
 @jitable
-def gpc_start(settings: GPCSettings, state: GPCState, target: float, measured: float
-              ) -> GPCState:
+def gpc_start(settings: GPCSettings, state: GPCState, target: float, measured: float,
+              horizon) -> GPCState:
     """The histories as if the train had stood at `measured` under no command."""
     state.speeds[:] = measured
     state.commands[:] = 0.0
@@ -352,7 +352,8 @@ def _gpc_step(settings: GPCSettings, state: GPCState, target: float, measured: f
         raise ValueError("the GPC needs controller.preview >= gpc.horizon")
     speeds, commands = state.speeds, state.commands
     _push(speeds, measured)
-    error, bias, added, model = _learn(settings, state, target, measured, limits)
+    tracked = horizon[-1]  # r_k+N: the law's berth and hold rules read the horizon's end
+    error, bias, added, model = _learn(settings, state, tracked, measured, limits)
     c, a, b = _linearise(settings, model, speeds, commands)
     c += _resistance_change(settings, state.estimator, a, measured)
     free, matrix = free_and_forced(c + bias, a, b, settings.delay, speeds, commands,
@@ -362,7 +363,7 @@ def _gpc_step(settings: GPCSettings, state: GPCState, target: float, measured: f
     brake, traction = _force_range(settings, state.estimator, measured)
     move = first_move(settings, hessian, gradient, last, max(limits.u_min, brake),
                       min(limits.u_max, traction), limits.max_change)
-    u = limit_command(last + move, target, measured, last, limits)
+    u = limit_command(last + move, tracked, measured, last, limits)
     # what the models see: the part of the command the train can apply (the nominal
     # envelope), as in identification
     _push(commands, clamp(u, brake, traction))

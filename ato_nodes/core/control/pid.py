@@ -62,28 +62,29 @@ class PIDState(NamedTuple):
 
 
 @jitable
-def pid_start(settings: PIDSettings, state: PIDState, target: float, measured: float
-              ) -> PIDState:
+def pid_start(settings: PIDSettings, state: PIDState, target: float, measured: float,
+              horizon) -> PIDState:
     return PIDState(state.integral, measured, state.estimator)
 
 
 @jitable
 def pid_step(settings: PIDSettings, state: PIDState, target: float, measured: float, horizon,
              last: float, limits: LimiterSettings):
-    """One step (ControllerSteps.step); outputs feedforward, proportional, integral (after
-    the step), derivative and the estimates (ESTIMATE_OUTPUTS)."""
-    g, h, train = settings.gains, settings.period, settings.train
+    """One step (ControllerSteps.step), tracking the horizon's end r_k+N; outputs
+    feedforward, proportional, integral (after the step), derivative and the estimates
+    (ESTIMATE_OUTPUTS)."""
+    g, h, train, tracked = settings.gains, settings.period, settings.train, horizon[-1]
     planned_acceleration = (horizon[-1] - horizon[-2]) / h if len(horizon) > 1 else 0.0
     feedforward = g.feedforward * (
         planned_acceleration / train.xi + on_board_scale(state.estimator) * basic_resistance(
-            target, train.davis_a, train.davis_b, train.davis_c))
+            tracked, train.davis_a, train.davis_b, train.davis_c))
     previous = state.filtered
     filtered = previous + h / (g.tf + h) * (measured - previous)
     derivative = -g.kd * (filtered - previous) / h
-    error = target - measured
+    error = tracked - measured
     proportional = g.kp * error
     raw = feedforward + proportional + state.integral + derivative
-    u = limit_command(raw, target, measured, last, limits)
+    u = limit_command(raw, tracked, measured, last, limits)
     integral = state.integral + h * (g.ki * error + g.kt * (u - raw))
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)
     return u, (feedforward, proportional, integral, derivative) + on_board_estimates(

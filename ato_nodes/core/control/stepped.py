@@ -16,10 +16,11 @@ from .limiter import CommandLimiter
 
 class ControllerSteps(NamedTuple):
     """A controller kind's start and step, both jitable (core/base/kernels.py):
-    start(settings, state, target, measured) -> state;
+    start(settings, state, target, measured, horizon) -> state;
     step(settings, state, target, measured, horizon, last, limits) -> (u, outputs, state),
-    `last` and `limits` the limiter's last command and LimiterSettings, `outputs` the
-    kind's declared outputs in order."""
+    `target` the plan's speed now r_k, `horizon` r_k .. r_k+N (core/base/registry.py's
+    Controller), `last` and `limits` the limiter's last command and LimiterSettings,
+    `outputs` the kind's declared outputs in order."""
 
     start: Callable[..., Any]
     step: Callable[..., Any]
@@ -36,10 +37,10 @@ class SteppedController(Controller):
         self.steps, self.settings, self.limiter = steps, settings, limiter
         self.state = steps.state_type() if state is None else state
 
-    def start(self, target: float, measured: float) -> None:
-        self.state = self.steps.start(self.settings, self.state, target, measured)
+    def start(self, target: float, measured: float, horizon: Sequence[float]) -> None:
+        self.state = self.steps.start(self.settings, self.state, target, measured, horizon)
 
-    def step(self, target: float, measured: float, horizon: Sequence[float] | None = None
+    def step(self, target: float, measured: float, horizon: Sequence[float]
              ) -> ControllerOutput:
         limiter = self.limiter
         u, outputs, self.state = self.steps.step(self.settings, self.state, target, measured,

@@ -204,9 +204,9 @@ def _first_state(profile, plant, controller, controller_state, running_index) ->
         stood=int(plant.stood), ended=False)
 
 
-def controller_start(settings, state, target: float, measured: float):
+def controller_start(settings, state, target: float, measured: float, horizon):
     """The kind's ControllerSteps.start, chosen by the type of `state`."""
-    return steps_of(type(state)).start(settings, state, target, measured)
+    return steps_of(type(state)).start(settings, state, target, measured, horizon)
 
 
 def controller_step(settings, state, target: float, measured: float, horizon, last: float,
@@ -223,10 +223,10 @@ def as_read(horizon):
 
 if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
     @overload(controller_start)
-    def _compiled_start(settings, state, target, measured):
+    def _compiled_start(settings, state, target, measured, horizon):
         start = steps_of(state.instance_class).start
-        return lambda settings, state, target, measured: start(settings, state, target,
-                                                                measured)
+        return lambda settings, state, target, measured, horizon: start(
+            settings, state, target, measured, horizon)
 
     @overload(controller_step)
     def _compiled_step(settings, state, target, measured, horizon, last, limits):
@@ -253,13 +253,14 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
                                         inputs.quantum))
         profile = profile_step(inputs.profile, journey, profile, k, plant.position, targets)
         horizon = targets[k]
-        reference = float(horizon[inputs.profile.preview])
+        target = float(horizon[0])
         if k == 0:
-            controller = controller_start(inputs.settings, controller, reference, measured)
-        u, outputs, controller = controller_step(inputs.settings, controller, reference,
+            controller = controller_start(inputs.settings, controller, target, measured,
+                                          as_read(horizon))
+        u, outputs, controller = controller_step(inputs.settings, controller, target,
                                                  measured, as_read(horizon), last, inputs.limits)
         last = u
-        _record(inputs, journey, rows[k], k, plant, horizon[0], measured, u)
+        _record(inputs, journey, rows[k], k, plant, target, measured, u)
         for i in range(len(outputs)):
             extras[k, i] = outputs[i]
         speed = plant.speed

@@ -47,8 +47,8 @@ def running(controller) -> Iterator[PythonController]:
         del RUNNING[slot]
 
 
-def _start(slot: int, target: float, measured: float) -> None:
-    RUNNING[slot].start(target, measured)
+def _start(slot: int, target: float, measured: float, horizon: np.ndarray) -> None:
+    RUNNING[slot].start(target, measured, horizon)
 
 
 def _step(slot: int, target: float, measured: float, horizon: np.ndarray
@@ -59,9 +59,9 @@ def _step(slot: int, target: float, measured: float, horizon: np.ndarray
 
 @jitable
 def python_start(settings: PythonController, state: PythonController, target: float,
-                 measured: float) -> PythonController:
+                 measured: float, horizon) -> PythonController:
     with _objmode():
-        _start(state.slot, target, measured)
+        _start(state.slot, target, measured, horizon)
     return state
 
 

@@ -4,7 +4,7 @@ Step k (t_k = k * period), in every runner:
   plant.outputs()            -> position s_k, measured and true speed, ... at t_k
   profile.on_position(s_k)   -> the horizon of step k+2: r_k+2 .. r_k+2+N, N = controller.preview
                                 (and the horizons of steps 0, 1, 2 at k = 0)
-  controller.step(horizon_k, y_k) -> command u_k (N/kN), tracking r_k+N
+  controller.step(r_k, y_k, horizon_k) -> command u_k (N/kN)
   plant.apply(u_k)           -> integrate [t_k, t_k+1] with u_k held
 The target topic carries r_k as its k-th message, whatever the runner, so the
 recorded target of step k is always r(t_k). The profile sends targets two
@@ -179,7 +179,8 @@ class PlantStage:
 
 class ControllerStage:
     """The controller (built at once from the registry) and its pairing rule: step k
-    needs the measured speed y_k and the horizon r_k .. r_k+N; it tracks r_k+N.
+    needs the measured speed y_k and the horizon r_k .. r_k+N; it is given r_k (the
+    horizon's first) as its target and the horizon, as the compiled loop gives them.
 
     Live parameters (the controller kind's `live_parameters`): changes put in
     `pending` take effect at the next step boundary, before the next step is
@@ -194,7 +195,6 @@ class ControllerStage:
         self.context = RunContext(values, line)
         self.limiter = CommandLimiter.from_values(values)
         self.controller = self.component.factory(values, self.context, self.limiter)
-        self.preview = values["controller.preview"]
         self.horizons: deque[list[float]] = deque()
         self.speeds: deque[float] = deque()
         self.step_index = 0
@@ -235,9 +235,8 @@ class ControllerStage:
                 self.pending = {}
             horizon = self.horizons.popleft()
             speed = self.speeds.popleft()
-            reference = horizon[self.preview]
             if self.step_index == 0:
-                self.controller.start(reference, speed)
-            outputs.append(self.controller.step(reference, speed, horizon))
+                self.controller.start(horizon[0], speed, horizon)
+            outputs.append(self.controller.step(horizon[0], speed, horizon))
             self.step_index += 1
         return outputs
