@@ -23,9 +23,9 @@ from commands import invocation, one_line_exit_2
 ROOT = Path(__file__).resolve().parents[1]
 RUN_STACK = invocation("run_stack")
 PID_NODE = [sys.executable, str(ROOT / "tests" / "data" / "external_pid.py")]
-# The PID tracking r_k (a preview of 0: the target the helper hands the law is the one
-# the project's controller tracks), on seed 000's target, with sensor noise
-PID_RUN = ["controller.kind=pid", "controller.preview=0", "run.duration=20",
+# The PID tracking two steps ahead (its feedforward reads the horizon), on seed 000's
+# target, with sensor noise
+PID_RUN = ["controller.kind=pid", "controller.preview=2", "run.duration=20",
            "plant.speed_noise=0.05"]
 
 

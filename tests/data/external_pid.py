@@ -10,20 +10,12 @@ from ato_nodes.nodes.external import run_controller
 PID = CONTROLLERS["pid"]
 
 
-class PIDLaw:
-    """The PID kind's controller, built from the run's controller values."""
-
-    def __init__(self, parameters: dict):
-        values = NodeValues("controller", parameters)
-        self.controller = PID.factory(values, RunContext(values),
-                                      CommandLimiter.from_values(values))
-
-    def start(self, target, measured, horizon):
-        self.controller.start(target, measured)
-
-    def step(self, target, measured, horizon):
-        return self.controller.step(target, measured, horizon)
+def pid_law(parameters: dict):
+    """The PID kind's controller (start and step of r_k, y_k and the horizon), built from
+    the run's controller values."""
+    values = NodeValues("controller", parameters)
+    return PID.factory(values, RunContext(values), CommandLimiter.from_values(values))
 
 
 if __name__ == "__main__":
-    run_controller(PIDLaw, outputs=PID.output_names, name="tests/data/external_pid.py")
+    run_controller(pid_law, outputs=PID.output_names, name="tests/data/external_pid.py")
