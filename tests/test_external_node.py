@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from ato_nodes.bags.bagio import read_parameters, read_series
+from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.launcher.launch import node_environment
@@ -23,25 +24,27 @@ from commands import invocation, one_line_exit_2
 ROOT = Path(__file__).resolve().parents[1]
 RUN_STACK = invocation("run_stack")
 PID_NODE = [sys.executable, str(ROOT / "tests" / "data" / "external_pid.py")]
+SMC_NODE = ROOT / "examples" / "smc-node" / "smc_node.py"
 # The PID tracking two steps ahead (its feedforward reads the horizon), on seed 000's
 # target, with sensor noise
 PID_RUN = ["controller.kind=pid", "controller.preview=2", "run.duration=20",
            "plant.speed_noise=0.05"]
 
 
-def stack_command(bag: Path, domain, *arguments) -> list[str]:
+def stack_command(bag: Path, domain, *arguments, run=PID_RUN) -> list[str]:
     return [*RUN_STACK, "--scenario", "seed000", "--out", str(bag), "--quiet",
-            "--domain-id", str(domain.domain_id), *(f"--set={item}" for item in PID_RUN),
+            "--domain-id", str(domain.domain_id), *(f"--set={item}" for item in run),
             *arguments]
 
 
-def assert_series_equal_in_process(bag: Path) -> None:
-    expected = simulate(apply_overrides(load_scenario("seed000"), PID_RUN))
+def assert_series_equal_in_process(bag: Path, run=PID_RUN,
+                                   outputs=("proportional", "integral")) -> None:
+    expected = simulate(apply_overrides(load_scenario("seed000"), run))
     recorded = read_series(bag)
     for name, series in expected.items():
         if name != "t":
             np.testing.assert_array_equal(recorded[name], series, err_msg=name)
-    assert {"proportional", "integral"} <= set(recorded)  # its named outputs, recorded
+    assert set(outputs) <= set(recorded)  # its named outputs, recorded
 
 
 @pytest.mark.integration
@@ -55,6 +58,24 @@ def test_an_external_controller_started_by_run_stack_gives_the_in_process_bits(
     assert done.returncode == 0, done.stderr
     assert_series_equal_in_process(bag)
     assert read_parameters(bag)["controller.external"] == "tests/data/external_pid.py"
+
+
+@pytest.mark.integration
+def test_the_example_smc_node_gives_the_bits_of_the_smc_kind_in_process(tmp_path, ros_domain):
+    """examples/smc-node: the plug-in's law in a node of its own, against the same law
+    registered as the kind smc and run in-process."""
+    pytest.importorskip("ato_smc.law", reason="the example plug-in examples/ato-smc")
+    if "smc" not in CONTROLLERS.components:
+        pytest.skip("the example plug-in is not registered (pip install -e examples/ato-smc)")
+    run = ["controller.kind=smc", "smc.gain=30", *PID_RUN[1:]]
+    done = subprocess.run(stack_command(tmp_path / "bag", ros_domain, "--external",
+                                        "controller", "--", sys.executable, str(SMC_NODE),
+                                        run=run),
+                          capture_output=True, text=True, timeout=180, cwd=tmp_path,
+                          **ros_domain.handed_down())
+    assert done.returncode == 0, done.stderr
+    assert_series_equal_in_process(tmp_path / "bag", run, ("sliding_surface", "switching"))
+    assert read_parameters(tmp_path / "bag")["controller.external"] == "examples/smc-node"
 
 
 @pytest.mark.integration

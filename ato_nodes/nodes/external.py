@@ -32,6 +32,7 @@ from typing import Any
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
+from ato_nodes.core.config.schema import defaults, for_node
 from ato_nodes.nodes.base import AtoNode, run_node
 
 # What the helper adds to the values it announces: the bag then says that a law of the
@@ -66,8 +67,8 @@ class ExternalController(AtoNode):
         self.own = {spec[0]: spec for spec in own}
         self.mark = name
         super().__init__()
-        self.parameters = {**self.values, **{key: self.get_parameter(key).value
-                                             for key in self.own}}
+        self.parameters = {**{key: self.get_parameter(key).value for key in self.own},
+                           **self.values}
         self.law = make_law(self.parameters)
         self.names = tuple(outputs)
         self.speeds: deque[float] = deque()
@@ -90,10 +91,14 @@ class ExternalController(AtoNode):
     def _declare_parameters(self, use_sim_time: bool):
         """The run's controller values as the project's node declares them, and the
         user's own parameters, live, with their ranges."""
-        given = {key: self._parameter_overrides.pop(key) for key in self.own
-                 if key in self._parameter_overrides}
+        overrides = self._parameter_overrides
+        run = {spec.name for spec in for_node(self.role, {
+            **defaults(), **{key: overrides[key].value for key in overrides}})}
+        given = {key: overrides.pop(key) for key in set(self.own) - run if key in overrides}
         values = super()._declare_parameters(use_sim_time)
         for key, default, description, low, high in self.own.values():
+            if key in values:  # the run's schema declares it (a plug-in kind's): its value
+                continue
             descriptor = ParameterDescriptor(name=key, description=description,
                                              floating_point_range=[FloatingPointRange(
                                                  from_value=float(low), to_value=float(high))])
@@ -105,7 +110,8 @@ class ExternalController(AtoNode):
         """The values it runs with, the user's own and the mark of an external law with
         them (before they are declared: AtoNode announces at construction)."""
         values = {**self.values, EXTERNAL_MARK: self.mark}
-        values.update({key: self.get_parameter(key).value for key in self.own})
+        values.update({key: self.get_parameter(key).value for key in self.own
+                       if key not in self.values})
         self.announce(f"parameters {self.role} {json.dumps(values)}")
 
     def on_set_parameters(self, parameters) -> SetParametersResult:
