@@ -23,6 +23,7 @@ from commands import invocation, one_line_exit_2
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN_STACK = invocation("run_stack")
+SCORE_BAG = invocation("score_bag")
 PID_NODE = [sys.executable, str(ROOT / "tests" / "data" / "external_pid.py")]
 SMC_NODE = ROOT / "examples" / "smc-node" / "smc_node.py"
 # The PID tracking two steps ahead (its feedforward reads the horizon), on seed 000's
@@ -58,6 +59,13 @@ def test_an_external_controller_started_by_run_stack_gives_the_in_process_bits(
     assert done.returncode == 0, done.stderr
     assert_series_equal_in_process(bag)
     assert read_parameters(bag)["controller.external"] == "tests/data/external_pid.py"
+    scored = subprocess.run([*SCORE_BAG, str(bag), "--resimulate"], capture_output=True,
+                            text=True, timeout=60)
+    assert scored.returncode == 0 and scored.stderr.splitlines() == [
+        "not re-simulated: the controller was an external node's law "
+        "(tests/data/external_pid.py), which only that node runs; the bag is scored as "
+        "recorded"], scored.stderr
+    assert "ITAE" in scored.stdout and "re-simulated" not in scored.stdout
 
 
 @pytest.mark.integration

@@ -32,12 +32,10 @@ from typing import Any
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
+from ato_nodes.bags.bagio import EXTERNAL_LAW
 from ato_nodes.core.config.schema import defaults, for_node
 from ato_nodes.nodes.base import AtoNode, run_node
 
-# What the helper adds to the values it announces: the bag then says that a law of the
-# user's ran, which no in-process run can simulate again (bagio.resimulate).
-EXTERNAL_MARK = "controller.external"
 OwnParameter = tuple[str, float, str, float, float]  # name, default, description, low, high
 
 
@@ -109,7 +107,7 @@ class ExternalController(AtoNode):
     def announce_parameters(self) -> None:
         """The values it runs with, the user's own and the mark of an external law with
         them (before they are declared: AtoNode announces at construction)."""
-        values = {**self.values, EXTERNAL_MARK: self.mark}
+        values = {**self.values, EXTERNAL_LAW: self.mark}
         values.update({key: self.get_parameter(key).value for key in self.own
                        if key not in self.values})
         self.announce(f"parameters {self.role} {json.dumps(values)}")
