@@ -24,6 +24,7 @@ from commands import invocation, one_line_exit_2
 ROOT = Path(__file__).resolve().parents[1]
 RUN_STACK = invocation("run_stack")
 SCORE_BAG = invocation("score_bag")
+ANALYZE = invocation("analyze")
 PID_NODE = [sys.executable, str(ROOT / "tests" / "data" / "external_pid.py")]
 SMC_NODE = ROOT / "examples" / "smc-node" / "smc_node.py"
 # The PID tracking two steps ahead (its feedforward reads the horizon), on seed 000's
@@ -66,6 +67,11 @@ def test_an_external_controller_started_by_run_stack_gives_the_in_process_bits(
         "(tests/data/external_pid.py), which only that node runs; the bag is scored as "
         "recorded"], scored.stderr
     assert "ITAE" in scored.stdout and "re-simulated" not in scored.stdout
+    analyzed = subprocess.run([*ANALYZE, str(bag), "--out", str(tmp_path / "report")],
+                              capture_output=True, text=True, timeout=120)
+    assert analyzed.returncode == 0, analyzed.stderr
+    assert "## Controller outputs" in (tmp_path / "report" / "report.md").read_text()
+    assert (tmp_path / "report" / "outputs_1.png").stat().st_size > 0
 
 
 @pytest.mark.integration
