@@ -3,6 +3,7 @@ started by run_stack.py --external, or by the user in the domain it prints; its 
 bit for bit those of the same law in-process; a node that never joins named in one line
 and nothing of it left running."""
 
+import json
 import os
 import re
 import shlex
@@ -25,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RUN_STACK = invocation("run_stack")
 SCORE_BAG = invocation("score_bag")
 ANALYZE = invocation("analyze")
+TUNE = invocation("tune")
 PID_NODE = [sys.executable, str(ROOT / "tests" / "data" / "external_pid.py")]
 SMC_NODE = ROOT / "examples" / "smc-node" / "smc_node.py"
 # The PID tracking two steps ahead (its feedforward reads the horizon), on seed 000's
@@ -161,3 +163,30 @@ def test_a_bad_external_node_is_refused_in_one_line_before_anything_starts(
     one_line_exit_2(done, *words)
     assert not (tmp_path / "bag").exists()
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.integration
+def test_tune_tunes_an_external_nodes_own_parameter_in_its_declared_range(tmp_path):
+    out = tmp_path / "tune"
+    node = [sys.executable, str(ROOT / "tests" / "data" / "proportional_node.py")]
+    done = subprocess.run([*TUNE, "--scenario", "seed000", "--set", "run.duration=5",
+                           "--evaluations", "4", "--population", "2", "--out", str(out),
+                           "--keep-bags", "--quiet", "--external", "controller", "--", *node],
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert json.loads((out / "tuning.json").read_text())["params"] == {"gain": [1.0, 200.0]}
+    logged = [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
+    assert len(logged) == 4 and logged[0]["params"] == {"gain": 50.0}  # its declared value
+    for record in logged:  # each candidate's node ran with the candidate's gain
+        bag = out / "runs" / f"candidate-{record['index']:05d}"
+        assert read_parameters(bag)["gain"] == record["params"]["gain"]
+        assert 1.0 <= record["params"]["gain"] <= 200.0 and record["status"] == "ok"
+    assert "--external controller -- " in done.stdout and "-p gain:=" in done.stdout
+
+
+def test_tune_refuses_an_external_node_in_process_in_one_line(tmp_path):
+    one_line_exit_2(subprocess.run([*TUNE, "--out", str(tmp_path / "tune"), "--in-process",
+                                    "--external", "controller", "--", "true"],
+                                   capture_output=True, text=True, timeout=60),
+                    "runs only in its node")
+    assert not (tmp_path / "tune").exists()

@@ -40,6 +40,7 @@ from ato_nodes import cli
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.topics import topic_map
 from ato_nodes.core.config.scenario import check_launcher_free, prepare, ros_parameter_file
+from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.launcher.nodefork import STOP_GRACE
 from ato_nodes.nodes.base import QOS, message_class
 
@@ -318,6 +319,52 @@ class Harness:
 
     def send_horizon(self, k: int) -> None:
         self.horizons.publish(Float64MultiArray(data=horizon(self.values, k)))
+
+
+def declared_parameters(command: list[str], values: dict) -> dict[str, tuple[float, float, float]]:
+    """The parameters an external controller node declares of its own, live, with a
+    FloatingPointRange: {name: (low, high, value)}, asked of the node (started alone with
+    the run's parameter file, then stopped) through its parameter services. A node that
+    does not answer within READY_TIMEOUT is a ScenarioError."""
+    from rclpy.parameter import parameter_value_to_python
+    from rclpy.parameter_client import AsyncParameterClient
+    from ato_nodes.launcher.launch import (DomainLock, external_arguments, node_environment,
+                                           start_external)
+    lock = DomainLock()
+    folder = Path(tempfile.mkdtemp(prefix="ato-node-parameters-"))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=lock.domain_id)
+    process = None
+    try:
+        params = folder / "params.yaml"
+        params.write_text(yaml.safe_dump(ros_parameter_file(values), sort_keys=False))
+        process = start_external(ROLE, [*command, *external_arguments(ROLE, params)],
+                                 node_environment(lock.domain_id), (2, 2), lock.fileno(),
+                                 threading.Event())
+        node = Node("ato_node_parameters", context=context)
+        client = AsyncParameterClient(node, f"/{ROLE}")
+        if not client.wait_for_services(timeout_sec=READY_TIMEOUT):
+            raise ScenarioError(f"the external {ROLE} ({command[0]}) did not answer for its "
+                                f"parameters within {READY_TIMEOUT:g} s")
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        def ask(future):
+            executor.spin_until_future_complete(future, timeout_sec=READY_TIMEOUT)
+            return future.result()
+        names = [name for name in ask(client.list_parameters()).result.names
+                 if name not in SPEC_BY_NAME and name != "use_sim_time"]
+        described = ask(client.describe_parameters(names)).descriptors
+        current = ask(client.get_parameters(names)).values
+        return {d.name: (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value,
+                         float(parameter_value_to_python(value)))
+                for d, value in zip(described, current, strict=True)
+                if d.floating_point_range and not d.read_only}
+    finally:
+        if process is not None:
+            stop(process, 0.0)
+        rclpy.shutdown(context=context)
+        shutil.rmtree(folder, ignore_errors=True)
+        lock.release()
 
 
 def stop(process, grace: float) -> int | None:
