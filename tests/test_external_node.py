@@ -190,3 +190,20 @@ def test_tune_refuses_an_external_node_in_process_in_one_line(tmp_path):
                                    capture_output=True, text=True, timeout=60),
                     "runs only in its node")
     assert not (tmp_path / "tune").exists()
+
+
+@pytest.mark.integration
+def test_compare_scenarios_runs_an_external_node_in_every_variant(tmp_path):
+    out = tmp_path / "compare"
+    node = [sys.executable, str(ROOT / "tests" / "data" / "proportional_node.py")]
+    done = subprocess.run([*invocation("compare_scenarios.py"), "seed000:run.duration=5",
+                           "seed000:run.duration=5:plant.speed_noise=0.1", "--out", str(out),
+                           "--external", "controller", "--", *node, "--ros-args", "-p",
+                           "gain:=80.0"], capture_output=True, text=True, timeout=300,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads((out / "comparison.json").read_text())
+    assert [row["bit_identical"] for row in report.values()] == [None, None]
+    assert done.stdout.count("n/a (external node)") == 4  # two progress lines, two rows
+    for bag in ("run0", "run1"):  # the node's own parameter, from its command line
+        assert read_parameters(out / bag)["gain"] == 80.0

@@ -16,7 +16,6 @@ arguments are printed and the run waits supervisor.ready_timeout for your node.
 from __future__ import annotations
 
 import argparse
-import shutil
 import signal
 import sys
 import time
@@ -61,17 +60,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def external_nodes(args: argparse.Namespace) -> dict[str, list[str]]:
     """--external and its command, checked before anything starts (one line, exit 2)."""
-    from ato_nodes.launcher.launch import EXTERNAL_ROLES
-    if args.external is None:
-        if args.command:
-            cli.fail(f"a command after -- ({args.command[0]}) needs --external ROLE")
-        return {}
-    if args.external not in EXTERNAL_ROLES:
-        cli.fail(f"--external {args.external}: a node of your own may stand in for "
-                 f"{' or '.join(EXTERNAL_ROLES)}")
-    if args.command and shutil.which(args.command[0]) is None:
-        cli.fail(f"--external {args.external}: command {args.command[0]} not found")
-    return {args.external: args.command}
+    from ato_nodes.launcher.launch import external_nodes as checked
+    try:
+        return checked(args.external, args.command)
+    except ScenarioError as exc:
+        cli.fail(str(exc))
 
 
 def main() -> None:

@@ -38,6 +38,7 @@ import numpy as np
 import yaml
 
 from ato_nodes.bags.bagrepair import RepairError, needs_repair, repair
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import ros_parameter_file
 from ato_nodes.core.config.schema import NODES
 from ato_nodes.launcher.nodefork import (LIBC, NODE_NAME_PREFIX, PR_SET_PDEATHSIG, STOP_GRACE,
@@ -217,6 +218,21 @@ def node_environment(domain_id: int) -> dict[str, str]:
 # The nodes a user's own node may stand in for (docs/external-nodes.md)
 EXTERNAL_ROLES = ("controller", "profile")
 EXTERNAL_CONTRACT = "docs/external-nodes.md"
+
+
+def external_nodes(role: str | None, command: list[str]) -> dict[str, list[str]]:
+    """--external ROLE and the command after --, checked before anything starts (a
+    ScenarioError, one line): {role: command}, {} without --external."""
+    if role is None:
+        if command:
+            raise ScenarioError(f"a command after -- ({command[0]}) needs --external ROLE")
+        return {}
+    if role not in EXTERNAL_ROLES:
+        raise ScenarioError(f"--external {role}: a node of your own may stand in for "
+                            f"{' or '.join(EXTERNAL_ROLES)}")
+    if command and shutil.which(command[0]) is None:
+        raise ScenarioError(f"--external {role}: command {command[0]} not found")
+    return {role: command}
 
 
 def external_arguments(role: str, params_path: Path) -> list[str]:
@@ -541,18 +557,22 @@ class Stack:
         return outcome
 
 
-def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0
-                ) -> tuple[dict[str, Any], bool]:
+def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0,
+                external: dict[str, list[str]] | None = None
+                ) -> tuple[dict[str, Any], bool | None]:
     """One run through the stack, scored from its bag, and the same run in-process:
-    (the bag's indices, whether the two agree bit for bit). A failed run raises
-    RuntimeError with the launcher's one-line message."""
+    (the bag's indices, whether the two agree bit for bit; None with an `external` node,
+    whose law only it runs). A failed run raises RuntimeError with the launcher's
+    one-line message."""
     from ato_nodes.bags.bagio import read_run
     from ato_nodes.core.run.loop import simulate
     from ato_nodes.core.run.scoring import score_series
-    outcome = Stack(values, bag, quiet=True, timeout=timeout).run()
+    outcome = Stack(values, bag, quiet=True, timeout=timeout, external=external).run()
     if not outcome.ok:
         raise RuntimeError(f"{bag}: {outcome.message}")
     run = read_run(bag)
+    if external:
+        return score_series(run.series, run.parameters), None
     identical = all(np.array_equal(run.series[name], series)
                     for name, series in simulate(values).items() if name != "t")
     return score_series(run.series, run.parameters), identical
