@@ -9,6 +9,7 @@ import re
 import shlex
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -207,3 +208,17 @@ def test_compare_scenarios_runs_an_external_node_in_every_variant(tmp_path):
     assert done.stdout.count("n/a (external node)") == 4  # two progress lines, two rows
     for bag in ("run0", "run1"):  # the node's own parameter, from its command line
         assert read_parameters(out / bag)["gain"] == 80.0
+
+
+@pytest.mark.integration
+def test_robustness_runs_each_sample_through_the_stack_with_the_external_node(tmp_path):
+    out = tmp_path / "robust"
+    node = [sys.executable, str(ROOT / "tests" / "data" / "proportional_node.py")]
+    done = subprocess.run([*invocation("robustness.py"), "seed000", "--samples", "2",
+                           "--workers", "2", "--set", "run.duration=5", "--out", str(out),
+                           "--external", "controller", "--", *node], capture_output=True,
+                          text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    rows = (out / "samples.csv").read_text().splitlines()
+    assert len(rows) == 3 and "2 samples" in done.stdout  # a header and a row per sample
+    assert not list(Path(tempfile.gettempdir()).glob("ato-sample-*/bag"))  # scored, deleted
