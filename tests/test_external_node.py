@@ -78,6 +78,19 @@ def test_an_external_controller_started_by_run_stack_gives_the_in_process_bits(
 
 
 @pytest.mark.integration
+def test_an_external_profile_started_by_run_stack_gives_the_in_process_bits(
+        tmp_path, ros_domain):
+    """The project's own profile node, started as a user's command would be."""
+    bag = tmp_path / "bag"
+    done = subprocess.run(stack_command(bag, ros_domain, "--external", "profile", "--",
+                                        sys.executable, "-m", "ato_nodes.nodes.profile"),
+                          capture_output=True, text=True, timeout=180, cwd=tmp_path,
+                          **ros_domain.handed_down())
+    assert done.returncode == 0, done.stderr
+    assert_series_equal_in_process(bag)
+
+
+@pytest.mark.integration
 def test_the_example_smc_node_gives_the_bits_of_the_smc_kind_in_process(tmp_path, ros_domain):
     """examples/smc-node: the plug-in's law in a node of its own, against the same law
     registered as the kind smc and run in-process."""
