@@ -63,9 +63,8 @@ def main() -> None:
                         help="run on a Dask cluster (as tune.py --cluster)")
     parser.add_argument("--external", metavar="ROLE", help="a node of your own stands in "
                         "for ROLE (controller or profile) in every run: the command after --")
-    argv = sys.argv[1:]
-    ours, command = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv \
-        else (argv, [])
+    from ato_nodes.launcher.launch import split_command  # its command after --
+    ours, command = split_command(sys.argv[1:])
     args = parser.parse_args(ours)
     try:
         external = external_nodes(args.external, command)

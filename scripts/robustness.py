@@ -73,11 +73,9 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--external", metavar="ROLE", help="a node of your own stands in "
                         "for ROLE (controller or profile), the command after --: every "
                         "sample runs through the stack on this host")
-    argv = sys.argv[1:]
-    ours, command = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv \
-        else (argv, [])
+    from ato_nodes.launcher.launch import external_nodes, split_command
+    ours, command = split_command(sys.argv[1:])  # the external node's command after --
     args = parser.parse_args(ours)
-    from ato_nodes.launcher.launch import external_nodes  # the bag libraries: only here
     try:
         args.nodes = external_nodes(args.external, command)
     except ScenarioError as exc:

@@ -54,9 +54,8 @@ RULES = ("parameters announced", "ready announced", "/clock used",
 
 
 def parse_args() -> argparse.Namespace:
-    argv = sys.argv[1:]
-    ours, command = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv \
-        else (argv, [])
+    from ato_nodes.launcher.launch import split_command  # its command after --
+    ours, command = split_command(sys.argv[1:])
     parser = cli.argument_parser(__doc__)
     parser.add_argument("role", help="the node it stands in for: controller")
     parser.add_argument("--scenario", default="seed000",
@@ -109,15 +108,14 @@ def check_node() -> None:
     values = checked(args)
     from ato_nodes.launcher.launch import DomainLock, isolate_to_this_host
     lock = DomainLock()
-    os.environ["ROS_DOMAIN_ID"] = str(lock.domain_id)
-    isolate_to_this_host(os.environ)
+    isolate_to_this_host(os.environ)  # the harness discovers as the run's nodes do
     folder = Path(tempfile.mkdtemp(prefix="ato-check-node-"))
     try:
         params = folder / "params.yaml"
         params.write_text(yaml.safe_dump(ros_parameter_file(values), sort_keys=False))
-        sessions = [Harness(values, lock.domain_id, True).check(args.command, params)]
+        sessions = [Harness(values, lock, True).check(args.command, params)]
         if sessions[0].ready:  # started again: its horizons come just in time
-            sessions.append(Harness(values, lock.domain_id, False).check(args.command, params))
+            sessions.append(Harness(values, lock, False).check(args.command, params))
     finally:
         shutil.rmtree(folder, ignore_errors=True)
         lock.release()
@@ -219,23 +217,24 @@ class Harness:
     """The node's neighbours in one start of it: the plant's clock and measured speed,
     the profile's horizons, the supervisor's run events, the recorder's subscriptions."""
 
-    def __init__(self, values: dict, domain_id: int, ahead: bool):
-        self.values, self.domain_id, self.ahead = values, domain_id, ahead
+    def __init__(self, values: dict, lock, ahead: bool):
+        """`lock` the DomainLock of the harness's domain (the node keeps it open)."""
+        self.values, self.lock, self.ahead = values, lock, ahead
         self.session = Session()
 
     def check(self, command: list[str], params: Path) -> Session:
         """Start the node, run the steps, tell it to shut down; what was seen."""
         from ato_nodes.launcher.launch import external_arguments, node_environment, start_external
         context = rclpy.Context()
-        rclpy.init(context=context, domain_id=self.domain_id)
+        rclpy.init(context=context, domain_id=self.lock.domain_id)
         self.node = Node("ato_check_node", context=context)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self._edges()
         ended = threading.Event()
         process = start_external(ROLE, [*command, *external_arguments(ROLE, params)],
-                                 node_environment(self.domain_id), (2, 2), os.open(
-                                     os.devnull, os.O_RDONLY), ended)
+                                 node_environment(self.lock.domain_id), (2, 2),
+                                 self.lock.fileno(), ended)
         try:
             self.spin_until(lambda: self.session.ready or ended.is_set(), READY_TIMEOUT)
             if self.session.ready:

@@ -34,9 +34,8 @@ EXIT_FAILED, EXIT_INTERRUPTED = 1, 130
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The options; `command` what follows the first `--` (an external node's command)."""
-    argv = sys.argv[1:] if argv is None else argv
-    ours, command = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv \
-        else (argv, [])
+    from ato_nodes.launcher.launch import split_command
+    ours, command = split_command(sys.argv[1:] if argv is None else argv)
     parser = cli.argument_parser(__doc__)
     parser.add_argument("--scenario", default="seed000",
                         help="scenario name in msg_config/scenarios or a YAML file "

@@ -40,9 +40,8 @@ from ato_nodes.studies.tuning import (FITNESS, PENALTY, Requirement, SearchSpace
 
 
 def parse_args() -> argparse.Namespace:
-    argv = sys.argv[1:]
-    ours, command = (argv[:argv.index("--")], argv[argv.index("--") + 1:]) if "--" in argv \
-        else (argv, [])
+    from ato_nodes.launcher.launch import split_command  # its command after --
+    ours, command = split_command(sys.argv[1:])
     parser = cli.argument_parser(__doc__)
     parser.add_argument("--algorithm", default="bas-pso", choices=sorted(ALGORITHMS))
     parser.add_argument("--scenario", default="seed000")

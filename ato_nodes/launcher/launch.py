@@ -220,6 +220,14 @@ EXTERNAL_ROLES = ("controller", "profile")
 EXTERNAL_CONTRACT = "docs/external-nodes.md"
 
 
+def split_command(argv: list[str]) -> tuple[list[str], list[str]]:
+    """A command line's own arguments and the external node's command after its first
+    `--` (none without one)."""
+    if "--" not in argv:
+        return argv, []
+    return argv[:argv.index("--")], argv[argv.index("--") + 1:]
+
+
 def external_nodes(role: str | None, command: list[str]) -> dict[str, list[str]]:
     """--external ROLE and the command after --, checked before anything starts (a
     ScenarioError, one line): {role: command}, {} without --external."""

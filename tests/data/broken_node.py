@@ -51,8 +51,6 @@ class Broken(ExternalController):
             super().shut_down()
 
 
-Broken.role = "controller"
-
 if __name__ == "__main__":
     if Broken.flaw == "no-clock":  # not even rclpy's time source subscribes /clock
         at = sys.argv.index("use_sim_time:=true")
