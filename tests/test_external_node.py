@@ -164,6 +164,18 @@ def test_an_external_node_that_never_joins_is_named_in_one_line_and_nothing_of_i
     assert not alive(child)
 
 
+@pytest.mark.integration
+def test_an_external_node_that_fails_fails_the_run_in_one_line_naming_it(tmp_path, ros_domain):
+    done = subprocess.run(stack_command(tmp_path / "bag", ros_domain, "--external",
+                                        "controller", "--", sys.executable, "-c",
+                                        "import sys; sys.exit(3)"),
+                          capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                          **ros_domain.handed_down())
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if "error" in line]
+    assert line.startswith("error: node 'controller' exited with status 3"), line
+
+
 @pytest.mark.parametrize("arguments, words", [
     (["--external", "plant", "--", "true"], ["--external plant", "controller or profile"]),
     (["--external", "controller", "--", "no-such-command-here"], ["no-such-command-here",
