@@ -7,7 +7,9 @@ against the same run in-process.
 
 A scenario may carry overrides after colons (seed000:controller.preview=1), whose values
 may hold colons (seed004-metro-line:profile.journey.dwell_extension=2:30). Prints and
-writes (comparison.md, comparison.json) one row per run: max |e| (outside seed 003's
+writes (comparison.md, comparison.json) one row per run, labelled by the scenario's
+name and its overrides with their values short (a file's by its name; the JSON keeps
+each run's whole text under "variant"): max |e| (outside seed 003's
 stepped approach where it has one), p95 |e|, ITAE, stopping error, max jerk over 1 s,
 traction/brake switches, overspeed, net energy and whether the stack and the
 in-process run agree. With --cluster the runs go on a Dask cluster's workers, several
@@ -32,8 +34,8 @@ from ato_nodes.reports.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.launcher.launch import external_nodes
 from ato_nodes.studies.backend import ClusterLost, check_cluster
-from ato_nodes.studies.runner import (Outcome, Variant, numeric, prepare_variants, run_study,
-                                     write_outputs)
+from ato_nodes.studies.runner import (Outcome, Variant, labels, numeric, prepare_variants,
+                                     run_study, write_outputs)
 
 
 # a ':' that starts the next NAME=VALUE; any other stays in its value (dwell_extension=2:30)
@@ -66,16 +68,18 @@ def main() -> None:
     from ato_nodes.launcher.launch import split_command  # its command after --
     ours, command = split_command(sys.argv[1:])
     args = parser.parse_args(ours)
+    texts = list(dict.fromkeys(args.scenarios))
+    named = dict(zip(labels([variant(text) for text in texts]), texts, strict=True))
     try:
         external = external_nodes(args.external, command)
         if args.cluster:
             check_cluster(args.cluster)
-        runs = prepare_variants({text: variant(text) for text in args.scenarios})
+        runs = prepare_variants({label: variant(text) for label, text in named.items()})
     except ScenarioError as exc:
         _cli.fail(str(exc))
     _cli.new_directory(args.out)
     args.out.mkdir()
-    bags = {text: args.out / f"run{number}" for number, text in enumerate(runs)}
+    bags = {label: args.out / f"run{number}" for number, label in enumerate(runs)}
     try:
         outcomes = run_study(runs, bags=bags, cluster=args.cluster, progress=progress,
                              external=external)
@@ -86,10 +90,10 @@ def main() -> None:
         _cli.fail(f"{exc} mid-study; the finished runs' bags are in {args.out}", 1)
     except RuntimeError as exc:
         _cli.fail(str(exc), 1)
-    results = {text: {**numeric(outcome.indices), "bit_identical": outcome.identical}
-               for text, outcome in outcomes.items()}
+    results = {label: {**numeric(outcome.indices), "bit_identical": outcome.identical,
+                       "variant": named[label]} for label, outcome in outcomes.items()}
     markdown = markdown_table(results, extra={"stack = in-process": {
-        text: agreement(result["bit_identical"]) for text, result in results.items()}})
+        label: agreement(result["bit_identical"]) for label, result in results.items()}})
     write_outputs(args.out, "comparison", markdown=markdown, report=results)
     print(markdown)
 

@@ -36,7 +36,7 @@ import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies.backend import Backend, ClusterLost, Progress, check_cluster
-from ato_nodes.studies.robustness import (COLUMNS, FACTORS, INDICES, run_sample,
+from ato_nodes.studies.robustness import (COLUMNS, FACTORS, INDICES, RANGES, run_sample,
                                           run_sample_in_stack, summarise)
 from ato_nodes.studies.runner import Variant, check_counts, prepare_variants
 from ato_nodes.studies.samples import SampleFailed, SampleStudy, write_json_with_rows
@@ -56,10 +56,13 @@ def parse_args() -> argparse.Namespace:
     parser = _cli.argument_parser(__doc__)
     parser.add_argument("scenario")
     parser.add_argument("--samples", type=int, default=50)
-    parser.add_argument("--mass", default="0.85:1.3", help="mass range, share of the nominal "
-                        "(default 0.85:1.3, empty to crush load)")
-    parser.add_argument("--resistance", default="0.8:1.2", help="resistance range (+-20 %%)")
-    parser.add_argument("--lag", default="0.7:1.3", help="actuator lag range (+-30 %%)")
+    default = {option: "{:g}:{:g}".format(*RANGES[name]) for name, option in FACTORS.items()}
+    parser.add_argument("--mass", default=default["mass"], help="mass range, share of the "
+                        "nominal (default %(default)s: empty to crush load)")
+    parser.add_argument("--resistance", default=default["resistance"],
+                        help="resistance range (default %(default)s)")
+    parser.add_argument("--lag", default=default["lag"], help="actuator lag range (default "
+                        "%(default)s)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=2)

@@ -9,7 +9,8 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.studies.runner import Variant, numeric, prepare_variants, run_study, write_outputs
+from ato_nodes.studies.runner import (Variant, labels, numeric, prepare_variants, run_study,
+                                     write_outputs)
 
 
 def test_a_variant_overrides_the_common_overrides_of_its_scenario():
@@ -50,3 +51,27 @@ def test_the_outputs_are_markdown_and_strict_json(tmp_path):
     assert (tmp_path / "out" / "study.md").read_text() == "| a |\n"
     assert json.loads((tmp_path / "out" / "study.json").read_text()) == {"x": None}
     assert numeric({"a": 1, "b": 2.5, "c": "text", "d": None}) == {"a": 1, "b": 2.5}
+
+
+def test_a_row_label_is_short_without_machine_paths_and_unique():
+    """compare_scenarios.py's rows: the scenario's stem, each override by its name and a
+    short value, a file's value by its file name; labels that coincide told apart."""
+    line = "/home/someone/lines/metro-interstation.yaml"
+    require = "max_abs_error_kmh<=1, abs_stopping_error<=0.3, overspeed_time<=0"
+    texts = labels([
+        Variant("seed004-metro-ato", ["run.duration=15"]),
+        Variant("/tmp/tune-1/best.yaml", [f"line.file={line}", f"report.require={require}"]),
+        Variant("/tmp/tune-2/best.yaml", [f"line.file={line}", f"report.require={require}"]),
+        Variant("seed000", [f"report.require={require}"]),
+        Variant("seed000", [f"report.require={require[:-1]}"]),
+        Variant("seed000", {"plant.mass_factor": 1.2}),
+    ])
+    assert texts[0] == "seed004-metro-ato:run.duration=15"
+    assert texts[1] == ("tune-1/best:line.file=metro-interstation.yaml:"
+                        "report.require=max_abs_error...")
+    assert texts[2].startswith("tune-2/best:")
+    assert texts[3:5] == ["seed000:report.require=max_abs_error... #4",
+                          "seed000:report.require=max_abs_error... #5"]
+    assert texts[5] == "seed000:plant.mass_factor=1.2"
+    assert len(set(texts)) == len(texts) and not any("/home" in text for text in texts)
+    assert all(len(text) < 90 for text in texts)

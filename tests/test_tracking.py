@@ -311,6 +311,24 @@ def test_compare_scenarios_runs_each_through_the_stack_and_checks_it_in_process(
     assert "| seed004-metro-ato:run.duration=15 |" in result.stdout
 
 
+@pytest.mark.integration
+def test_compare_scenarios_labels_its_rows_short_without_paths_and_unique(tmp_path):
+    line = ROOT / "msg_config" / "lines" / "metro-interstation.yaml"
+    require = "max_abs_error_kmh<=1, abs_stopping_error<=0.3, overspeed_time<=0"
+    runs = [f"seed004-metro-ato:run.duration=5:line.file={line}:report.require={require}",
+            f"seed004-metro-ato:run.duration=5:line.file={line}:report.require={require[:-1]}1"]
+    result = subprocess.run([*invocation("compare_scenarios"), *runs, "--out", tmp_path / "c"],
+                            capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert result.returncode == 0, result.stderr
+    report = json.loads((tmp_path / "c" / "comparison.json").read_text())
+    label = ("seed004-metro-ato:run.duration=5:line.file=metro-interstation.yaml:"
+             "report.require=max_abs_error...")
+    assert list(report) == [f"{label} #1", f"{label} #2"]
+    assert [row["variant"] for row in report.values()] == runs
+    table = result.stdout.splitlines()
+    assert f"| {label} #1 |" in result.stdout and not any(str(ROOT) in row for row in table)
+
+
 @pytest.mark.parametrize("text, words", [
     # the value's colon is its own: the stop's extension is read whole and refused as too long
     ("seed004-metro-line:profile.journey.dwell_extension=2:3601", "3601 s at stop 2"),

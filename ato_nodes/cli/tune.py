@@ -34,16 +34,16 @@ from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.studies.runner import COUNT_BOUNDS, check_counts
-from ato_nodes.studies.tuning import (FITNESS, PENALTY, Requirement, SearchSpace, Tuner, TuningLost,
-                                      TuningSettings, best_command,
-                                      check_external)
+from ato_nodes.studies.tuning import (DEFAULT_ALGORITHM, FITNESS, PENALTY, Requirement,
+                                      SearchSpace, Tuner, TuningLost, TuningSettings,
+                                      best_command, check_external)
 
 
 def parse_args() -> argparse.Namespace:
     from ato_nodes.launcher.launch import split_command  # its command after --
     ours, command = split_command(sys.argv[1:])
     parser = cli.argument_parser(__doc__)
-    parser.add_argument("--algorithm", default="bas-pso", choices=sorted(ALGORITHMS))
+    parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, choices=sorted(ALGORITHMS))
     parser.add_argument("--scenario", default="seed000")
     parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",
                         help="parameters to tune and their bounds (repeatable; default: the "

@@ -21,6 +21,9 @@ from ato_nodes.studies.samples import NUMBER, SampleFailed
 FACTORS = {  # the real train's shares of the nominal values, and the option of each range
     "plant.mass_factor": "mass", "plant.resistance_factor": "resistance",
     "plant.lag_factor": "lag"}
+RANGES = {  # the real trains' default spread: each factor's range of shares, low and high
+    "plant.mass_factor": (0.85, 1.3), "plant.resistance_factor": (0.8, 1.2),
+    "plant.lag_factor": (0.7, 1.3)}
 SEEDS = ("plant.noise_seed", "train.load_weighing_seed")
 INDICES = (  # key, heading; worst is the largest
     ("max_abs_error_kmh", "max abs(e) km/h"),
@@ -57,15 +60,18 @@ def draw_train(ranges: Mapping[str, tuple[float, float]], seed: int, number: int
 
 
 def run_sample(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]], seed: int,
-               number: int) -> dict[str, Any]:
+               number: int, extra: tuple[str, ...] = ()) -> dict[str, Any]:
     """Sample `number` of the study on `base` (the scenario's checked values with the
-    study's --set): drawn, prepared and run here (a worker), its row of COLUMNS."""
+    study's --set): drawn, prepared and run here (a worker), its row of COLUMNS and of
+    the indices named in `extra` that the run has."""
     draw = draw_train(ranges, seed, number)
     try:
         values = apply_overrides(base, draw)
     except ScenarioError as exc:
         raise SampleFailed(f"sample {number}: {exc}") from None
-    return {NUMBER: number, **sample_result(draw, score_with_journey(values)),
+    indices = score_with_journey(values)
+    return {NUMBER: number, **sample_result(draw, indices),
+            **{key: float(indices[key]) for key in extra if key in indices},
             "train.mass_reading": values["train.mass_reading"]}  # what the ATO knew
 
 

@@ -22,6 +22,7 @@ from typing import Any
 from ato_nodes.results import jsontext
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, prepare
+from ato_nodes.core.config.schema import FILE_PARAMETERS
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.studies.backend import Backend
@@ -31,8 +32,10 @@ from ato_nodes.studies.backend import Backend
 MAX_WORKERS = 64      # processes of a pool: more than the machine's cores only share them
 MAX_SAMPLES = 10_000  # runs of a study (robustness.py: samples.csv and its report)
 MAX_SEED = 2**31 - 1  # a study's seed, as the schema's (plant.noise_seed and the others)
+MAX_EVALUATIONS = 1_000_000  # a league's tuning budget per kind
 COUNT_BOUNDS = {"samples": (1, MAX_SAMPLES), "workers": (1, MAX_WORKERS), "seed": (0, MAX_SEED),
-                "seeds": (0, MAX_SEED), "population": (2, MAX_SAMPLES)}
+                "seeds": (0, MAX_SEED), "population": (2, MAX_SAMPLES),
+                "trains": (1, MAX_SAMPLES), "tune": (0, MAX_EVALUATIONS)}
 
 
 def check_counts(**counts: int | Sequence[int]) -> None:
@@ -55,6 +58,41 @@ class Variant:
     win over them."""
     scenario: str
     overrides: Sequence[str] | Mapping[str, Any] = ()
+
+
+SHORT_VALUE = 16  # characters of an override's value a row's label shows whole
+
+
+def labels(variants: Sequence[Variant]) -> list[str]:
+    """Each variant's row label, short and without machine paths: the scenario's stem
+    (a file's name without its suffix) and each override as NAME=VALUE, joined by ':' as
+    the command line takes them; a file's value shown by its file name, a number in six
+    digits, any other value longer than SHORT_VALUE cut short. Labels that coincide name
+    their scenario file's folder, then their place in the list (#N): each is unique."""
+    short = [_short_label(variant, folder=False) for variant in variants]
+    short = [_short_label(variant, folder=True) if short.count(label) > 1 else label
+             for variant, label in zip(variants, short, strict=True)]
+    return [f"{label} #{number}" if short.count(label) > 1 else label
+            for number, label in enumerate(short, 1)]
+
+
+def _short_label(variant: Variant, folder: bool) -> str:
+    scenario = Path(variant.scenario)
+    name = scenario.stem if scenario.suffix in (".yaml", ".yml") else scenario.name
+    if folder and scenario.parent.name:
+        name = f"{scenario.parent.name}/{name}"
+    overrides = (variant.overrides.items() if isinstance(variant.overrides, Mapping)
+                 else (text.partition("=")[::2] for text in variant.overrides))
+    return ":".join([name, *(f"{key.strip()}={short_value(key.strip(), value)}"
+                             for key, value in overrides)])
+
+
+def short_value(name: str, value: Any) -> str:
+    """A parameter's value as a label shows it (see labels())."""
+    text = f"{value:g}" if isinstance(value, float) else str(value).strip()
+    if name in FILE_PARAMETERS and text:
+        return Path(text).name
+    return text if len(text) <= SHORT_VALUE else text[:SHORT_VALUE - 3] + "..."
 
 
 def prepare_variants(variants: Mapping[str, Variant], common: Sequence[str] = ()

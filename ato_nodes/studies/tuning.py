@@ -49,6 +49,7 @@ from ato_nodes.core.run.last_stop import planned_steps
 from ato_nodes.core.scoring.catalogue import FITNESS, Requirement
 from ato_nodes.core.run.scoring import score_series
 
+DEFAULT_ALGORITHM = "bas-pso"  # tune.py's, and the league's for every kind
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
 COMPILING = "compiling the simulation kernels (once per checkout)"
 
