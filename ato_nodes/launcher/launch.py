@@ -365,7 +365,8 @@ class Stack:
                             *start, bag=self.bag.resolve() if role == "recorder" else None)
                         continue
                     except NodeStartError as exc:
-                        if self.processes:  # forked nodes went with it: the run has failed
+                        if any(isinstance(process, ForkedNode) for process in
+                               self.processes.values()):  # forked nodes went with it: failed
                             raise
                         print(f"{exc} before forking a node: starting the nodes as plain "
                               "processes", file=sys.stderr)
