@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from ato_nodes.bags.bagio import read_parameters, read_series
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.run.loop import simulate
@@ -95,7 +96,9 @@ def test_the_example_smc_node_gives_the_bits_of_the_smc_kind_in_process(tmp_path
     """examples/smc-node: the plug-in's law in a node of its own, against the same law
     registered as the kind smc and run in-process."""
     pytest.importorskip("ato_smc.law", reason="the example plug-in examples/ato-smc")
-    if "smc" not in CONTROLLERS.components:
+    try:
+        CONTROLLERS["smc"]
+    except ScenarioError:
         pytest.skip("the example plug-in is not registered (pip install -e examples/ato-smc)")
     run = ["controller.kind=smc", "smc.gain=30", *PID_RUN[1:]]
     done = subprocess.run(stack_command(tmp_path / "bag", ros_domain, "--external",
