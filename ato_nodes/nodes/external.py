@@ -33,6 +33,7 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParam
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
 from ato_nodes.bags.bagio import EXTERNAL_LAW
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.schema import defaults, for_node
 from ato_nodes.nodes.base import AtoNode, run_node
 
@@ -90,8 +91,11 @@ class ExternalController(AtoNode):
         """The run's controller values as the project's node declares them, and the
         user's own parameters, live, with their ranges."""
         overrides = self._parameter_overrides
-        run = {spec.name for spec in for_node(self.role, {
-            **defaults(), **{key: overrides[key].value for key in overrides}})}
+        try:  # those the run's schema declares too keep their place (the run's values)
+            run = {spec.name for spec in for_node(self.role, {
+                **defaults(), **{key: overrides[key].value for key in overrides}})}
+        except ScenarioError:  # a kind this process learns from the run's plug-ins: theirs
+            run = set(self.own)
         given = {key: overrides.pop(key) for key in set(self.own) - run if key in overrides}
         values = super()._declare_parameters(use_sim_time)
         for key, default, description, low, high in self.own.values():
