@@ -8,7 +8,7 @@ PACKAGE = "ato_nodes"
 NODES = ("profile", "plant", "controller", "supervisor", "recorder")
 # The user-facing commands (ato_nodes.cli), named as their scripts in scripts/ are
 # (`ros2 run ato_nodes run_stack` = scripts/run_stack.py)
-COMMANDS = ("run_stack", "tune", "analyze", "replay_bag", "score_bag")
+COMMANDS = ("run_stack", "tune", "analyze", "replay_bag", "score_bag", "check_node")
 
 
 def config_files():
@@ -42,6 +42,7 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [f"{node} = {PACKAGE}.nodes.{node}:main" for node in NODES]
-        + [f"{command} = {PACKAGE}.cli.console:{command}" for command in COMMANDS],
+        + [f"{command} = {PACKAGE}.cli.console:{command}" for command in COMMANDS]
+        + [f"ato-check-node = {PACKAGE}.cli.console:check_node"],
     },
 )

@@ -13,6 +13,12 @@ of them (a node still running STOP_GRACE s after the supervisor, or one that fai
 the launch down, as run_stack.py does). The ROS domain is the environment's
 (ROS_DOMAIN_ID). Without a ROS install, `python scripts/run_stack.py --scenario NAME` is
 the same run.
+
+`controller:=external` (or `profile:=external`) starts the other nodes and leaves that one
+to a node of your own (docs/external-nodes.md), started in the same domain with
+`--ros-args -r __node:=controller -p use_sim_time:=true --params-file FILE`, FILE the
+resolved parameter file the launch logs; the supervisor waits supervisor.ready_timeout
+for it, then ends the run naming it.
 """
 
 import tempfile
@@ -20,7 +26,7 @@ from pathlib import Path
 
 import yaml
 from launch import LaunchDescription
-from launch.actions import (DeclareLaunchArgument, EmitEvent, OpaqueFunction,
+from launch.actions import (DeclareLaunchArgument, EmitEvent, LogInfo, OpaqueFunction,
                             RegisterEventHandler, TimerAction)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
@@ -29,6 +35,7 @@ from launch_ros.actions import Node
 
 from ato_nodes.core.config.scenario import prepare, resolve_scenario, ros_parameter_file
 from ato_nodes.core.config.schema import NODES
+from ato_nodes.launcher.launch import EXTERNAL_CONTRACT, EXTERNAL_ROLES, external_arguments
 from ato_nodes.launcher.nodefork import STOP_GRACE  # s the other nodes have after the supervisor
 
 
@@ -42,15 +49,21 @@ def nodes(context):
     # itself) as the parameter file run_stack.py writes: rcl knows no `base:`
     resolved = Path(tempfile.mkdtemp(prefix="ato_nodes-launch-")) / path.name
     resolved.write_text(yaml.safe_dump(ros_parameter_file(prepare(str(path))), sort_keys=False))
+    external = [role for role in EXTERNAL_ROLES
+                if LaunchConfiguration(role).perform(context) == "external"]
+    started = [role for role in NODES if role not in external]
     launched = [Node(package="ato_nodes", executable=role, name=role, output="screen",
                      parameters=[str(resolved), {name: value for name, value in
                                                  run_parameters.items()
                                                  if name.startswith(role)}])
-                for role in NODES]
+                for role in started]
+    said = [LogInfo(msg=f"the {role} is yours: start it with "
+                        f"{' '.join(external_arguments(role, resolved))} ({EXTERNAL_CONTRACT})")
+            for role in external]
     # A Shutdown as soon as the supervisor exits would SIGINT nodes that are already
     # exiting on its 'shutdown' (launch then reports them as died, exit code -2): the
     # launch ends by itself once every node has exited; the grace timer is the fallback.
-    running = set(NODES)
+    running = set(started)
     grace = TimerAction(period=STOP_GRACE, actions=[EmitEvent(event=Shutdown(
         reason=f"a node still ran {STOP_GRACE:g} s after the supervisor ended the run"))])
 
@@ -66,7 +79,7 @@ def nodes(context):
             return [grace]
         return None
 
-    return [*launched, RegisterEventHandler(OnProcessExit(on_exit=exited))]
+    return [*said, *launched, RegisterEventHandler(OnProcessExit(on_exit=exited))]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -78,5 +91,8 @@ def generate_launch_description() -> LaunchDescription:
                                           "bags/<scenario>-launch)"),
         DeclareLaunchArgument("report", default_value="",
                               description="path of the supervisor's JSON run report"),
+        *(DeclareLaunchArgument(role, default_value="ato_nodes", choices=["ato_nodes", "external"],
+                                description=f"external: a node of your own is the {role}")
+          for role in EXTERNAL_ROLES),
         OpaqueFunction(function=nodes),
     ])

@@ -14,18 +14,25 @@ stepped approach where it has one), p95 |e|, ITAE, stopping error, max jerk over
 traction/brake switches, overspeed, net energy and whether the stack and the
 in-process run agree. With --cluster the runs go on a Dask cluster's workers, several
 at once, each in a ROS domain of its own on its worker's host; the workers write the
-bags into --out, so they must see it (this host, or a shared file system).
+bags into --out, so they must see it (this host, or a shared file system). With
+--external ROLE -- COMMAND a node of your own stands in for the controller or the profile
+in every run (docs/external-nodes.md); no in-process run repeats its law ("n/a").
+
+    python scripts/compare_scenarios.py seed000 seed000:plant.mass_factor=1.2 \
+        --out bags/compare-smc --external controller -- python examples/smc-node/smc_node.py
 """
 
 from __future__ import annotations
 
 import re
+import sys
 from pathlib import Path
 
 import _cli
 
 from ato_nodes.reports.analysis import markdown_table
 from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.launcher.launch import external_nodes
 from ato_nodes.studies.backend import ClusterLost, check_cluster
 from ato_nodes.studies.runner import (Outcome, Variant, labels, numeric, prepare_variants,
                                      run_study, write_outputs)
@@ -43,7 +50,11 @@ def variant(text: str) -> Variant:
 
 def progress(label: str, outcome: Outcome) -> None:
     print(f"{label}: max |e| {outcome.indices['max_abs_error_kmh']:.3f} km/h, stack = "
-          f"in-process: {outcome.identical} ({outcome.bag})", flush=True)
+          f"in-process: {agreement(outcome.identical)} ({outcome.bag})", flush=True)
+
+
+def agreement(identical: bool | None) -> str:
+    return {True: "yes", False: "NO", None: "n/a (external node)"}[identical]
 
 
 def main() -> None:
@@ -52,10 +63,15 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True, help="directory to create")
     parser.add_argument("--cluster", default="", metavar="local:N|tcp://HOST:PORT",
                         help="run on a Dask cluster (as tune.py --cluster)")
-    args = parser.parse_args()
+    parser.add_argument("--external", metavar="ROLE", help="a node of your own stands in "
+                        "for ROLE (controller or profile) in every run: the command after --")
+    from ato_nodes.launcher.launch import split_command  # its command after --
+    ours, command = split_command(sys.argv[1:])
+    args = parser.parse_args(ours)
     texts = list(dict.fromkeys(args.scenarios))
     named = dict(zip(labels([variant(text) for text in texts]), texts, strict=True))
     try:
+        external = external_nodes(args.external, command)
         if args.cluster:
             check_cluster(args.cluster)
         runs = prepare_variants({label: variant(text) for label, text in named.items()})
@@ -65,7 +81,8 @@ def main() -> None:
     args.out.mkdir()
     bags = {label: args.out / f"run{number}" for number, label in enumerate(runs)}
     try:
-        outcomes = run_study(runs, bags=bags, cluster=args.cluster, progress=progress)
+        outcomes = run_study(runs, bags=bags, cluster=args.cluster, progress=progress,
+                             external=external)
     except ScenarioError as exc:  # the cluster refused (no scheduler answers): nothing ran
         args.out.rmdir()
         _cli.fail(str(exc))
@@ -76,7 +93,7 @@ def main() -> None:
     results = {label: {**numeric(outcome.indices), "bit_identical": outcome.identical,
                        "variant": named[label]} for label, outcome in outcomes.items()}
     markdown = markdown_table(results, extra={"stack = in-process": {
-        label: "yes" if result["bit_identical"] else "NO" for label, result in results.items()}})
+        label: agreement(result["bit_identical"]) for label, result in results.items()}})
     write_outputs(args.out, "comparison", markdown=markdown, report=results)
     print(markdown)
 

@@ -17,6 +17,12 @@ within 1 km/h, stop within 0.1 m and arrive within 5 s of the planned time. On a
 journey (profile.kind journey) also the worst stop and arrival over its stations
 (core/scoring/journey.py) and how many samples stop within 0.1 m and arrive within
 5 s of the timetable at every station (a station missed or not reached: neither).
+With --external ROLE -- COMMAND every sample runs through the stack with a node of your
+own standing in for the controller or the profile (docs/external-nodes.md), --workers
+at once, each in a ROS domain of its own:
+
+    python scripts/robustness.py seed000 --samples 20 --out bags/robust-smc \
+        --external controller -- python examples/smc-node/smc_node.py
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import _cli
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies.backend import Backend, ClusterLost, Progress, check_cluster
 from ato_nodes.studies.robustness import (COLUMNS, FACTORS, INDICES, RANGES, run_sample,
-                                          summarise)
+                                          run_sample_in_stack, summarise)
 from ato_nodes.studies.runner import Variant, check_counts, prepare_variants
 from ato_nodes.studies.samples import SampleFailed, SampleStudy, write_json_with_rows
 
@@ -67,7 +73,20 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--resume", action="store_true", help="continue the study in --out: "
                         "run only the samples its samples.csv lacks (the same settings only)")
-    return parser.parse_args()
+    parser.add_argument("--external", metavar="ROLE", help="a node of your own stands in "
+                        "for ROLE (controller or profile), the command after --: every "
+                        "sample runs through the stack on this host")
+    from ato_nodes.launcher.launch import external_nodes, split_command
+    ours, command = split_command(sys.argv[1:])  # the external node's command after --
+    args = parser.parse_args(ours)
+    try:
+        args.nodes = external_nodes(args.external, command)
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    if args.nodes and args.cluster:
+        _cli.fail("--external runs the samples through the stack on this host, not with "
+                  "--cluster")
+    return args
 
 
 def checked(args: argparse.Namespace) -> tuple[dict, dict]:
@@ -98,7 +117,8 @@ def main() -> None:
     args = parse_args()
     base, ranges = checked(args)
     settings = {"scenario": args.scenario, "set": args.set, "ranges": ranges,
-                "seed": args.seed, "samples": args.samples}
+                "seed": args.seed, "samples": args.samples,
+                **({"external": args.nodes} if args.nodes else {})}
     study = None
     try:
         study = SampleStudy(args.out, settings, base, COLUMNS, args.samples, args.resume)
@@ -127,12 +147,15 @@ def kept(study: SampleStudy | None) -> str:
 def run_missing(study: SampleStudy, base: dict, ranges: dict, args: argparse.Namespace) -> None:
     """The samples the study lacks, each row appended as it finishes (the cluster is
     opened, and refused, before the study's directory is written)."""
-    with Backend(args.workers, args.cluster) as backend:
+    with Backend(args.workers, args.cluster, threads=bool(args.nodes)) as backend:
         study.begin()
         progress = Progress(args.samples, len(study.file.done), "samples")
-        tasks = ((number, (base, ranges, args.seed, number)) for number in study.missing())
+        tasks = ((number, (base, ranges, args.seed, number, *([args.nodes] if args.nodes
+                                                               else [])))
+                 for number in study.missing())
         try:
-            for _, row in backend.stream(run_sample, tasks):
+            for _, row in backend.stream(run_sample_in_stack if args.nodes else run_sample,
+                                         tasks):
                 study.file.append(row)
                 progress.advance()
         finally:

@@ -27,9 +27,10 @@ def declared_console_scripts(monkeypatch) -> dict[str, str]:
 
 
 def commands(monkeypatch) -> dict[str, str]:
-    """The declared entry points that start an ato_nodes.cli command."""
-    return {name: target for name, target in declared_console_scripts(monkeypatch).items()
-            if target.startswith("ato_nodes.cli.")}
+    """The ato_nodes.cli commands the declared entry points start, by command (an entry
+    point of another name, `ato-check-node`, is the same command as `check_node`)."""
+    return {target.split(":")[1]: target for target in
+            declared_console_scripts(monkeypatch).values() if target.startswith("ato_nodes.cli.")}
 
 
 def test_every_script_of_a_command_is_a_declared_entry_point(monkeypatch):

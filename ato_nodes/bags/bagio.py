@@ -68,6 +68,16 @@ class BagError(ValueError):
     """A bag that cannot be read or lacks what is asked of it (one-line message)."""
 
 
+# The parameter a controller node of the user's announces (ato_nodes.nodes.external,
+# docs/external-nodes.md): its law is not in the bag, so no in-process run repeats it.
+EXTERNAL_LAW = "controller.external"
+
+
+class ExternalLaw(BagError):
+    """A bag whose controller was an external node's law: it can be scored, not
+    simulated again."""
+
+
 @dataclass
 class Run:
     """What a bag holds, as per-step series."""
@@ -497,6 +507,10 @@ def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
     from ato_nodes.results.journeys import TIMETABLE
     if not run.parameters:
         raise BagError(f"{run.path}: the bag keeps no run parameters to simulate from")
+    if run.parameters.get(EXTERNAL_LAW):
+        raise ExternalLaw(f"not re-simulated: the controller was an external node's law "
+                          f"({run.parameters[EXTERNAL_LAW]}), which only that node runs; the "
+                          "bag is scored as recorded")
     values = dict(run.parameters)
     with tempfile.TemporaryDirectory() as folder:
         kept = {"line.file": base64.b64decode(values[LINE_BASE64])

@@ -3,6 +3,14 @@ recorded to a rosbag2 MCAP bag, scored at the end.
 
     python scripts/run_stack.py                       # seed 000, paper-faithful
     python scripts/run_stack.py --scenario seed000-step --set adrc.r0=20
+    python scripts/run_stack.py --external controller -- python my_controller.py
+    python scripts/run_stack.py --external controller    # prints where; you start it
+
+With --external ROLE a node of your own stands in for the controller or the profile
+(docs/external-nodes.md): COMMAND, after --, is started in the run's ROS domain and
+environment with `--ros-args -r __node:=ROLE -p use_sim_time:=true --params-file FILE`
+appended (FILE the run's ROS parameter file); without a COMMAND the domain and the
+arguments are printed and the run waits supervisor.ready_timeout for your node.
 """
 
 from __future__ import annotations
@@ -24,7 +32,10 @@ from ato_nodes.bags.summary import bag_contents, write_summary
 EXIT_FAILED, EXIT_INTERRUPTED = 1, 130
 
 
-def parse_args() -> argparse.Namespace:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The options; `command` what follows the first `--` (an external node's command)."""
+    from ato_nodes.launcher.launch import split_command
+    ours, command = split_command(sys.argv[1:] if argv is None else argv)
     parser = cli.argument_parser(__doc__)
     parser.add_argument("--scenario", default="seed000",
                         help="scenario name in msg_config/scenarios or a YAML file "
@@ -38,7 +49,21 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--domain-id", type=int, help="ROS domain id (default: a free one, 1-101)")
     parser.add_argument("--timeout", type=float, help="give up after this many wall seconds")
     parser.add_argument("--quiet", action="store_true", help="no node output, no progress")
-    return parser.parse_args()
+    parser.add_argument("--external", metavar="ROLE",
+                        help="a node of your own stands in for ROLE (controller or profile): "
+                             "the command after --, or one you start")
+    args = parser.parse_args(ours)
+    args.command = command
+    return args
+
+
+def external_nodes(args: argparse.Namespace) -> dict[str, list[str]]:
+    """--external and its command, checked before anything starts (one line, exit 2)."""
+    from ato_nodes.launcher.launch import external_nodes as checked
+    try:
+        return checked(args.external, args.command)
+    except ScenarioError as exc:
+        cli.fail(str(exc))
 
 
 def main() -> None:
@@ -48,6 +73,7 @@ def main() -> None:
 def run_stack() -> None:
     args = parse_args()
     values = checked_values(args)
+    external = external_nodes(args)
     name = Path(args.scenario).stem
     bag = args.out or Path("bags") / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}"
     cli.new_directory(bag)
@@ -56,7 +82,7 @@ def run_stack() -> None:
     from ato_nodes.launcher.launch import Stack  # imports no ROS itself; kept lazy for speed
     try:
         stack = Stack(values, bag, domain_id=args.domain_id, quiet=args.quiet,
-                      timeout=args.timeout)
+                      timeout=args.timeout, external=external)
     except RuntimeError as exc:
         cli.fail(str(exc))
     # From here a stop is the run's: noted and handled by stack.run(), which decides the

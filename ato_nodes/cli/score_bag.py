@@ -20,7 +20,7 @@ import sys
 
 from ato_nodes.results import jsontext
 from ato_nodes import cli
-from ato_nodes.bags.bagio import BagError, parse_mapping, read_run, resimulate
+from ato_nodes.bags.bagio import BagError, ExternalLaw, parse_mapping, read_run, resimulate
 from ato_nodes.core.scoring.catalogue import format_indices
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.run.scoring import stop_not_reached
@@ -42,6 +42,9 @@ def main() -> None:
     try:
         run = read_run(args.bag, parse_mapping(args.map))
         differ = resimulate(run)[1] if args.resimulate else []
+    except ExternalLaw as exc:  # scored as it is, the reason said once
+        print(exc, file=sys.stderr)
+        args.resimulate, differ = False, []
     except BagError as exc:
         cli.fail(str(exc))
     indices = score_run(run.series, run.parameters)

@@ -8,6 +8,14 @@ core code without ROS). Example, seed 000's BAS-PSO on the paper's gains:
         --params adrc.mu1=100:20000,adrc.mu2=100:20000,adrc.beta1=50:3000 \\
         --evaluations 2700 --seed 1 --workers 2 --out bags/tune-baspso-1
 
+With --external controller -- COMMAND the candidates are a node of your own
+(docs/external-nodes.md) in place of the controller, its own ROS parameters tuned: those
+it declares live with a FloatingPointRange, in that range (--params narrows it), given
+to each candidate's COMMAND as --ros-args -p NAME:=VALUE:
+
+    python scripts/tune.py --scenario seed000 --evaluations 40 --out bags/tune-smc \
+        --external controller -- python examples/smc-node/smc_node.py
+
 Outputs in --out: best.yaml (a scenario run_stack.py accepts as it is),
 evaluations.jsonl (every evaluation, appended as it finishes), history.csv
 (best and mean fitness per iteration), convergence.png, summary.json.
@@ -17,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from pathlib import Path
 
@@ -26,10 +35,13 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.studies.runner import COUNT_BOUNDS, check_counts
 from ato_nodes.studies.tuning import (DEFAULT_ALGORITHM, FITNESS, PENALTY, Requirement,
-                                      SearchSpace, Tuner, TuningLost, TuningSettings)
+                                      SearchSpace, Tuner, TuningLost, TuningSettings,
+                                      best_command, check_external)
 
 
 def parse_args() -> argparse.Namespace:
+    from ato_nodes.launcher.launch import split_command  # its command after --
+    ours, command = split_command(sys.argv[1:])
     parser = cli.argument_parser(__doc__)
     parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, choices=sorted(ALGORITHMS))
     parser.add_argument("--scenario", default="seed000")
@@ -66,7 +78,31 @@ def parse_args() -> argparse.Namespace:
                         help="keep every stack candidate's bag in OUT/runs (default: deleted "
                         "once scored)")
     parser.add_argument("--quiet", action="store_true")
-    return parser.parse_args()
+    parser.add_argument("--external", metavar="ROLE",
+                        help="tune a node of your own standing in for ROLE (controller): "
+                        "the command after --, its own ROS parameters")
+    args = parser.parse_args(ours)
+    args.command = command
+    return args
+
+
+def search_space(args: argparse.Namespace, values: dict) -> SearchSpace:
+    """The tuned parameters: the scenario's (--params, else the kind's default space) or,
+    with --external, the external node's own, as it declares them."""
+    if args.external is None:
+        if args.command:
+            raise ScenarioError(f"a command after -- ({args.command[0]}) needs --external "
+                                "controller")
+        return (SearchSpace.parse(args.params, values) if args.params
+                else SearchSpace.default(values))
+    if args.external != "controller" or not args.command:
+        raise ScenarioError("--external tunes a controller node of your own: --external "
+                            "controller -- COMMAND")
+    check_external(tuple(args.command), args.in_process, args.cluster)
+    if shutil.which(args.command[0]) is None:
+        raise ScenarioError(f"--external controller: command {args.command[0]} not found")
+    from ato_nodes.cli.check_node import declared_parameters
+    return SearchSpace.of_node(declared_parameters(args.command, values), args.params)
 
 
 def main() -> None:
@@ -86,16 +122,17 @@ def tune() -> None:
     try:
         values = prepare(args.scenario, args.set)
         check_launcher_free(values)
-        space = (SearchSpace.parse(args.params, values) if args.params
-                 else SearchSpace.default(values))
+        space = search_space(args, values)
         options = {"population_size": args.population} if args.population else {}
         settings = TuningSettings(args.algorithm, args.scenario, space, args.evaluations,
                                   args.seed, args.workers, args.in_process, args.fitness,
                                   args.timeout, options,
                                   tuple(Requirement.parse(text) for text in args.require),
-                                  args.keep_bags, not args.no_prune, args.cluster)
+                                  args.keep_bags, not args.no_prune, args.cluster,
+                                  tuple(args.command))
         if not args.params and not args.quiet:
-            print(f"tuning the default search space: {space.describe()}")
+            print(f"tuning the {'external node' if args.external else 'default'} search "
+                  f"space: {space.describe()}")
         if values["line.file"] and not args.require:
             print("warning: tuning on a line without --require: a candidate that stops short "
                   "or overspeeds can win (e.g. --require 'abs_stopping_error<=0.5' --require "
@@ -140,4 +177,5 @@ def report(summary: dict, out: Path) -> None:
         print(f"warning: the best {name} sits on its bound; a wider --params box may do "
               f"better", file=sys.stderr)
     print(f"outputs: {out}/best.yaml, evaluations.jsonl, history.csv, convergence.png")
-    print(f"run the best: python scripts/run_stack.py --scenario {out / 'best.yaml'}")
+    print("run the best: " + best_command(out, tuple(summary.get("external", ())),
+                                          summary["best_params"]))

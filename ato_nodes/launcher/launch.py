@@ -11,6 +11,11 @@ candidate's relaunch overhead. With ATO_NODE_START=subprocess, and for a run
 whose fork server fails to start or dies before forking its first node (one line
 on stderr says so), each node is a plain `python -m ato_nodes.nodes.ROLE`
 subprocess instead (nodefork.start_plain).
+
+A user's own node may stand in for the controller or the profile (`external`,
+docs/external-nodes.md): the launcher starts its command in the run's domain and
+environment, its own process group, with ROS arguments naming the run's parameter
+file, or waits for a node the user starts.
 """
 
 from __future__ import annotations
@@ -33,10 +38,12 @@ import numpy as np
 import yaml
 
 from ato_nodes.bags.bagrepair import RepairError, needs_repair, repair
+from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import ros_parameter_file
 from ato_nodes.core.config.schema import NODES
-from ato_nodes.launcher.nodefork import (NODE_NAME_PREFIX, STOP_GRACE, ForkedNode, NodeStartError,
-                                         fork_server, plain_start_requested, start_plain)
+from ato_nodes.launcher.nodefork import (LIBC, NODE_NAME_PREFIX, PR_SET_PDEATHSIG, STOP_GRACE,
+                                         ForkedNode, NodeStartError, fork_server,
+                                         plain_start_requested, start_plain)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # TCP port base + domain id held while a run uses that domain: below Linux's ephemeral
@@ -208,6 +215,83 @@ def node_environment(domain_id: int) -> dict[str, str]:
     return env
 
 
+# The nodes a user's own node may stand in for (docs/external-nodes.md)
+EXTERNAL_ROLES = ("controller", "profile")
+EXTERNAL_CONTRACT = "docs/external-nodes.md"
+
+
+def split_command(argv: list[str]) -> tuple[list[str], list[str]]:
+    """A command line's own arguments and the external node's command after its first
+    `--` (none without one)."""
+    if "--" not in argv:
+        return argv, []
+    return argv[:argv.index("--")], argv[argv.index("--") + 1:]
+
+
+def external_nodes(role: str | None, command: list[str]) -> dict[str, list[str]]:
+    """--external ROLE and the command after --, checked before anything starts (a
+    ScenarioError, one line): {role: command}, {} without --external."""
+    if role is None:
+        if command:
+            raise ScenarioError(f"a command after -- ({command[0]}) needs --external ROLE")
+        return {}
+    if role not in EXTERNAL_ROLES:
+        raise ScenarioError(f"--external {role}: a node of your own may stand in for "
+                            f"{' or '.join(EXTERNAL_ROLES)}")
+    if command and shutil.which(command[0]) is None:
+        raise ScenarioError(f"--external {role}: command {command[0]} not found")
+    return {role: command}
+
+
+def external_arguments(role: str, params_path: Path) -> list[str]:
+    """The ROS arguments an external node is given: its role's node name (the run's
+    parameter file and run events address it so), simulated time, the parameter file."""
+    return ["--ros-args", "-r", f"__node:={role}", "-p", "use_sim_time:=true",
+            "--params-file", str(params_path)]
+
+
+class ExternalNode(subprocess.Popen):
+    """A user's command standing in for a node, in a session and process group of its
+    own: signals go to the whole group (as a terminal's Ctrl-C would), and what is left
+    of the group once the run is over is killed (`ros2 run` or a shell script runs the
+    node in a child of its own)."""
+
+    def send_signal(self, signum: int) -> None:
+        self.signal_group(signum)
+
+    def signal_group(self, signum: int) -> None:
+        try:
+            os.killpg(self.pid, signum)
+        except (ProcessLookupError, PermissionError):  # the group is gone
+            pass
+
+
+def start_external(role: str, command: list[str], env: dict[str, str],
+                   output: tuple[int, int], lock_fd: int, notify: threading.Event
+                   ) -> ExternalNode:
+    """Start `command` as the run's `role` (the domain's lock kept open while it lives,
+    SIGTERM if the launcher's thread ends first); `notify` is set when it ends. A command
+    that cannot start raises NodeStartError."""
+    def in_the_child() -> None:  # the launcher may hold the stop signals: the node may not
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+        LIBC.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+
+    try:
+        process = ExternalNode(command, env=env, stdin=subprocess.DEVNULL, stdout=output[0],
+                               stderr=output[1], pass_fds=(lock_fd,), start_new_session=True,
+                               preexec_fn=in_the_child)
+    except OSError as exc:
+        raise NodeStartError(f"the external {role} ({command[0]}) cannot start: "
+                             f"{exc.strerror or exc}") from None
+
+    def watch() -> None:
+        process.wait()
+        notify.set()
+
+    threading.Thread(target=watch, name=f"external-{role}", daemon=True).start()
+    return process
+
+
 @dataclass
 class RunOutcome:
     status: str  # "completed", "diverged", "pruned", "failed", "interrupted", "timeout"
@@ -226,8 +310,12 @@ class Stack:
 
     def __init__(self, values: dict[str, Any], bag: Path, domain_id: int | None = None,
                  quiet: bool = False, timeout: float | None = None,
-                 cancel: threading.Event | None = None):
+                 cancel: threading.Event | None = None,
+                 external: dict[str, list[str]] | None = None):
+        """`external`: {role: command} for each node a user's own stands in for (an
+        empty command: the launcher waits for a node the user starts)."""
         self.values = dict(values)
+        self.external = dict(external or {})
         self.bag = Path(bag)
         self.quiet = quiet
         self.timeout = timeout
@@ -263,6 +351,9 @@ class Stack:
                       "processes", file=sys.stderr)
         try:
             for role in NODES:
+                if role in self.external:
+                    self._start_external(role, env, output)
+                    continue
                 # the nodes log to /rosout; the console keeps the launcher's concise lines
                 argv = [f"ato_nodes.nodes.{role}", "--ros-args", "--params-file",
                         str(self.params_path), "--disable-stdout-logs"]
@@ -274,7 +365,8 @@ class Stack:
                             *start, bag=self.bag.resolve() if role == "recorder" else None)
                         continue
                     except NodeStartError as exc:
-                        if self.processes:  # forked nodes went with it: the run has failed
+                        if any(isinstance(process, ForkedNode) for process in
+                               self.processes.values()):  # forked nodes went with it: failed
                             raise
                         print(f"{exc} before forking a node: starting the nodes as plain "
                               "processes", file=sys.stderr)
@@ -283,6 +375,20 @@ class Stack:
         finally:
             if console:
                 console.close()
+
+    def _start_external(self, role: str, env: dict[str, str], output: tuple[int, int]) -> None:
+        """The user's command as `role`, with the ROS arguments that make it the run's
+        node; without a command, what to start and where, on stderr."""
+        arguments = external_arguments(role, self.params_path)
+        if self.external[role]:
+            self.processes[role] = start_external(role, [*self.external[role], *arguments], env,
+                                                  output, self.lock.fileno(), self.node_ended)
+            return
+        print(f"waiting {self.values['supervisor.ready_timeout']:g} s "
+              f"(supervisor.ready_timeout) for the external {role}: start it with "
+              f"ROS_DOMAIN_ID={self.lock.domain_id} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST "
+              f"and the arguments {' '.join(arguments)} ({EXTERNAL_CONTRACT})",
+              file=sys.stderr, flush=True)
 
     def stop(self, ended: bool = False) -> None:
         """SIGINT every live node (the recorder drains and closes its bag), SIGCONT so a
@@ -300,6 +406,8 @@ class Stack:
                 process.send_signal(sig)
         for process in self.processes.values():
             process.wait()
+            if isinstance(process, ExternalNode):  # what its command left behind
+                process.signal_group(signal.SIGKILL)
 
     def _still_running(self, within: float) -> list[ForkedNode]:
         """The nodes that have not exited within `within` s (one deadline for all)."""
@@ -319,7 +427,8 @@ class Stack:
         while True:
             self.node_ended.clear()
             codes = {role: process.poll() for role, process in self.processes.items()}
-            if codes["supervisor"] == 0:
+            if codes["supervisor"] == 0 or (codes["supervisor"] is not None
+                                            and "failed" in self._report()):
                 return self._finish()
             for role, process in self.processes.items():  # frozen: SIGSTOP, a debugger
                 if _stopped(process.pid):
@@ -377,12 +486,19 @@ class Stack:
         except RepairError as exc:
             return f"bag not repaired: {exc}"
 
+    def _report(self) -> dict:
+        """The supervisor's report ({} before it is written)."""
+        return json.loads(self.report_path.read_text()) if self.report_path.exists() else {}
+
     def _finish(self) -> RunOutcome:
         """The supervisor ended the run; the other nodes are exiting on 'shutdown'."""
         if not self.report_path.exists():
             return RunOutcome("failed", "the supervisor stopped the run before it completed "
                               "(a node never became ready)")
         report = json.loads(self.report_path.read_text())
+        if report.get("failed"):  # the supervisor's reason (a node that never became ready)
+            return RunOutcome("failed", report["failed"] + self._external_hint(
+                report.get("not_ready", [])))
         if report.get("pruned"):
             return RunOutcome("pruned", f"pruned at step {report['steps']}: the running "
                               f"fitness {report['fitness']:.9g} passed its bound", report=report)
@@ -390,6 +506,13 @@ class Stack:
             return RunOutcome("diverged", f"the run diverged at step {report['steps']} (speed not "
                               "finite or beyond plant.max_speed)", report=report)
         return RunOutcome("completed", report=report)
+
+    def _external_hint(self, not_ready: list[str]) -> str:
+        """What the external nodes among those never ready must do."""
+        return "".join(
+            f" (the external {role} never announced 'ready {role}': see {EXTERNAL_CONTRACT})"
+            if role in not_ready else f" (the external {role} was ready: they wait for one "
+            f"of its topics, see {EXTERNAL_CONTRACT})" for role in self.external if not_ready)
 
     def run(self) -> RunOutcome:
         """Start, watch, stop. SIGTERM interrupts a run as Ctrl-C does; once the run is
@@ -443,18 +566,22 @@ class Stack:
         return outcome
 
 
-def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0
-                ) -> tuple[dict[str, Any], bool]:
+def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0,
+                external: dict[str, list[str]] | None = None
+                ) -> tuple[dict[str, Any], bool | None]:
     """One run through the stack, scored from its bag, and the same run in-process:
-    (the bag's indices, whether the two agree bit for bit). A failed run raises
-    RuntimeError with the launcher's one-line message."""
+    (the bag's indices, whether the two agree bit for bit; None with an `external` node,
+    whose law only it runs). A failed run raises RuntimeError with the launcher's
+    one-line message."""
     from ato_nodes.bags.bagio import read_run
     from ato_nodes.core.run.loop import simulate
     from ato_nodes.core.run.scoring import score_series
-    outcome = Stack(values, bag, quiet=True, timeout=timeout).run()
+    outcome = Stack(values, bag, quiet=True, timeout=timeout, external=external).run()
     if not outcome.ok:
         raise RuntimeError(f"{bag}: {outcome.message}")
     run = read_run(bag)
+    if external:
+        return score_series(run.series, run.parameters), None
     identical = all(np.array_equal(run.series[name], series)
                     for name, series in simulate(values).items() if name != "t")
     return score_series(run.series, run.parameters), identical

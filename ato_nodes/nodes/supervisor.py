@@ -163,12 +163,7 @@ class SupervisorNode(AtoNode):
             return
         if self.started is None:
             if now - self.created > self.values["supervisor.ready_timeout"]:
-                self.log.error("nodes not ready after "
-                                        f"{self.values['supervisor.ready_timeout']:g} s: "
-                                        + ", ".join(sorted(self.waiting)))
-                self.exit_status = 1  # a run that never started is a failure
-                self.failed = True
-                self.shut_down_all()
+                self.not_ready()
             return
         if self.finished is not None:
             self.finish_when_followed()
@@ -183,6 +178,20 @@ class SupervisorNode(AtoNode):
         elif now - self.last_line >= 5.0:
             self.last_line = now
             print(line, file=sys.stderr, flush=True)
+
+    def not_ready(self) -> None:
+        """The ready timeout passed: the run fails (exit status 1), naming the nodes that
+        never announced 'ready' (to the launcher in its report, which it says in one line)."""
+        waiting = sorted(self.waiting)
+        message = (f"nodes not ready after {self.values['supervisor.ready_timeout']:g} s: "
+                   + ", ".join(waiting))
+        self.log.error(message)
+        if self.values["supervisor.report"]:
+            Path(self.values["supervisor.report"]).write_text(jsontext.dumps(
+                {"steps": 0, "failed": message, "not_ready": waiting}, indent=2))
+        self.exit_status = 1  # a run that never started is a failure
+        self.failed = True
+        self.shut_down_all()
 
     def report(self, recorded_steps: int, pruned: bool = False) -> None:
         if self.interactive:

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ato_nodes.core.base.registry import Output
 from ato_nodes.core.config.components import CONTROLLERS, PROFILES
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
@@ -304,15 +305,28 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
     return figures
 
 
-def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:
-    """Every named output the run's controller kind declares (with its unit), against
-    time; kinds with an extended state observer have plot_observer instead."""
+def named_outputs(run: Run) -> tuple[str, list[Output]]:
+    """(whose, the named outputs to plot): an external node's law's (docs/external-nodes.md)
+    or the run's controller kind's; none for a kind with an extended state observer
+    (plot_observer) or an unknown kind."""
+    from ato_nodes.bags.bagio import EXTERNAL_LAW  # the bag reader: see TYPE_CHECKING above
+    external = (run.parameters or {}).get(EXTERNAL_LAW)
+    if external:
+        return external, external_outputs(run)
     try:
         component = CONTROLLERS[(run.parameters or {}).get("controller.kind", "")]
     except ScenarioError:
-        return None
-    outputs = [o for o in component.outputs if o.name in run.series]
-    if component.observer_gain is not None or not outputs:
+        return "", []
+    if component.observer_gain is not None:
+        return component.kind, []
+    return component.kind, [o for o in component.outputs if o.name in run.series]
+
+
+def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:
+    """Every named output of the run's controller (with its unit), against time; kinds
+    with an extended state observer have plot_observer instead."""
+    whose, outputs = named_outputs(run)
+    if not outputs:
         return None
     plt = _pyplot()
     figure, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs) + 0.8),
@@ -326,8 +340,18 @@ def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure |
     if live_changes(run):
         axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time (s)")
-    figure.suptitle(f"Controller outputs ({component.kind}): {label(run)}")
+    figure.suptitle(f"Controller outputs ({whose}): {label(run)}")
     return Figure(f"Controller outputs: {label(run)}", _save(figure, path))
+
+
+def external_outputs(run: Run) -> list[Output]:
+    """The named outputs of an external node's law (docs/external-nodes.md): the series
+    its /ato/controller_state gave, named by the messages; their units are the law's."""
+    from ato_nodes.bags.bagio import ROLES
+    recorded = {name for _, fields in ROLES.values() if isinstance(fields, list)
+                for name, _ in fields} | {"t", "preview"}
+    return [Output(name, "as the law gives it", f"{name}, from the external node")
+            for name in run.series if name not in recorded]
 
 
 def plot_observer(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:

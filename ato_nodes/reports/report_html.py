@@ -21,9 +21,8 @@ import numpy as np
 
 from ato_nodes.reports.analysis import (CHANGES_HEADER, FAIL, LIMIT_COLOUR, PASS, RUN_COLOURS,
                                         UNMEASURED, RunReport, Tuning, VerdictRow, change_rows,
-                                        convergence_axis, live_changes, report_notes)
-from ato_nodes.core.config.components import CONTROLLERS
-from ato_nodes.core.base.errors import ScenarioError
+                                        convergence_axis, live_changes, named_outputs,
+                                        report_notes)
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.train.line import Line
 from ato_nodes.core.scoring.operation import (JERK_WINDOW, SWITCH_THRESHOLD, drive_modes,
@@ -255,14 +254,9 @@ def time_figure(reports: list[RunReport]):
 
 
 def _outputs(report: RunReport):
-    """The named outputs of a controller kind without an observer (one with has z1..z3)."""
-    try:
-        component = CONTROLLERS[(report.run.parameters or {}).get("controller.kind", "")]
-    except ScenarioError:
-        return []
-    if component.observer_gain is not None:
-        return []
-    return [o for o in component.outputs if o.name in report.run.series]
+    """The named outputs of a controller kind without an observer (one with has z1..z3),
+    or of an external node's law."""
+    return named_outputs(report.run)[1]
 
 
 def _mode_traces(modes: list[tuple[str, np.ndarray, np.ndarray]]) -> list:

@@ -122,10 +122,11 @@ def worst_stations(indices: JourneyIndices) -> dict[str, float]:
             WORST_ARRIVAL: max(abs(station.arrival_lateness) for station in stations)}
 
 
-def score_with_journey(values: dict) -> dict:
-    """score_run's indices of the run of `values` in-process, with worst_stations for a
-    journey run (a study's worker: the series stay in its process)."""
-    indices, journey = _scored(simulate(values), values)
+def score_with_journey(values: dict, series: dict[str, np.ndarray] | None = None) -> dict:
+    """score_run's indices of the run of `values` in-process (or of its recorded
+    `series`: a stack run's), with worst_stations for a journey run (a study's worker:
+    the series stay in its process)."""
+    indices, journey = _scored(simulate(values) if series is None else series, values)
     if journey is not None:
         indices.update(worst_stations(journey))
     return indices

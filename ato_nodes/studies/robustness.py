@@ -5,7 +5,10 @@ gives the sample the same train and result)."""
 
 from __future__ import annotations
 
+import shutil
+import tempfile
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -70,6 +73,31 @@ def run_sample(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]], 
     return {NUMBER: number, **sample_result(draw, indices),
             **{key: float(indices[key]) for key in extra if key in indices},
             "train.mass_reading": values["train.mass_reading"]}  # what the ATO knew
+
+
+def run_sample_in_stack(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]],
+                        seed: int, number: int, external: dict[str, list[str]]
+                        ) -> dict[str, Any]:
+    """run_sample through the stack, with a node of the user's (`external`,
+    docs/external-nodes.md: its law runs only there) in its run: the bag in a temporary
+    directory, scored, then deleted."""
+    from ato_nodes.bags.bagio import read_series
+    from ato_nodes.launcher.launch import Stack
+    draw = draw_train(ranges, seed, number)
+    try:
+        values = apply_overrides(base, draw)
+    except ScenarioError as exc:
+        raise SampleFailed(f"sample {number}: {exc}") from None
+    folder = Path(tempfile.mkdtemp(prefix="ato-sample-"))
+    try:
+        outcome = Stack(values, folder / "bag", quiet=True, external=external).run()
+        if not outcome.ok:
+            raise SampleFailed(f"sample {number}: {outcome.message}")
+        indices = score_with_journey(values, read_series(folder / "bag"))
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return {NUMBER: number, **sample_result(draw, indices),
+            "train.mass_reading": values["train.mass_reading"]}
 
 
 def sample_result(draw: dict, indices: dict) -> dict:

@@ -126,19 +126,22 @@ class Outcome:
 
 def run_study(runs: Mapping[str, dict[str, Any]], *, workers: int = 1,
               bags: Mapping[str, Path] | None = None, cluster: str = "",
-              progress: Callable[[str, Outcome], None] | None = None) -> dict[str, Outcome]:
+              progress: Callable[[str, Outcome], None] | None = None,
+              external: Mapping[str, list[str]] | None = None) -> dict[str, Outcome]:
     """label -> Outcome of each run (label -> prepared values), in the runs' order:
     in-process in `workers` processes, or, given `bags` (label -> the bag directory to
     record), through the stack one after another; with `cluster` (--cluster) either
     kind on a Dask cluster's workers, several at once (a stack run takes a ROS domain
     of its own on its worker's host, and its bag must be a path that host writes).
     progress(label, outcome) as each outcome is known. A failed stack run raises
-    RuntimeError (one line, naming its bag); a lost scheduler ClusterLost."""
+    RuntimeError (one line, naming its bag); a lost scheduler ClusterLost. `external`
+    ({role: command}, docs/external-nodes.md) runs a node of the user's in each stack
+    run, which no in-process run can repeat (Outcome.identical None)."""
     if bags is not None and not cluster:  # here: the stack takes this process's signals
-        outcomes = ((label, run_through_stack(values, bags[label]))
+        outcomes = ((label, run_through_stack(values, bags[label], external))
                     for label, values in runs.items())
         return _recorded(outcomes, progress)
-    tasks = ((label, (values,) if bags is None else (values, bags[label]))
+    tasks = ((label, (values,) if bags is None else (values, bags[label], external))
              for label, values in runs.items())
     with Backend(workers, cluster, threads=bags is not None) as backend:
         results = _recorded(backend.stream(
@@ -160,10 +163,11 @@ def run_in_process(values: dict[str, Any]) -> Outcome:
     return Outcome(score_series(simulate(values), values))
 
 
-def run_through_stack(values: dict[str, Any], bag: Path) -> Outcome:
+def run_through_stack(values: dict[str, Any], bag: Path,
+                      external: Mapping[str, list[str]] | None = None) -> Outcome:
     # Imported here: the launcher loads the bag libraries, which in-process studies skip.
     from ato_nodes.launcher.launch import run_checked
-    indices, identical = run_checked(values, bag)
+    indices, identical = run_checked(values, bag, external=dict(external or {}))
     return Outcome(indices, bag, identical)
 
 

@@ -17,6 +17,7 @@ import functools
 import json
 import math
 import os
+import shlex
 import shutil
 import sys
 import tempfile
@@ -59,6 +60,9 @@ class SearchSpace:
     names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
+    # an external node's own parameters (not the schema's): their values as it declares
+    # them, the starting region (docs/external-nodes.md)
+    node_values: dict[str, float] = field(default_factory=dict)
 
     @classmethod
     def parse(cls, items: list[str], values: dict[str, Any] | None = None) -> SearchSpace:
@@ -104,17 +108,46 @@ class SearchSpace:
                                 f"space; give --params")
         return cls.parse([f"{n}={lo!r}:{hi!r}" for n, lo, hi in component.search_space], values)
 
+    @classmethod
+    def of_node(cls, declared: dict[str, tuple[float, float, float]],
+                items: list[str] | None = None) -> SearchSpace:
+        """An external node's own parameters, `declared` {name: (low, high, value)} from
+        its parameter descriptors (FloatingPointRange); `items` (name=low:high) choose some
+        and narrow their boxes, inside the declared ranges."""
+        if not declared:
+            raise ScenarioError("the external node declares no parameter with a "
+                                "FloatingPointRange to tune")
+        chosen: dict[str, tuple[float, float]] = {}
+        for item in (part.strip() for text in items or [] for part in text.split(",")):
+            name, _, bounds = item.partition("=")
+            low, colon, high = bounds.partition(":")
+            if name not in declared or not colon:
+                raise ScenarioError(f"--params: {item!r} is not name=low:high of a parameter "
+                                    f"the external node declares ({', '.join(declared)})")
+            box = (float(low), float(high))
+            if not declared[name][0] <= box[0] < box[1] <= declared[name][1]:
+                raise ScenarioError(f"--params: {name} needs low < high within its declared "
+                                    f"range {declared[name][0]:g}:{declared[name][1]:g}")
+            chosen[name] = box
+        boxes = chosen or {name: (low, high) for name, (low, high, _) in declared.items()}
+        return cls(tuple(boxes), np.array([low for low, _ in boxes.values()]),
+                   np.array([high for _, high in boxes.values()]),
+                   {name: declared[name][2] for name in boxes})
+
     def describe(self) -> str:
         return ", ".join(f"{n}={lo:g}:{hi:g}" for n, lo, hi in zip(self.names, self.lower,
                                                                    self.upper, strict=True))
 
     def overrides(self, x: np.ndarray) -> dict[str, Any]:
-        return {name: (int(round(value)) if SPEC_BY_NAME[name].value_type is int else float(value))
+        return {name: (int(round(value)) if name in SPEC_BY_NAME and
+                       SPEC_BY_NAME[name].value_type is int else float(value))
                 for name, value in zip(self.names, x, strict=True)}
 
     def start(self, values: dict[str, Any]) -> np.ndarray:
-        """The scenario's own values, clipped into the box: the starting region."""
-        return np.clip([float(values[name]) for name in self.names], self.lower, self.upper)
+        """The scenario's own values (an external node's: its own), clipped into the box:
+        the starting region."""
+        return np.clip([float(self.node_values.get(name, values.get(name, 0.0)))
+                        for name in self.names], self.lower, self.upper)
 
 
 @dataclass
@@ -239,21 +272,27 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
 def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
                       objective: Objective | str, index: int, bag: Path,
                       timeout: float, cancel: threading.Event | None = None,
-                      bound: float = math.inf) -> Evaluation:
+                      bound: float = math.inf, external: tuple[str, ...] = ()) -> Evaluation:
     """One candidate through the real node graph, scored from its bag. With a finite
     `bound` (see evaluate_in_process) the supervisor follows the running fitness and
-    ends a run that passes it: `pruned`, with the value it reached."""
+    ends a run that passes it: `pruned`, with the value it reached. With an `external`
+    controller's command, the overrides the schema does not know are that node's own
+    parameters, given to it as `--ros-args -p NAME:=VALUE`."""
     from ato_nodes.bags.bagio import BagError, read_parameters, read_series
     from ato_nodes.launcher.launch import Stack
 
-    candidate = _candidate(values, overrides, objective, index, bound)
+    candidate = _candidate(values, {name: value for name, value in overrides.items()
+                                    if name in SPEC_BY_NAME}, objective, index, bound)
     if isinstance(candidate, Evaluation):
+        candidate.params = overrides
         return candidate
     run_values = candidate.values
     if candidate.limit is not None:
         run_values = {**run_values, "supervisor.fitness": FITNESS[candidate.objective.fitness],
                       "supervisor.prune_above": candidate.limit}
-    outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel).run()
+    nodes = {"controller": node_command(external, overrides)} if external else None
+    outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel,
+                    external=nodes).run()
     if outcome.status == "pruned":
         return Evaluation(index, overrides, outcome.report["fitness"], "pruned",
                           candidate.elapsed(), message=outcome.message)
@@ -269,6 +308,14 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
         return Evaluation(index, overrides, PENALTY, status, elapsed, indices, outcome.message)
     value, status, message = candidate.objective.score(indices)
     return Evaluation(index, overrides, value, status, elapsed, indices, message)
+
+
+def node_command(external: tuple[str, ...], overrides: dict[str, Any]) -> list[str]:
+    """An external node's command with the overrides the schema does not know, its own
+    parameters, as ROS arguments."""
+    own = [item for name, value in overrides.items() if name not in SPEC_BY_NAME
+           for item in ("-p", f"{name}:={float(value)!r}")]
+    return [*external, "--ros-args", *own] if own else list(external)
 
 
 def evaluate_in_stack_anywhere(values: dict[str, Any], overrides: dict[str, Any],
@@ -379,6 +426,7 @@ class TuningSettings:
     keep_bags: bool = False    # stack candidates' bags (runs/), else deleted once scored
     prune: bool = True         # in-process: end candidates that cannot matter (see Tuner)
     cluster: str = ""          # "" = local worker processes; local:N or tcp://HOST:PORT = Dask
+    external: tuple[str, ...] = ()  # an external controller's command (its own parameters)
 
     @property
     def objective(self) -> Objective:
@@ -391,7 +439,8 @@ class TuningSettings:
                 "evaluations": self.evaluations, "seed": self.seed, "fitness": self.fitness,
                 "in_process": self.in_process, "options": self.options,
                 "prune": self.prune,
-                "requirements": [f"{r.name}<={r.limit:g}" for r in self.requirements]}
+                "requirements": [f"{r.name}<={r.limit:g}" for r in self.requirements],
+                **({"external": list(self.external)} if self.external else {})}
 
 
 class Tuner:
@@ -469,7 +518,8 @@ class Tuner:
             shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
         record = evaluate_in_stack(values, overrides, objective, index, bag,
-                                   self.settings.timeout, self.cancel, bound)
+                                   self.settings.timeout, self.cancel, bound,
+                                   self.settings.external)
         if not self.settings.keep_bags:  # scored; best.yaml reruns the best one
             shutil.rmtree(bag, ignore_errors=True)
         return record
@@ -561,7 +611,8 @@ class Tuner:
     def _write_outputs(self, result: Result) -> None:
         best_overrides = self.settings.space.overrides(result.best_x)
         if result.best_f < PENALTY:  # else every candidate failed: there is no best to run
-            best_values = apply_overrides(self.values, best_overrides)
+            best_values = apply_overrides(self.values, {
+                name: value for name, value in best_overrides.items() if name in SPEC_BY_NAME})
             (self.out / "best.yaml").write_text(self.best_scenario(result, best_values))
         with (self.out / "history.csv").open("w", newline="") as handle:
             writer = csv.writer(handle)
@@ -601,17 +652,38 @@ class Tuner:
         changed = [name for name in SPEC_BY_NAME if best_values[name] != base_values[name]
                    and name not in ("recorder.output", "supervisor.report")]
         feasible = "feasible" if result.best_f < INFEASIBLE else "INFEASIBLE"
+        run_best = best_command(self.out, s.external, s.space.overrides(result.best_x))
         header = (f"# Best of a {s.algorithm} tuning (seed {s.seed}, {result.evaluations} "
                   f"evaluations) on {s.scenario}, {time.strftime('%Y-%m-%d')}: fitness "
                   f"{s.fitness} = {result.best_f:.9g} ({feasible}"
                   + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ").\n"
-                  f"# Run it: python scripts/run_stack.py --scenario {self.out / 'best.yaml'}\n")
+                  f"# Run it: {run_best}\n")
         document = {"base": base, **ros_parameter_file(best_values, set(changed))}
         return header + yaml.safe_dump(document, sort_keys=False)
 
 
+def best_command(out: Path, external: tuple[str, ...], best: dict[str, Any]) -> str:
+    """The command that runs the best candidate (with an external node: its best own
+    parameters on its command line)."""
+    command = f"python scripts/run_stack.py --scenario {out / 'best.yaml'}"
+    if not external:
+        return command
+    return " ".join([command, "--external", "controller", "--",
+                     *map(shlex.quote, node_command(external, best))])
+
+
+def check_external(external: tuple[str, ...], in_process: bool, cluster: str) -> None:
+    """An external node's law runs only in its node, through the stack on this host."""
+    if external and (in_process or cluster):
+        raise ScenarioError("an external node's law runs only in its node: --external "
+                            "tunes through the stack on this host, not with --in-process "
+                            "or --cluster")
+
+
 def _check_settings(settings: TuningSettings) -> None:
-    """A ScenarioError for an unknown algorithm or fitness, or bags kept from a cluster."""
+    """A ScenarioError for an unknown algorithm or fitness, bags kept from a cluster, or
+    an external node not run through the stack here."""
+    check_external(settings.external, settings.in_process, settings.cluster)
     if settings.algorithm not in ALGORITHMS:
         raise ScenarioError(f"unknown algorithm {settings.algorithm!r}; known: "
                             f"{', '.join(ALGORITHMS)}")
