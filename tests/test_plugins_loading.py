@@ -110,6 +110,9 @@ BAD = {  # name: (its modules' sources, the plug-in named, words of the one line
                             "plug_second": plugin_source("twin")}, "plug_first,plug_second",
                            ("plug_second", "clashes with the controller kind twin of plug-in "
                                            "plug_first")),
+    "state_clash": ({"plug_one": plugin_source("one"), "plug_two": plugin_source("two")},
+                    "plug_one,plug_two", ("plug_two", "its state class State('error',) is "
+                                          "named and shaped as kind one's")),
     "group": ({"plug_group": plugin_source("grouped", group="other")}, "plug_group",
               ("parameter other.kp is not in its group grouped.*",)),
     "schema_clash": ({"plug_run": plugin_source("run", group="run").replace(
@@ -142,7 +145,7 @@ def test_a_bad_plugin_is_refused_in_one_line_by_the_commands_and_in_process(
     with pytest.raises(ScenarioError) as refused:
         prepare(str(scenario))
     assert all(word in str(refused.value) for word in words)
-    if case != "other_plugins_kind":  # none of a refused plug-in's kinds joined
+    if case not in ("other_plugins_kind", "state_clash"):  # no refused plug-in's kind joined
         assert kinds == {role: set(registry.components) for role, registry in REGISTRIES.items()}
 
 

@@ -186,6 +186,7 @@ def check(component: Component, reference: str, role: str | None, names: set[str
         raise ScenarioError(f"{where}: its factory is not callable")
     if component.role == "controller":
         _check_controller(component, where)
+        _check_state_is_its_own(component, registry, where)
     elif component.outputs or component.steps is not None:
         raise ScenarioError(f"{where}: a profile has no outputs and no steps")
 
@@ -243,3 +244,16 @@ def _check_controller(component: Component, where: str) -> None:
                                   and hasattr(steps.state_type, "_fields")):
         raise ScenarioError(f"{where}: its steps are not ControllerSteps(start, step, "
                             f"state NamedTuple type) (ato_nodes.plugin.ControllerSteps)")
+
+
+def _check_state_is_its_own(component: Component, registry: Registry, where: str) -> None:
+    """numba tells NamedTuple classes apart by name and fields only: a state class named and
+    shaped as another kind's would run that kind's compiled loop."""
+    state = getattr(component.steps, "state_type", None)
+    for other in registry.components.values():
+        theirs = getattr(other.steps, "state_type", None)
+        if (state is not None and theirs is not None and theirs is not state
+                and theirs.__name__ == state.__name__ and theirs._fields == state._fields):
+            raise ScenarioError(f"{where}: its state class {state.__name__}{state._fields} is "
+                                f"named and shaped as kind {other.kind}'s; compiled code would "
+                                f"run {other.kind}'s loop for it: give it a name of its own")
