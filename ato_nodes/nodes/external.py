@@ -20,6 +20,8 @@ horizon)` (called once, before step 0) and `retune(changes)` (your own parameter
 changed, between two steps). It returns the command u_k (N/kN) or (u_k, outputs), the
 outputs one float per name of `outputs`, in that order. `target` is r_k, the plan's
 target now, `measured` y_k, `horizon` r_k .. r_k+N (N = controller.preview).
+`nominal_train(parameters)` and `command_limiter(parameters)` give a law the run's nominal
+train and command limiter as the project's controllers have them.
 """
 
 from __future__ import annotations
@@ -34,7 +36,10 @@ from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
 
 from ato_nodes.bags.bagio import EXTERNAL_LAW
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.config.schema import defaults, for_node
+from ato_nodes.core.config.context import RunContext
+from ato_nodes.core.config.schema import NodeValues, defaults, for_node
+from ato_nodes.core.control.limiter import CommandLimiter
+from ato_nodes.core.train.plant import TrainConstants
 from ato_nodes.nodes.base import AtoNode, run_node
 
 OwnParameter = tuple[str, float, str, float, float]  # name, default, description, low, high
@@ -160,6 +165,18 @@ class ExternalController(AtoNode):
                                                          "parameters": changes})))
         self.log.info(f"from step {self.step_index}: "
                       + ", ".join(f"{key} = {value!r}" for key, value in changes.items()))
+
+
+def nominal_train(parameters: dict) -> TrainConstants:
+    """The run's nominal train as the project's controllers model it (mass, xi, Davis
+    coefficients; the load weighing's reading included), from make_law's parameters."""
+    return RunContext(NodeValues("controller", parameters)).train.constants()
+
+
+def command_limiter(parameters: dict) -> CommandLimiter:
+    """The run's command limiter (bounds, jerk limit, holding brake, mode band) as the
+    project's controllers apply it, from make_law's parameters."""
+    return CommandLimiter.from_values(NodeValues("controller", parameters))
 
 
 def run_controller(make_law: Callable[[dict], Any], outputs: Sequence[str] = (),

@@ -14,11 +14,8 @@ controller.kind is smc (the plug-in installed) gives the node its smc.* values i
 
 from ato_smc.law import PARAMETERS, SMC_STEPS, SMCState, smc_settings
 
-from ato_nodes.core.config.context import RunContext
-from ato_nodes.core.config.schema import NodeValues
-from ato_nodes.core.control.limiter import CommandLimiter
-from ato_nodes.core.control.stepped import SteppedController
-from ato_nodes.nodes.external import run_controller
+from ato_nodes.nodes.external import command_limiter, nominal_train, run_controller
+from ato_nodes.plugin import SteppedController
 
 OUTPUTS = ("sliding_surface", "feedforward", "equivalent", "switching")  # the law's, in order
 GAINS = [(spec.name, spec.default, spec.description, spec.low, spec.high)
@@ -30,11 +27,10 @@ class SlidingMode:
     the node's parameters, changed between two steps by retune()."""
 
     def __init__(self, parameters: dict):
-        values = NodeValues("controller", parameters)
         self.parameters = parameters
-        self.train = RunContext(values).train.constants()
+        self.train = nominal_train(parameters)
         self.controller = SteppedController(SMC_STEPS, self.settings(),
-                                            CommandLimiter.from_values(values), SMCState(0.0))
+                                            command_limiter(parameters), SMCState(0.0))
 
     def settings(self):
         return smc_settings(self.parameters, self.parameters["run.period"], self.train)
