@@ -213,6 +213,27 @@ def test_tune_tunes_an_external_nodes_own_parameter_in_its_declared_range(tmp_pa
     assert "--external controller -- " in done.stdout and "-p gain:=" in done.stdout
 
 
+@pytest.mark.integration
+def test_tune_tunes_the_example_nodes_own_gains_named_as_an_installed_plugins(tmp_path):
+    """The example node's gains are smc.*, the schema's too once the plug-in is installed:
+    on a run of another kind they are still the node's own, tuned on its command line (the
+    tuner used to take them for the run's and refuse every candidate)."""
+    pytest.importorskip("ato_smc.law", reason="the example plug-in examples/ato-smc")
+    out = tmp_path / "tune"
+    done = subprocess.run([*TUNE, "--scenario", "seed000", "--set", "run.duration=5",
+                           "--evaluations", "4", "--population", "2", "--out", str(out),
+                           "--quiet", "--external", "controller", "--", sys.executable,
+                           str(SMC_NODE)], capture_output=True, text=True, timeout=300,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert set(json.loads((out / "tuning.json").read_text())["params"]) == {
+        "smc.integral_weight", "smc.gain", "smc.boundary", "smc.feedforward"}
+    logged = [json.loads(line) for line in (out / "evaluations.jsonl").read_text().splitlines()]
+    statuses = [record["status"] for record in logged]  # none refused as the run's values
+    assert len(logged) == 4 and "invalid" not in statuses and statuses[0] == "ok"
+    assert "-p smc.gain:=" in (out / "best.yaml").read_text()
+
+
 def test_tune_refuses_an_external_node_in_process_in_one_line(tmp_path):
     one_line_exit_2(subprocess.run([*TUNE, "--out", str(tmp_path / "tune"), "--in-process",
                                     "--external", "controller", "--", "true"],

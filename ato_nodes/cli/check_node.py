@@ -40,7 +40,7 @@ from ato_nodes import cli
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.topics import topic_map
 from ato_nodes.core.config.scenario import check_launcher_free, prepare, ros_parameter_file
-from ato_nodes.core.config.schema import SPEC_BY_NAME
+from ato_nodes.core.config.schema import for_node
 from ato_nodes.launcher.nodefork import STOP_GRACE
 from ato_nodes.nodes.base import QOS, message_class
 
@@ -350,8 +350,11 @@ def declared_parameters(command: list[str], values: dict) -> dict[str, tuple[flo
         def ask(future):
             executor.spin_until_future_complete(future, timeout_sec=READY_TIMEOUT)
             return future.result()
+        # the node's own: not what the run's controller declares (a plug-in's parameters
+        # of a kind the run does not use are the node's to tune)
+        run = {spec.name for spec in for_node(ROLE, values)}
         names = [name for name in ask(client.list_parameters()).result.names
-                 if name not in SPEC_BY_NAME and name != "use_sim_time"]
+                 if name not in run and name != "use_sim_time"]
         described = ask(client.describe_parameters(names)).descriptors
         current = ask(client.get_parameters(names)).values
         return {d.name: (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value,

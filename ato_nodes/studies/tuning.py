@@ -276,13 +276,12 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
     """One candidate through the real node graph, scored from its bag. With a finite
     `bound` (see evaluate_in_process) the supervisor follows the running fitness and
     ends a run that passes it: `pruned`, with the value it reached. With an `external`
-    controller's command, the overrides the schema does not know are that node's own
-    parameters, given to it as `--ros-args -p NAME:=VALUE`."""
+    controller's command, the overrides are that node's own parameters (SearchSpace.of_node:
+    none the run's controller declares), given to it as `--ros-args -p NAME:=VALUE`."""
     from ato_nodes.bags.bagio import BagError, read_parameters, read_series
     from ato_nodes.launcher.launch import Stack
 
-    candidate = _candidate(values, {name: value for name, value in overrides.items()
-                                    if name in SPEC_BY_NAME}, objective, index, bound)
+    candidate = _candidate(values, {} if external else overrides, objective, index, bound)
     if isinstance(candidate, Evaluation):
         candidate.params = overrides
         return candidate
@@ -311,9 +310,9 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
 
 
 def node_command(external: tuple[str, ...], overrides: dict[str, Any]) -> list[str]:
-    """An external node's command with the overrides the schema does not know, its own
-    parameters, as ROS arguments."""
-    own = [item for name, value in overrides.items() if name not in SPEC_BY_NAME
+    """An external node's command with its own parameters' values (a candidate's
+    overrides: SearchSpace.of_node's) as ROS arguments."""
+    own = [item for name, value in overrides.items()
            for item in ("-p", f"{name}:={float(value)!r}")]
     return [*external, "--ros-args", *own] if own else list(external)
 
@@ -611,8 +610,8 @@ class Tuner:
     def _write_outputs(self, result: Result) -> None:
         best_overrides = self.settings.space.overrides(result.best_x)
         if result.best_f < PENALTY:  # else every candidate failed: there is no best to run
-            best_values = apply_overrides(self.values, {
-                name: value for name, value in best_overrides.items() if name in SPEC_BY_NAME})
+            best_values = apply_overrides(self.values, {} if self.settings.external  # its own
+                                          else best_overrides)  # on the command line
             (self.out / "best.yaml").write_text(self.best_scenario(result, best_values))
         with (self.out / "history.csv").open("w", newline="") as handle:
             writer = csv.writer(handle)
