@@ -30,6 +30,15 @@ def hold_directory(out: Path, what: str) -> TextIO:
     return handle
 
 
+def create_and_hold(out: Path, what: str) -> TextIO:
+    """OUT created if new (one line if it cannot be) and held (hold_directory)."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ScenarioError(f"cannot create {out}: {exc.strerror or exc}") from None
+    return hold_directory(out, what)
+
+
 def name_holder(lock: TextIO) -> None:
     """This process's pid in the held lock file (what a refused second one names)."""
     lock.seek(0)

@@ -30,8 +30,8 @@ from ato_nodes.core.scoring.catalogue import Requirement
 from ato_nodes.results import jsontext
 from ato_nodes.results.journeys import WORST_ARRIVAL, WORST_STOP
 from ato_nodes.studies.backend import Backend, Progress
-from ato_nodes.studies.directory import (check_same_settings, conditions_digest, hold_directory,
-                                         name_holder)
+from ato_nodes.studies.directory import (check_same_settings, conditions_digest,
+                                         create_and_hold, name_holder)
 from ato_nodes.studies.robustness import COLUMNS, INDICES, RANGES, WITHIN, run_sample, summarise
 from ato_nodes.studies.runner import short_value
 from ato_nodes.studies.samples import SampleStudy
@@ -191,11 +191,7 @@ class League:
 
     def begin(self) -> None:
         """OUT made this league's: created if new, held, its settings written."""
-        try:
-            self.out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ScenarioError(f"cannot create {self.out}: {exc.strerror or exc}") from None
-        self.lock = hold_directory(self.out, "league")
+        self.lock = create_and_hold(self.out, "league")
         name_holder(self.lock)
         (self.out / SETTINGS).write_text(self.described)
         self.started = True

@@ -23,8 +23,8 @@ import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.results import jsontext
-from ato_nodes.studies.directory import (check_same_settings, conditions_digest, hold_directory,
-                                         name_holder)
+from ato_nodes.studies.directory import (check_same_settings, conditions_digest,
+                                         create_and_hold, hold_directory, name_holder)
 
 NUMBER = "sample"  # the first column: the sample's number, 0 to samples - 1
 
@@ -154,11 +154,7 @@ class SampleStudy:
         """OUT made this study's: created if new, held, its settings and samples file
         written (those of a resumed study without a row cut short)."""
         if self.lock is None:
-            try:
-                self.out.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise ScenarioError(f"cannot create {self.out}: {exc.strerror or exc}") from None
-            self.lock = hold_directory(self.out, "study")
+            self.lock = create_and_hold(self.out, "study")
         name_holder(self.lock)
         (self.out / self.SETTINGS).write_text(self.described)
         self.file.start(self.resume)
