@@ -22,7 +22,7 @@ from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import (common_steps, energy_terms, kept_file,
                                         pantograph_in_neutral, run_line, score_series)
 from ato_nodes.core.scoring.catalogue import STOP_INDICES
-from ato_nodes.core.scoring.journey import (STOPPED, JourneyIndices, journey_indices,
+from ato_nodes.core.scoring.journey import (PASS, STOPPED, JourneyIndices, journey_indices,
                                             journey_record, last_stop_indices)
 from ato_nodes.core.targets.timetable import Timetable, timetable_on
 
@@ -108,18 +108,24 @@ def _scored(series: dict[str, np.ndarray], parameters: dict | None
 
 
 # The worst station of a journey run, as studies count it (inf: a station missed or not
-# reached, which no bound admits).
+# reached, which no bound admits); a TTOBench journey's timing points not kept.
 WORST_STOP, WORST_ARRIVAL = "journey_worst_stop_m", "journey_worst_arrival_s"
+TIMING_MISSED = "journey_timing_points_missed"
 
 
 def worst_stations(indices: JourneyIndices) -> dict[str, float]:
-    """The largest |stop error| (m) and |arrival lateness| (s) over the stations after
-    the origin; inf if one of them has no stop."""
+    """The largest |stop error| (m) and |arrival lateness| (s: against the window of a
+    TTOBench journey's stop) over the stations after the origin, inf if one of them has
+    no stop; with timing points, how many the run did not keep (window, speed bounds,
+    or not reached)."""
     stations = indices.stations[1:]
+    missed = {TIMING_MISSED: float(sum(point.verdict != PASS for point in indices.timing))} \
+        if indices.timing else {}
     if any(station.outcome != STOPPED for station in stations):
-        return {WORST_STOP: math.inf, WORST_ARRIVAL: math.inf}
+        return {WORST_STOP: math.inf, WORST_ARRIVAL: math.inf, **missed}
     return {WORST_STOP: max(abs(station.stop_error) for station in stations),
-            WORST_ARRIVAL: max(abs(station.arrival_lateness) for station in stations)}
+            WORST_ARRIVAL: max(abs(station.arrival_lateness) for station in stations),
+            **missed}
 
 
 def score_with_journey(values: dict, series: dict[str, np.ndarray] | None = None) -> dict:

@@ -35,16 +35,34 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from ..base.errors import ScenarioError
+from ..base.units import MS_TO_KMH
 from .operation import STANDSTILL, neutral_traction_time, traction_energy_kwh
 
 
 # What is read of a timetable (core/targets/timetable.py's Stop, JourneySection and
 # Timetable): scoring sits below the targets and does not import them.
+class Window(Protocol):
+    earliest: float | None  # s, timetable clock (None: not set)
+    latest: float | None
+
+    def miss(self, time: float) -> float: ...
+
+
 class Stop(Protocol):
     station: str
     position: float          # m
     arrival: float | None    # s, timetable clock
     departure: float | None  # s
+    arrival_window: Window | None    # a TTOBench journey's (None: a timetable file's)
+    departure_window: Window | None
+
+
+class PassingPoint(Protocol):
+    name: str
+    position: float          # m
+    window: Window
+    min_speed: float | None  # m/s
+    max_speed: float | None
 
 
 class JourneySection(Protocol):
@@ -58,6 +76,7 @@ class JourneySection(Protocol):
 class Timetable(Protocol):
     stops: tuple[Stop, ...]
     sections: tuple[JourneySection, ...]
+    passing: tuple[PassingPoint, ...]
 
 STOP_WINDOW = 50.0        # m either side of a station's mark
 STOP_TOLERANCE = 0.1      # m: the project's stopping accuracy (docs/tracking.md section 1)
@@ -102,6 +121,23 @@ class SectionIndices(NamedTuple):
     max_abs_error: float         # m/s, target - speed
 
 
+DEPARTURE, ARRIVAL, PASSING = "departure", "arrival", "passing"  # a timing point's kind
+
+
+class TimingIndices(NamedTuple):
+    """A TTOBench journey's timing point as the run kept it: when the train departed from,
+    arrived at or passed it against its window, and at what speed it passed."""
+
+    point: str        # the stop's station or the passing point's name
+    kind: str         # DEPARTURE, ARRIVAL or PASSING
+    mark: float       # m along the line
+    time: float       # s, run clock (NaN: not reached, or no stop)
+    miss: float       # s outside its window: 0 inside, + late, - early (NaN: no time)
+    speed: float      # m/s as the head passed it (NaN at a stop)
+    verdict: str      # PASS, FAIL, NOT_JUDGED
+    reason: str       # what is broken, or why it is not judged
+
+
 @dataclass(frozen=True)
 class JourneyIndices:
     stations: tuple[StationIndices, ...]
@@ -109,6 +145,7 @@ class JourneyIndices:
     traction_energy_kwh: float  # the whole run's
     neutral_traction_command_time: float  # s, the whole run's (operation.py; NaN: not told
                                           # where the neutral sections are)
+    timing: tuple[TimingIndices, ...] = ()  # a TTOBench journey's timing points, in order
 
     @property
     def worst_stop(self) -> StationIndices | None:
@@ -130,7 +167,7 @@ class JourneyIndices:
     @property
     def verdict(self) -> str:
         """FAIL if a station fails, else NOT_JUDGED if one is not judged, else PASS."""
-        verdicts = {station.verdict for station in self.stations}
+        verdicts = {item.verdict for item in (*self.stations, *self.timing)}
         return FAIL if FAIL in verdicts else NOT_JUDGED if NOT_JUDGED in verdicts else PASS
 
 
@@ -170,7 +207,66 @@ def journey_indices(series: dict[str, np.ndarray], timetable: Timetable, mass: f
         commanded = neutral_traction_time(t, series["command"], neutral)
     return JourneyIndices(stations, sections,
                           traction_energy_kwh(t, speed, force, mass, gravity, efficiency),
-                          commanded)
+                          commanded, timing_indices(timetable, stations, t, position, speed))
+
+
+def timing_indices(timetable: Timetable, stations: tuple[StationIndices, ...],
+                   t: np.ndarray, position: np.ndarray, speed: np.ndarray
+                   ) -> tuple[TimingIndices, ...]:
+    """Every timing point of a TTOBench journey in the order of the line (none for a
+    timetable file): each arrival and departure at a stop (the stations' times), each
+    passing point (when and how fast the head passed it). The first departure sets the
+    journey's clock (the run's t = 0) and is not judged."""
+    if timetable.stops[0].departure_window is None:
+        return ()
+    clock = timetable.stops[0].departure
+    points = []
+    for stop, station in zip(timetable.stops[1:], stations[1:], strict=True):
+        for kind, window, time in ((ARRIVAL, stop.arrival_window, station.arrival),
+                                   (DEPARTURE, stop.departure_window, station.departure)):
+            if window is not None:
+                points.append(_timed_point(station, kind, window, time, clock))
+    points += [_passing(point, t, position, speed, clock) for point in timetable.passing]
+    return tuple(sorted(points, key=lambda p: (p.mark, p.kind != ARRIVAL)))
+
+
+def _timed_point(station: StationIndices, kind: str, window: Window, time: float,
+                 clock: float) -> TimingIndices:
+    """A stop's arrival or departure against its window."""
+    nan = math.nan
+    if not math.isfinite(time):
+        why = station.reason or station.outcome
+        if station.outcome == STOPPED:  # standing at the run's end: not left
+            return TimingIndices(station.station, kind, station.mark, nan, nan, nan,
+                                 NOT_JUDGED, "still standing at the run's end")
+        return TimingIndices(station.station, kind, station.mark, nan, nan, nan,
+                             FAIL if station.outcome == PASSED else NOT_JUDGED, why)
+    miss = window.miss(time + clock)
+    reason = f"{miss:+.1f} s outside {window_text(window)}" if miss else ""
+    return TimingIndices(station.station, kind, station.mark, time, miss, nan,
+                         FAIL if miss else PASS, reason)
+
+
+def _passing(point: PassingPoint, t: np.ndarray, position: np.ndarray, speed: np.ndarray,
+             clock: float) -> TimingIndices:
+    """When and how fast the head first reached a passing point (interpolated between
+    the samples either side), against its window and speed bounds."""
+    beyond = np.flatnonzero(position >= point.position)
+    if not beyond.size or beyond[0] == 0:
+        return TimingIndices(point.name, PASSING, point.position, math.nan, math.nan,
+                             math.nan, NOT_JUDGED, "the run ended before it")
+    k = int(beyond[0])
+    share = (point.position - position[k - 1]) / (position[k] - position[k - 1])
+    time = float(t[k - 1] + share * (t[k] - t[k - 1]))
+    passed = float(speed[k - 1] + share * (speed[k] - speed[k - 1]))
+    miss = point.window.miss(time + clock)
+    broken = [f"{miss:+.1f} s outside {window_text(point.window)}"] if miss else []
+    if point.min_speed is not None and passed < point.min_speed:
+        broken.append(f"{passed * MS_TO_KMH:.1f} km/h below {point.min_speed * MS_TO_KMH:g} km/h")
+    if point.max_speed is not None and passed > point.max_speed:
+        broken.append(f"{passed * MS_TO_KMH:.1f} km/h above {point.max_speed * MS_TO_KMH:g} km/h")
+    return TimingIndices(point.name, PASSING, point.position, time, miss, passed,
+                         FAIL if broken else PASS, "; ".join(broken))
 
 
 def _check(series: dict[str, np.ndarray], timetable: Timetable, window: float) -> None:
@@ -230,17 +326,52 @@ def _station(stop: Stop, where: _Stop, t: np.ndarray, position: np.ndarray, cloc
     indices = StationIndices(
         stop.station, stop.position, where.outcome,
         float(position[where.last]) - stop.position if stopped else nan, arrival, departure,
-        arrival - (stop.arrival - clock) if stop.arrival is not None else nan,
-        departure - (stop.departure - clock) if stop.departure is not None else nan,
+        _lateness(arrival, stop.arrival, stop.arrival_window, clock),
+        _lateness(departure, stop.departure, stop.departure_window, clock),
         departure - arrival, "", "")
     if stop.arrival is None:
         return indices
-    verdict, reason = _verdict(indices, requirements, t, position, window)
+    windowed = stop.arrival_window is not None  # judged on its windows, not a tolerance
+    verdict, reason = _verdict(indices, requirements, t, position, window, windowed)
+    if windowed and indices.outcome == STOPPED:
+        timed, why = _window_verdict(stop, indices)
+        verdict, reason = (FAIL if FAIL in (verdict, timed) else PASS,
+                           "; ".join(filter(None, (reason, why))))
     return indices._replace(verdict=verdict, reason=reason)
 
 
+
+def _lateness(time: float, planned: float | None, window: Window | None, clock: float
+              ) -> float:
+    """s + late against the timetable's time (run clock `time`, `clock` the timetable's
+    time at t = 0); against its window where the stop has one: 0 inside, + after it, -
+    before it; NaN without a planned time."""
+    if planned is None:
+        return math.nan
+    if window is None:
+        return time - (planned - clock)
+    return window.miss(time + clock) if math.isfinite(time) else math.nan
+
+
+def _window_verdict(stop: Stop, station: StationIndices) -> tuple[str, str]:
+    """A TTOBench stop's verdict on its windows: the arrival inside its window, and the
+    departure inside its window once the train has left."""
+    broken = [f"{what} {lateness:+.1f} s outside its window {window_text(window)}"
+              for what, lateness, window in (
+                  ("arrival", station.arrival_lateness, stop.arrival_window),
+                  ("departure", station.departure_lateness, stop.departure_window))
+              if window is not None and math.isfinite(lateness) and lateness != 0.0]
+    return (FAIL, "; ".join(broken)) if broken else (PASS, "")
+
+
+def window_text(window: Window) -> str:
+    """A window as the verdicts say it: [earliest, latest] s on the timetable's clock."""
+    return (f"[{'-' if window.earliest is None else f'{window.earliest:g}'}, "
+            f"{'-' if window.latest is None else f'{window.latest:g}'}] s")
+
+
 def _verdict(station: StationIndices, requirements: StationRequirements, t: np.ndarray,
-             position: np.ndarray, window: float) -> tuple[str, str]:
+             position: np.ndarray, window: float, windowed: bool = False) -> tuple[str, str]:
     """(PASS, FAIL or NOT_JUDGED, what is broken or why it is not judged)."""
     if station.outcome == NOT_REACHED:
         short = station.mark - float(position[-1])
@@ -252,7 +383,8 @@ def _verdict(station: StationIndices, requirements: StationRequirements, t: np.n
     if not abs(station.stop_error) <= requirements.stop_error:
         broken.append(f"stop error {station.stop_error:+.3f} m (within "
                       f"{requirements.stop_error:g} m required)")
-    if not abs(station.arrival_lateness) <= requirements.arrival_lateness:
+    if not abs(station.arrival_lateness) <= requirements.arrival_lateness \
+            and not windowed:
         broken.append(f"arrival {station.arrival_lateness:+.1f} s against the timetable "
                       f"(within {requirements.arrival_lateness:g} s required)")
     return (FAIL, "; ".join(broken)) if broken else (PASS, "")
@@ -282,6 +414,9 @@ def summary_line(indices: JourneyIndices) -> str:
     unjudged = sum(s.verdict == NOT_JUDGED for s in judged)
     parts = [f"{sum(s.verdict == PASS for s in judged)} of {len(judged)} stations met"
              + (f", {unjudged} not judged" if unjudged else "")]
+    if indices.timing:
+        kept = sum(point.verdict == PASS for point in indices.timing)
+        parts.append(f"{kept} of {len(indices.timing)} timing points kept")
     if indices.worst_stop is not None:
         parts.append(f"worst stop {indices.worst_stop.stop_error:+.3f} m at "
                      f"{indices.worst_stop.station}")
@@ -304,9 +439,12 @@ def journey_record(indices: JourneyIndices) -> dict:
     --json, indices.json): its verdict and summary line, a row per station and per
     section with StationIndices' and SectionIndices' fields, SI (m, s, kWh, m/s); NaN
     where nothing was measured (null in the files)."""
-    return {"verdict": indices.verdict, "summary": summary_line(indices),
-            "stations": [station._asdict() for station in indices.stations],
-            "sections": [section._asdict() for section in indices.sections]}
+    record = {"verdict": indices.verdict, "summary": summary_line(indices),
+              "stations": [station._asdict() for station in indices.stations],
+              "sections": [section._asdict() for section in indices.sections]}
+    if indices.timing:  # a TTOBench journey's
+        record["timing_points"] = [point._asdict() for point in indices.timing]
+    return record
 
 
 def last_stop_indices(indices: JourneyIndices, planned_run_time: float | None
@@ -365,4 +503,19 @@ def format_journey(record: dict) -> list[str]:
                      f"{_timed(s['departure'], s['departure_lateness']):>18}  "
                      f"{_cell(s['dwell'], '{:.1f}'):>7}  "
                      f"{': '.join(filter(None, (s['verdict'] or '-', why)))}")
+    return lines + format_timing_points(record.get("timing_points", []))
+
+
+def format_timing_points(points: list[dict]) -> list[str]:
+    """Console lines of a journey_record's timing points (none for a timetable file)."""
+    if not points:
+        return []
+    width = max(len(point["point"]) for point in points)
+    lines = [f"  {'timing point':<{width + 10}}  {'time s':>8}  {'outside s':>9}  "
+             f"{'km/h':>6}  verdict"]
+    for p in points:
+        lines.append(f"  {p['point']:<{width}} {p['kind']:>9}  {_cell(p['time'], '{:.1f}'):>8}  "
+                     f"{_cell(p['miss'], '{:+.1f}'):>9}  "
+                     f"{_cell(p['speed'] * MS_TO_KMH if _known(p['speed']) else None, '{:.1f}'):>6}"
+                     f"  {': '.join(filter(None, (p['verdict'], p['reason'])))}")
     return lines

@@ -52,10 +52,13 @@ from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
+from ..base.units import MS_TO_KMH
+from ..train.line import Section, with_speed_restrictions
 from .profiles import (ATO_PARAMETERS, AtoCurve, DepartureRamp, PlanTable, ato_curve, cell_of,
                        departing, departure_ramp, rows_speed, table_limit)
 from .restriction import SPEED_RESTRICTION, restricted_line
-from .timetable import Timetable, load_timetable, section_line
+from .curve_passes import cell_times
+from .timetable import JourneySection, PassingPoint, Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
 _EXTENSION = r"\s*\d+\s*:\s*\d+(?:\.\d*)?\s*"
@@ -348,17 +351,18 @@ def new_journey_table(timetable: Timetable, values, line, train
     curves, times, notices = [], [], []
     scheduled = [section.running_time - values["profile.journey.recovery"]
                  for section in timetable.sections]
-    for section, planned in zip(timetable.sections, scheduled, strict=True):
+    for section, planned, stop in zip(timetable.sections, scheduled, timetable.stops,
+                                      strict=False):
         own = dataclasses.replace(section_line(line, section.start, section.end),
                                   planned_run_time=planned)
-        curve = ato_curve(values, own, train)
+        curve, said = timed_curve(values, own, train, section, stop.departure)
         if curve.notice:
             notices.append(f"{section.origin} - {section.destination}: {curve.notice}")
+        notices += [f"{section.origin} - {section.destination}: {text}" for text in said]
         speeds, section_times = (catch_up_curves(curve, fastest_curve(values, own, train), levels)
                                  if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
         curves += [(curve.positions, level, curve.limits) for level in speeds]
         times.append(section_times)
-    dwells = {station.name: station.dwell for station in line.stations}
     stops = timetable.stops
     leaving_at = [stop.departure - stops[0].departure for stop in stops[1:-1]]
     bounds = np.cumsum([0] + [len(positions) for positions, _, _ in curves], dtype=np.int64)
@@ -367,12 +371,110 @@ def new_journey_table(timetable: Timetable, values, line, train
         scheduled=np.array(scheduled),
         stops=np.array([stop.position for stop in stops]),
         departures=np.array([*leaving_at, math.inf]),
-        dwells=np.array([dwells[stop.station] for stop in stops[1:]]),
+        dwells=np.array([stop.least_dwell for stop in stops[1:]]),
         extensions=dwell_extensions(values["profile.journey.dwell_extension"], timetable),
         berth=float(values["profile.journey.berth"]),
         catch_up_after=float(values["profile.journey.catch_up_after"]),
         departure=departure_ramp(values, train, values["profile.ato.start_speed"])), \
         " | ".join(notices) or None
+
+
+def timed_curve(values, line, train, section: JourneySection, departure: float
+                ) -> tuple[AtoCurve, list[str]]:
+    """The section's on-time curve on `line` (its own, planned to its running time) kept
+    to its passing points' windows (passing_window), each in turn: a curve that passes a
+    point too late is capped after it, one too early before it, at the cruise that
+    passes it at the window's nearer edge (the least change from the on-time curve,
+    which a cruise curve's energy favours); and what cannot be kept, in one line each:
+    a window the curve cannot meet together with the arrival, a speed bound it breaks."""
+    curve, said, caps = ato_curve(values, line, train), [], ()
+    for point in section.passing:
+        if curve.notice:  # not even the arrival is met: no window to keep besides
+            break
+        low, high = passing_window(point, departure, values["profile.journey.recovery"])
+        at = point.position - section.start
+        passes = passing_time(curve, at)
+        if low <= passes <= high:
+            continue
+        late = passes > high
+        capped = _capped_at(values, line, train, caps, at, high if late else low, late)
+        if capped is None:
+            said.append(f"{point.name}: the window {_window_text(point.window)} cannot be "
+                        f"met with the arrival by this train (planned at "
+                        f"{departure + passes:.1f} s); passing it as the on-time curve does")
+            continue
+        curve, caps = capped
+    return curve, said + _speed_bounds(curve, section, values)
+
+
+def passing_window(point: PassingPoint, departure: float, recovery: float
+                   ) -> tuple[float, float]:
+    """When the head should pass `point`, s after the section's `departure`: its window
+    kept `recovery` inside either edge set (its middle when narrower), -inf/inf unset."""
+    low = -math.inf if point.window.earliest is None else point.window.earliest - departure
+    high = math.inf if point.window.latest is None else point.window.latest - departure
+    if high - low < 2.0 * recovery:
+        return (low + high) / 2.0, (low + high) / 2.0
+    return low + recovery, high - recovery
+
+
+def passing_time(curve: AtoCurve, at: float) -> float:
+    """When the curve passes `at` (m from its start), s after its departure (its time from
+    standstill, as its running time counts)."""
+    cells = np.concatenate(([0.0], np.cumsum(cell_times(curve.positions, curve.speeds))))
+    return (curve.departure or 0.0) + float(np.interp(at, curve.positions, cells))
+
+
+CAP_STEPS = 24  # bisections of a passing point's cap: the cruise to ~1e-7 of its range
+
+
+def _capped_at(values, line, train, caps: tuple, at: float, wanted: float, late: bool
+               ) -> tuple[AtoCurve, tuple] | None:
+    """The on-time curve passing `at` (m) at `wanted` (s after the departure), the line
+    capped after `at` (a curve that passed `late`) or before it (early) at the cruise
+    bisected for it, with the caps `caps` already set; None when no cap does it and
+    still arrives on time."""
+    def capped(cap: float) -> tuple[AtoCurve, tuple]:
+        stretch = Section(at, line.stop_position, cap) if late else Section(0.0, at, cap)
+        limits = (*caps, stretch)
+        return ato_curve(values, with_speed_restrictions(line, limits), train), limits
+
+    low, high = values["profile.ato.start_speed"] + values["profile.ato.margin"], \
+        max(section.value for section in line.speed_limits)
+    for _ in range(CAP_STEPS):
+        middle = 0.5 * (low + high)
+        curve, _limits = capped(middle)
+        # a lower cap after the point passes it earlier; before it, later
+        if (passing_time(curve, at) > wanted) == late:
+            high = middle
+        else:
+            low = middle
+    found = capped(low)  # the side that passes within the window
+    passes = passing_time(found[0], at)
+    met = passes <= wanted + CAP_TOLERANCE if late else passes >= wanted - CAP_TOLERANCE
+    return found if met and not found[0].notice else None
+
+
+CAP_TOLERANCE = 0.5  # s a capped curve may pass beyond the window it was bisected to
+
+
+def _window_text(window) -> str:
+    return f"[{'-' if window.earliest is None else f'{window.earliest:g}'}, " \
+           f"{'-' if window.latest is None else f'{window.latest:g}'}] s"
+
+
+def _speed_bounds(curve: AtoCurve, section: JourneySection, values) -> list[str]:
+    """A notice for each passing point whose speed bounds the curve breaks."""
+    said = []
+    for point in section.passing:
+        speed = float(np.interp(point.position - section.start, curve.positions, curve.speeds))
+        if point.min_speed is not None and speed < point.min_speed:
+            said.append(f"{point.name}: passed at {speed * MS_TO_KMH:.1f} km/h, below its "
+                        f"lower speed bound {point.min_speed * MS_TO_KMH:g} km/h")
+        if point.max_speed is not None and speed > point.max_speed:
+            said.append(f"{point.name}: passed at {speed * MS_TO_KMH:.1f} km/h, above its "
+                        f"upper speed bound {point.max_speed * MS_TO_KMH:g} km/h")
+    return said
 
 
 def stacked(curves: list[tuple], bounds: np.ndarray) -> np.ndarray:
@@ -422,10 +524,10 @@ def _journey(values, context) -> JourneyPlan:
     if context.line is None:
         raise ScenarioError("profile.kind is journey but line.file is empty")
     timetable = load_timetable(path)
-    if timetable.line != context.line:  # by contents: a bag's copies have other paths
+    if not timetable.on_line(context.line):  # by contents: a bag's copies have other paths
         raise ScenarioError(f"timetable {path} is of line {timetable.line_file}, the run's "
                             f"line.file is {values['line.file']} (their contents differ)")
-    if timetable.train != values["plant.train"]:
+    if not timetable.for_train(values["plant.train"]):
         raise ScenarioError(f"timetable {path} is planned for train {timetable.train!r}, the "
                             f"run uses {values['plant.train'] or '(none)'!r}")
     first = timetable.stops[0]

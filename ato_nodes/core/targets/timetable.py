@@ -38,9 +38,10 @@ import yaml
 
 from ..base import yamlfile
 from ..base.errors import ScenarioError
-from ..base.paths import resolve_file
+from ..base.paths import config_dir, resolve_file
 from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
                           node_error, node_number, node_value)
+from ..train import ttobench
 from ..train.plant import TrainParameters
 from .profiles import ato_curve_arguments, new_ato_curve
 
@@ -53,6 +54,34 @@ DAY = 86400.0  # s
 # s: a time on a journey's clock lies within this of its origin, either way (the longest
 # line, core/train/line.MAX_LENGTH, at 20 km/h takes about four days)
 LATEST_TIME = 7 * DAY
+JOURNEYS = config_dir() / "ttobench" / "journeys"  # the shipped TTOBench journeys
+TRACKS = config_dir() / "ttobench" / "tracks"
+
+
+class Window(NamedTuple):
+    """A timing point's time window, s on the journey's clock (None: not set)."""
+
+    earliest: float | None
+    latest: float | None
+
+    def miss(self, time: float) -> float:
+        """How far `time` (s) lies outside the window: 0 inside, - early, + late."""
+        if self.earliest is not None and time < self.earliest:
+            return time - self.earliest
+        if self.latest is not None and time > self.latest:
+            return time - self.latest
+        return 0.0
+
+
+class PassingPoint(NamedTuple):
+    """A TTOBench journey's timing point the train passes without stopping."""
+
+    name: str                 # its kilometre, as a stop's station is named
+    position: float           # m along the line
+    window: Window            # when the head passes it
+    min_speed: float | None   # m/s (None: not set)
+    max_speed: float | None   # m/s
+    source_line: int          # its entry in the journey's timing points
 
 
 @dataclass(frozen=True)
@@ -61,7 +90,12 @@ class Stop:
     position: float          # m along the line
     arrival: float | None    # s; None at the first stop
     departure: float | None  # s; None at the last stop
-    source_line: int         # the line of the timetable file that gives it
+    source_line: int         # the line of the timetable file that gives it (a TTOBench
+                             # journey's: the entry of its arrival's timing point)
+    least_dwell: float = 0.0  # s the train stands at least when it arrived late
+    # a TTOBench journey's windows (None: a timetable file's times, kept to a tolerance)
+    arrival_window: Window | None = None
+    departure_window: Window | None = None
 
     @property
     def dwell(self) -> float:
@@ -79,6 +113,7 @@ class JourneySection(NamedTuple):
     start: float         # m along the line
     end: float           # m
     running_time: float  # s, standstill to standstill, as the timetable gives it
+    passing: tuple[PassingPoint, ...] = ()  # the timing points between its stops
 
 
 @dataclass(frozen=True)
@@ -89,11 +124,15 @@ class Timetable:
     train: str       # the train preset it is planned for
     stops: tuple[Stop, ...]
     load: float = NOMINAL_LOAD  # the mass its running times are planned for, over the nominal
+    passing: tuple[PassingPoint, ...] = ()
+    journey: str = ""  # a TTOBench journey's id ("" for a timetable file)
 
     @property
     def sections(self) -> tuple[JourneySection, ...]:
         return tuple(JourneySection(a.station, b.station, a.position, b.position,
-                                    b.arrival - a.departure)
+                                    b.arrival - a.departure,
+                                    tuple(p for p in self.passing
+                                          if a.position < p.position < b.position))
                      for a, b in zip(self.stops, self.stops[1:], strict=False))
 
     @property
@@ -101,10 +140,31 @@ class Timetable:
         """The journey's running time: its sections' together, dwells excluded, s."""
         return sum(section.running_time for section in self.sections)
 
+    def where(self, source_line: int) -> str:
+        """Where in its file a stop or a timing point is given, as an error names it."""
+        return (f"timing points entry {source_line}" if self.journey
+                else f"line {source_line}")
+
+    def on_line(self, line: Line) -> bool:
+        """Whether a run of `line` (by contents) may drive it: a timetable file's own line;
+        a TTOBench journey's track, with or without a station at each of its stops."""
+        if not self.journey:
+            return self.line == line
+        return dataclasses.replace(self.line, stations=()) == \
+            dataclasses.replace(line, stations=())
+
+    def for_train(self, train: str) -> bool:
+        """Whether a run of train `train` (plant.train) may drive it: a timetable file's
+        own train; a TTOBench journey (planned for none) any."""
+        return bool(self.journey) or self.train == train
+
 
 def load_timetable(path: str | Path) -> Timetable:
     """A timetable file on the line its `line:` names, checked against that line (not
-    yet against a train: see check_minimum_times)."""
+    yet against a train: see check_minimum_times); a TTOBench journey file (.json) on its
+    associated track (journey_timetable)."""
+    if Path(path).suffix == ".json":
+        return journey_timetable(path)
     text = yamlfile.read_text(path, "timetable file")
     fields = _fields(path, text)
     line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
@@ -120,7 +180,10 @@ def load_timetable(path: str | Path) -> Timetable:
 @functools.lru_cache(maxsize=16)
 def timetable_on(text: str, path: str | Path, line: Line, line_file: str) -> Timetable:
     """A timetable from its text (a bag's copy of the file at `path`) on `line`, the line
-    the run drove (`line_file` names it), whatever the text's `line:` names now."""
+    the run drove (`line_file` names it), whatever the text's `line:` names now; a
+    TTOBench journey's (.json) on that line alike."""
+    if Path(path).suffix == ".json":
+        return journey_on(ttobench.parse_journey(text, path), line, line_file)
     return _timetable(path, _fields(path, text), line, line_file)
 
 
@@ -167,7 +230,7 @@ def _stops(path, node: yaml.Node, line: Line) -> tuple[Stop, ...]:
         times = {key: _time(path, item, entry, key, index, len(entries))
                  for key in ("arrival", "departure")}
         stop = Stop(name, stations[name].position, times["arrival"], times["departure"],
-                    item.start_mark.line + 1)
+                    item.start_mark.line + 1, stations[name].dwell)
         _check_order(path, item, stop, stops[-1] if stops else None, stations[name])
         stops.append(stop)
     return tuple(stops)
@@ -213,6 +276,105 @@ def _check_order(path, item, stop: Stop, previous: Stop | None, station: Station
                      f"from {previous.station}")
 
 
+# ------------------------------------------------------- TTOBench journeys ----
+
+
+def journey_file(given: str) -> str:
+    """A TTOBench journey as a user gives it: a file (a path with a folder or a .json
+    suffix, from anywhere), else the id of one in msg_config/ttobench/journeys/;
+    ScenarioError naming what was given."""
+    path = Path(given)
+    if path.suffix == ".json" or len(path.parts) > 1:
+        return str(path.resolve())
+    shipped = JOURNEYS / f"{given}.json"
+    if not shipped.is_file():
+        known = ", ".join(sorted(p.stem for p in JOURNEYS.glob("*.json")))
+        raise ScenarioError(f"unknown TTOBench journey {given!r}: neither a .json file nor "
+                            f"the id of one in {JOURNEYS} ({known})")
+    return str(shipped)
+
+
+def journey_track(journey: ttobench.Journey) -> Path:
+    """The file of a journey's associated track: beside the journey's folder, as the
+    library lays them out (../tracks/ID.json), else msg_config/ttobench/tracks/ID.json."""
+    beside = journey.path.parent.parent / "tracks" / f"{journey.track_id}.json"
+    return beside if beside.is_file() else TRACKS / f"{journey.track_id}.json"
+
+
+def journey_timetable(path: str | Path) -> Timetable:
+    """A TTOBench journey file as a timetable on its associated track (journey_track),
+    with a station at each of its stops (Track.line(journey))."""
+    journey = ttobench.load_journey(path)
+    track_file = journey_track(journey)
+    if not track_file.is_file():
+        raise ScenarioError(f"{path}: metadata: associated track {journey.track_id!r}: no "
+                            f"file {track_file}")
+    track = ttobench.load_track(track_file)
+    return journey_on(journey, track.line(journey), str(track_file.resolve()))
+
+
+def journey_on(journey: ttobench.Journey, line: Line, line_file: str) -> Timetable:
+    """The timetable of a TTOBench journey on `line` (its track's): a stop at each
+    stopping point, arriving at its window's latest time (the least-energy choice a
+    cruise curve has), departing at its window's earliest (not before the arrival); the
+    passing points between; ScenarioError (one line, the file and the entry) for a
+    stop the planner has no time for or times that do not increase."""
+    beyond = next((p for p in journey.points if p.position > line.length), None)
+    if beyond is not None:
+        raise ScenarioError(f"{journey.path}: timing points: {beyond.position:g} m is beyond "
+                            f"the end of the line ({line.length:g} m)")
+    dwells, names = journey.dwells(), {s.position: s.name for s in line.stations}
+    stops: list[Stop] = []
+    passing: list[PassingPoint] = []
+    for number, point in enumerate(journey.points, 1):
+        window = Window(point.earliest, point.latest)
+        name = names.get(point.position, kilometre(point.position))
+        if not point.stopping:
+            passing.append(PassingPoint(kilometre(point.position), point.position, window,
+                                        point.min_speed, point.max_speed, number))
+        elif stops and stops[-1].position == point.position:  # the departure of a stop
+            arrival = stops[-1]
+            departure = max(arrival.arrival, _first(point.earliest, point.latest,
+                                                    arrival.arrival))
+            stops[-1] = dataclasses.replace(arrival, departure=departure,
+                                            departure_window=window)
+        elif not stops:  # the journey's first departure
+            stops.append(Stop(name, point.position, None, _first(point.earliest,
+                              point.latest, 0.0), number, 0.0, None, window))
+        else:
+            stops.append(_journey_arrival(journey, stops[-1], point, number, name,
+                                          dwells.get(point.position, 0.0)))
+    return Timetable(str(journey.path), line_file, line, "", tuple(stops),
+                     passing=tuple(passing), journey=journey.id)
+
+
+def _first(*times: float | None) -> float:
+    return next(time for time in times if time is not None)
+
+
+def _journey_arrival(journey: ttobench.Journey, previous: Stop,
+                     point: ttobench.TimingPoint, number: int, name: str,
+                     least_dwell: float) -> Stop:
+    """An arrival stopping point as a stop, arriving at its window's latest time (its
+    earliest when it has no latest)."""
+    where = f"{journey.path}: timing points entry {number}"
+    if point.earliest is None and point.latest is None:
+        raise ScenarioError(f"{where}: a stop needs a lower or an upper time constraint "
+                            "(the planner plans the section to arrive by it)")
+    arrival = _first(point.latest, point.earliest)
+    if not arrival > previous.departure:
+        raise ScenarioError(f"{where}: the arrival {arrival:g} s at {point.position:g} m is "
+                            f"not after the departure {previous.departure:g} s from "
+                            f"{previous.station}")
+    return Stop(name, point.position, arrival, None, number, least_dwell,
+                Window(point.earliest, point.latest))
+
+
+def kilometre(position: float) -> str:
+    """A TTOBench stop's or passing point's name: its kilometre (Track.line's names)."""
+    return f"km {position / 1000:g}"
+
+
 def section_line(line: Line, start: float, end: float) -> Line:
     """The line from a stop at `start` to one at `end` (m), in metres from `start`: the
     stop mark at its end, every section of the line kept (the train's mass belt lies
@@ -222,6 +384,8 @@ def section_line(line: Line, start: float, end: float) -> Line:
 
     stops = tuple(Station(s.name, s.position - start, s.dwell) for s in line.stations
                   if s.position in (start, end))
+    if end not in (s.position for s in line.stations):  # a journey's stop the line lacks
+        stops += (Station(kilometre(end), end - start, 0.0),)
     return dataclasses.replace(
         line, name=f"{line.name}, {start:g}-{end:g} m", length=line.length - start,
         gradients=shifted(line.gradients), curves=shifted(line.curves),
@@ -267,7 +431,7 @@ def check_running_times(timetable: Timetable, values: dict) -> None:
         loaded = minimum_running_time(line, values, timetable.load)
         if section.running_time < loaded:
             raise ScenarioError(
-                f"{timetable.path} line {stop.source_line}: the running time "
+                f"{timetable.path} {timetable.where(stop.source_line)}: the running time "
                 f"{section.running_time:g} s from {section.origin} to {section.destination} "
                 f"is below its minimum {math.ceil(loaded * 10) / 10:g} s (train "
                 f"{values['plant.train'] or '(none)'} at {timetable.load:g} times its mass: "

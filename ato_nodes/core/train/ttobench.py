@@ -58,8 +58,11 @@ DEFAULT_DWELL = 0.0  # s at a stop no journey gives a dwell for: none required (
 def read_json(path: str | Path, what: str) -> Any:
     """A TTOBench file's JSON, read as the project reads a user's file (regular, at most
     1 MiB, UTF-8), without duplicate keys or NaN/Infinity; one line otherwise."""
-    text = yamlfile.read_text(path, what)
+    return parse_json(yamlfile.read_text(path, what), path)
 
+
+def parse_json(text: str, path: str | Path) -> Any:
+    """read_json of a file's `text` (a copy kept in a bag); `path` names it in errors."""
     def unique(pairs):
         document = dict(pairs)
         if len(document) < len(pairs):
@@ -453,9 +456,16 @@ def load_journey(path: str | Path, track: Track | None = None) -> Journey:
     """A TTOBench journey file, validated by the library's rules (journeys/README.md), on
     `track` when given (its associated track, every point on it); one ScenarioError line
     naming the file and the field."""
+    journey = parse_journey(yamlfile.read_text(path, "TTOBench journey"), path)
+    if track is not None:
+        journey.check_on(track)
+    return journey
+
+
+def parse_journey(text: str, path: str | Path) -> Journey:
+    """load_journey of a journey file's `text` (a copy kept in a bag); `path` names it."""
     path = Path(path)
-    fields = Fields(path, read_json(path, "TTOBench journey"), "journey", ("timing points",),
-                    ())
+    fields = Fields(path, parse_json(text, path), "journey", ("timing points",), ())
     metadata = fields.metadata(("associated track",))
     if not metadata["id"].startswith(metadata["associated track"] + "_"):
         raise fields.error("metadata", f"id {reprlib.repr(metadata['id'])} must start with "
@@ -465,11 +475,8 @@ def load_journey(path: str | Path, track: Track | None = None) -> Journey:
     points = tuple(_timing_point(fields, f"timing points entry {number}", row)
                    for number, row in enumerate(rows, 1))
     _check_points(fields, points)
-    journey = Journey(metadata["id"], metadata["library version"], path,
-                      metadata["associated track"], points)
-    if track is not None:
-        journey.check_on(track)
-    return journey
+    return Journey(metadata["id"], metadata["library version"], path,
+                   metadata["associated track"], points)
 
 
 def _timing_point(fields: Fields, name: str, row: list) -> TimingPoint:
