@@ -11,6 +11,7 @@ km/h and km only as shown.
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import itertools
 import math
@@ -27,7 +28,7 @@ from ato_nodes.core.scoring.journey import REQUIRED, JourneyIndices, summary_lin
 from ato_nodes.core.targets.restriction import restricted_line
 from ato_nodes.core.targets.served import Replan
 from ato_nodes.core.targets.timetable import Timetable
-from ato_nodes.core.train.line import Line
+from ato_nodes.core.train.line import Line, Station
 from ato_nodes.results.journeys import TIMETABLE, is_journey, run_journey, run_timetable
 from ato_nodes.reports.report_html import STATUS_COLOURS, Panels, _f32, _line_shapes, _table, _text
 
@@ -35,6 +36,14 @@ STATION_HEADER = ["station", "km", "stop error m", "arrival s", "arrival latenes
                   "departure s", "departure lateness s", "dwell s", "verdict"]
 SECTION_HEADER = ["section", "km", "running time s", "timetable s", "error s",
                   "traction kWh", "max abs(e) km/h"]
+TIMING_HEADER = ["timing point", "kind", "km", "window s", "time s", "outside s", "km/h",
+                 "speed bounds km/h", "verdict"]
+TIMING_EXPLAINED = ("A TTOBench journey's timing points: when the train arrived at, departed from "
+                    "or passed each (the head, interpolated between samples) on the run's "
+                    "clock, its window on the journey's (the same clock: t = 0 is the first "
+                    "departure), how far outside it (+ late, - early), and a passing point's "
+                    "speed against its bounds; the first departure sets the clock and is not "
+                    "judged.")
 EXPLAINED = (f"Stops found in the series (the final standstill within 50 m of each mark); "
              f"times on the run's clock (t = 0: the first departure), lateness against the "
              f"timetable (+ late). A station passes with its stop within "
@@ -70,13 +79,25 @@ def journey_reports(reports: list[RunReport]) -> tuple[list[JourneyReport], list
             continue
         try:
             indices = run_journey(report.run.series, parameters, timetable)
-            line = restricted_line(parameters, timetable.line)
+            line = with_stops(restricted_line(parameters, timetable.line), timetable)
         except ScenarioError as exc:
             notes.append(f"{report.label}: no per-station table: {exc}")
             continue
         journeys.append(JourneyReport(report.label, timetable, name, report.run.series,
                                       indices, colour, line, replan_lines(report.run.replans)))
     return journeys, notes
+
+
+def with_stops(line: Line, timetable: Timetable) -> Line:
+    """`line` with a station at each stop of the timetable it lacks (a TTOBench journey's
+    stopping points need not be its track's stops), for the plots to mark."""
+    have = {station.position for station in line.stations}
+    added = tuple(Station(stop.station, stop.position, stop.least_dwell)
+                  for stop in timetable.stops if stop.position not in have)
+    if not added:
+        return line
+    return dataclasses.replace(line, stations=tuple(sorted(
+        line.stations + added, key=lambda station: station.position)))
 
 
 def replan_lines(recorded: list[dict]) -> list[str]:
@@ -105,6 +126,20 @@ def station_rows(indices: JourneyIndices) -> list[tuple[list[str], str, str]]:
             for s in indices.stations]
 
 
+def timing_rows(indices: JourneyIndices) -> list[tuple[list[str], str, str]]:
+    """(cells of TIMING_HEADER but the verdict, verdict, reason) per timing point."""
+    def bounds(low: float, high: float, scale: float = 1.0) -> str:
+        if not (math.isfinite(low) or math.isfinite(high)):
+            return "-"
+        return f"{_number(low * scale, '{:g}')}-{_number(high * scale, '{:g}')}"
+
+    return [([p.point, p.kind, f"{p.mark / 1000:.3f}", bounds(p.earliest, p.latest),
+              _number(p.time, "{:.1f}"), _number(p.miss, "{:+.1f}"),
+              _number(p.speed * MS_TO_KMH, "{:.1f}"),
+              bounds(p.min_speed, p.max_speed, MS_TO_KMH)], p.verdict, p.reason)
+            for p in indices.timing]
+
+
 def section_rows(journey: JourneyReport) -> list[list[str]]:
     return [[f"{s.origin} - {s.destination}", f"{planned.start / 1000:.3f}-"
              f"{planned.end / 1000:.3f}", _number(s.running_time, "{:.1f}"),
@@ -126,6 +161,10 @@ def markdown_sections(journeys: list[JourneyReport], notes: list[str]) -> list[s
         lines += _markdown_rows(STATION_HEADER, [
             cells + [Markup(": ".join(filter(None, (MARK[verdict], md_text(reason)))) or "-")]
             for cells, verdict, reason in station_rows(journey.indices)])
+        if journey.indices.timing:
+            lines += ["", md_text(TIMING_EXPLAINED), ""] + _markdown_rows(TIMING_HEADER, [
+                cells + [Markup(": ".join(filter(None, (MARK[verdict], md_text(reason)))))]
+                for cells, verdict, reason in timing_rows(journey.indices)])
         lines += [""] + _markdown_rows(SECTION_HEADER, section_rows(journey))
         lines += ["", f"{REPLANS}:", ""] + [f"- {md_text(replan)}" for replan in journey.replans] \
             if journey.replans else ["", NO_REPLANS]
@@ -144,6 +183,10 @@ def html_sections(journeys: list[JourneyReport], notes: list[str]) -> list[str]:
         parts.append(_table(STATION_HEADER, [
             [(cell, "") for cell in cells] + [(verdict or "-", verdict, reason)]
             for cells, verdict, reason in station_rows(journey.indices)]))
+        if journey.indices.timing:
+            parts.append(f"<p>{html.escape(TIMING_EXPLAINED)}</p>" + _table(TIMING_HEADER, [
+                [(cell, "") for cell in cells] + [(verdict, verdict, reason)]
+                for cells, verdict, reason in timing_rows(journey.indices)]))
         parts.append(_table(SECTION_HEADER, [[(cell, "") for cell in row]
                                              for row in section_rows(journey)]))
         parts.append(f"<p>{REPLANS}:</p><ul>" + "".join(
@@ -159,6 +202,13 @@ def limit_steps(line: Line) -> tuple[list[float], list[float]]:
             [s.value * MS_TO_KMH for s in line.speed_limits for _ in "ab"])
 
 
+def marks(journey: JourneyReport) -> list[tuple[str, float, str]]:
+    """(name, m, line style) of each place the plot marks: the line's stations, solid;
+    the timetable's passing points, dotted."""
+    return ([(s.name, s.position, "-") for s in journey.line.stations]
+            + [(p.name, p.position, ":") for p in journey.timetable.passing])
+
+
 def plot_journey(journey: JourneyReport, path: Path) -> Figure:
     """report.md's speed against position over the line."""
     plt = _pyplot()
@@ -171,9 +221,9 @@ def plot_journey(journey: JourneyReport, path: Path) -> Figure:
     s, km = journey.series, journey.series["position"] / 1000
     axes.plot(km, s["target"] * MS_TO_KMH, "k--", lw=1, label="planned (target)")
     axes.plot(km, s["speed"] * MS_TO_KMH, color=journey.colour, lw=1, label="driven")
-    for station in journey.line.stations:
-        axes.axvline(station.position / 1000, color="purple", lw=0.8)
-        axes.text(station.position / 1000, 1.01, station.name, rotation=30, fontsize=7,
+    for name, position, style in marks(journey):
+        axes.axvline(position / 1000, color="purple", lw=0.8, ls=style)
+        axes.text(position / 1000, 1.01, name, rotation=30, fontsize=7,
                   transform=axes.get_xaxis_transform(), ha="left", va="bottom")
     axes.set(xlabel="position (km)", ylabel="speed (km/h)")
     axes.set_title(f"Journey: {journey.label}", pad=40)

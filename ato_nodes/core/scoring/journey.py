@@ -131,6 +131,10 @@ class TimingIndices(NamedTuple):
     point: str        # the stop's station or the passing point's name
     kind: str         # DEPARTURE, ARRIVAL or PASSING
     mark: float       # m along the line
+    earliest: float   # s, its window on the timetable's clock (NaN: not set)
+    latest: float
+    min_speed: float  # m/s, a passing point's speed bounds (NaN: not set)
+    max_speed: float
     time: float       # s, run clock (NaN: not reached, or no stop)
     miss: float       # s outside its window: 0 inside, + late, - early (NaN: no time)
     speed: float      # m/s as the head passed it (NaN at a stop)
@@ -234,26 +238,33 @@ def _timed_point(station: StationIndices, kind: str, window: Window, time: float
                  clock: float) -> TimingIndices:
     """A stop's arrival or departure against its window."""
     nan = math.nan
+    point = TimingIndices(station.station, kind, station.mark, *_bounds(window), nan, nan,
+                          nan, "", "")
     if not math.isfinite(time):
-        why = station.reason or station.outcome
         if station.outcome == STOPPED:  # standing at the run's end: not left
-            return TimingIndices(station.station, kind, station.mark, nan, nan, nan,
-                                 NOT_JUDGED, "still standing at the run's end")
-        return TimingIndices(station.station, kind, station.mark, nan, nan, nan,
-                             FAIL if station.outcome == PASSED else NOT_JUDGED, why)
+            return point._replace(verdict=NOT_JUDGED, reason="still standing at the run's end")
+        return point._replace(verdict=FAIL if station.outcome == PASSED else NOT_JUDGED,
+                              reason=station.reason or station.outcome)
     miss = window.miss(time + clock)
-    reason = f"{miss:+.1f} s outside {window_text(window)}" if miss else ""
-    return TimingIndices(station.station, kind, station.mark, time, miss, nan,
-                         FAIL if miss else PASS, reason)
+    return point._replace(time=time, miss=miss, verdict=FAIL if miss else PASS,
+                          reason=f"{miss:+.1f} s outside {window_text(window)}" if miss else "")
+
+
+def _bounds(window: Window, low: float | None = None, high: float | None = None
+            ) -> tuple[float, float, float, float]:
+    """A timing point's window and speed bounds as TimingIndices holds them (NaN unset)."""
+    return tuple(math.nan if value is None else float(value)
+                 for value in (window.earliest, window.latest, low, high))
 
 
 def _passing(point: PassingPoint, t: np.ndarray, position: np.ndarray, speed: np.ndarray,
              clock: float) -> TimingIndices:
     """When and how fast the head first reached a passing point (interpolated between
     the samples either side), against its window and speed bounds."""
+    bounds = _bounds(point.window, point.min_speed, point.max_speed)
     beyond = np.flatnonzero(position >= point.position)
     if not beyond.size or beyond[0] == 0:
-        return TimingIndices(point.name, PASSING, point.position, math.nan, math.nan,
+        return TimingIndices(point.name, PASSING, point.position, *bounds, math.nan, math.nan,
                              math.nan, NOT_JUDGED, "the run ended before it")
     k = int(beyond[0])
     share = (point.position - position[k - 1]) / (position[k] - position[k - 1])
@@ -265,7 +276,7 @@ def _passing(point: PassingPoint, t: np.ndarray, position: np.ndarray, speed: np
         broken.append(f"{passed * MS_TO_KMH:.1f} km/h below {point.min_speed * MS_TO_KMH:g} km/h")
     if point.max_speed is not None and passed > point.max_speed:
         broken.append(f"{passed * MS_TO_KMH:.1f} km/h above {point.max_speed * MS_TO_KMH:g} km/h")
-    return TimingIndices(point.name, PASSING, point.position, time, miss, passed,
+    return TimingIndices(point.name, PASSING, point.position, *bounds, time, miss, passed,
                          FAIL if broken else PASS, "; ".join(broken))
 
 
@@ -511,11 +522,13 @@ def format_timing_points(points: list[dict]) -> list[str]:
     if not points:
         return []
     width = max(len(point["point"]) for point in points)
-    lines = [f"  {'timing point':<{width + 10}}  {'time s':>8}  {'outside s':>9}  "
-             f"{'km/h':>6}  verdict"]
+    lines = [f"  {'timing point':<{width + 10}}  {'window s':>13}  {'time s':>8}  "
+             f"{'outside s':>9}  {'km/h':>6}  verdict"]
     for p in points:
-        lines.append(f"  {p['point']:<{width}} {p['kind']:>9}  {_cell(p['time'], '{:.1f}'):>8}  "
-                     f"{_cell(p['miss'], '{:+.1f}'):>9}  "
-                     f"{_cell(p['speed'] * MS_TO_KMH if _known(p['speed']) else None, '{:.1f}'):>6}"
-                     f"  {': '.join(filter(None, (p['verdict'], p['reason'])))}")
+        window = f"{_cell(p['earliest'], '{:g}')}-{_cell(p['latest'], '{:g}')}"
+        speed = p["speed"] * MS_TO_KMH if _known(p["speed"]) else None
+        lines.append(f"  {p['point']:<{width}} {p['kind']:>9}  {window:>13}  "
+                     f"{_cell(p['time'], '{:.1f}'):>8}  {_cell(p['miss'], '{:+.1f}'):>9}  "
+                     f"{_cell(speed, '{:.1f}'):>6}  "
+                     f"{': '.join(filter(None, (p['verdict'], p['reason'])))}")
     return lines
