@@ -147,16 +147,20 @@ class Timetable:
 
     def on_line(self, line: Line) -> bool:
         """Whether a run of `line` (by contents) may drive it: a timetable file's own line;
-        a TTOBench journey's track, with or without a station at each of its stops."""
+        a TTOBench journey's track (its geometry: with or without a station at each of its
+        stops, its limits capped at the run's train's maximum speed or not)."""
         if not self.journey:
             return self.line == line
-        return dataclasses.replace(self.line, stations=()) == \
-            dataclasses.replace(line, stations=())
+        return _geometry(self.line) == _geometry(line)
 
     def for_train(self, train: str) -> bool:
         """Whether a run of train `train` (plant.train) may drive it: a timetable file's
         own train; a TTOBench journey (planned for none) any."""
         return bool(self.journey) or self.train == train
+
+
+def _geometry(line: Line) -> Line:
+    return dataclasses.replace(line, stations=(), speed_limits=())
 
 
 def load_timetable(path: str | Path) -> Timetable:

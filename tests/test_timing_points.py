@@ -1,0 +1,203 @@
+"""Journeys of timing points: a TTOBench journey file as a timetable
+(core/targets/timetable.py), its sections planned to their passing points' windows
+(core/targets/served.py) and every timing point judged (core/scoring/journey.py)."""
+
+import dataclasses
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.paths import config_dir
+from ato_nodes.core.config.schema import defaults
+from ato_nodes.core.scoring.journey import (ARRIVAL, DEPARTURE, FAIL, NOT_JUDGED, PASS, PASSING,
+                                            journey_indices, journey_record)
+from ato_nodes.core.targets import served
+from ato_nodes.core.targets.timetable import (JOURNEYS, Window, check_running_times,
+                                              journey_file, journey_on, load_timetable)
+from ato_nodes.core.train.line import Line, Section
+from ato_nodes.core.train.plant import TrainParameters
+from ato_nodes.core.train.ttobench import Journey, TimingPoint, load_train
+from ato_nodes.results.journeys import TIMING_MISSED, WORST_ARRIVAL, worst_stations
+
+SHIPPED = JOURNEYS / "CH_StGallen_Wil_Journey_01.json"
+DT = 0.1  # s, the synthetic runs' period
+
+
+def kiss() -> dict:
+    """A run's values with the SBB KISS as the plant and an on-time ato curve."""
+    values = defaults()
+    train = load_train(config_dir() / "ttobench" / "trains" / "CH_Stadler_KISS_SBB.json")
+    values.update(train.plant_values(values["plant.gravity"]))
+    values.update({"profile.ato.on_time": True, "profile.envelope_share": 0.9,
+                   "profile.jerk": 0.5, "profile.ato.start_speed": 0.1,
+                   "profile.ato.acceleration": 0.6, "profile.ato.deceleration": 0.6,
+                   "profile.journey.recovery": 5.0, "profile.journey.catch_up": 0})
+    return values
+
+
+def test_a_ttobench_journey_is_a_timetable_of_windows():
+    timetable = load_timetable(SHIPPED)
+    first, middle, last = timetable.stops
+    assert (first.departure, middle.arrival, middle.departure, last.arrival) == (
+        0.0, 680.0, 800.0, 1450.0)  # arriving at the latest, departing at the earliest
+    assert middle.arrival_window == Window(620.0, 680.0)
+    assert middle.departure_window == Window(800.0, 840.0)
+    assert middle.least_dwell == 120.0 and middle.station == "km 15"
+    assert [s.running_time for s in timetable.sections] == [680.0, 650.0]
+    (one,), (two,) = (section.passing for section in timetable.sections)
+    assert (one.name, one.position, one.window, one.min_speed) == (
+        "km 12.5", 12500.0, Window(480.0, 540.0), pytest.approx(10 / 3.6))
+    assert two.window == Window(1200.0, 1250.0) and two.min_speed is None
+    assert timetable.journey == "CH_StGallen_Wil_Journey_01" and timetable.for_train("any")
+    assert timetable.where(3) == "timing points entry 3"
+
+
+def test_a_window_tells_how_far_outside():
+    window = Window(10.0, 20.0)
+    assert [window.miss(t) for t in (5.0, 10.0, 20.0, 26.5)] == [-5.0, 0.0, 0.0, 6.5]
+    assert Window(None, 20.0).miss(-1e9) == 0.0 and Window(10.0, None).miss(1e9) == 0.0
+
+
+def test_a_journey_is_given_by_its_file_from_anywhere_or_its_id(tmp_path):
+    assert journey_file("CH_StGallen_Wil_Journey_01") == str(SHIPPED)
+    copy = tmp_path / "elsewhere" / "mine.json"  # no tracks/ beside it: the shipped track
+    copy.parent.mkdir()
+    shutil.copy(SHIPPED, copy)
+    assert journey_file(str(copy)) == str(copy)
+    assert load_timetable(copy).stops == load_timetable(SHIPPED).stops
+    with pytest.raises(ScenarioError, match="unknown TTOBench journey 'nowhere'"):
+        journey_file("nowhere")
+
+
+def edited(tmp_path, rows) -> str:
+    document = json.loads(SHIPPED.read_text())
+    document["timing points"]["values"] = rows
+    path = tmp_path / "journey.json"
+    path.write_text(json.dumps(document))
+    return str(path)
+
+
+def test_bad_journeys_are_one_line_naming_the_file_and_entry(tmp_path):
+    untimed = edited(tmp_path, [[0, 0, 0, 0, 0], [15000, None, None, 0, 0]])
+    with pytest.raises(ScenarioError, match=r"journey.json: timing points entry 2: a stop "
+                       "needs a lower or an upper time constraint"):
+        load_timetable(untimed)
+    tight = load_timetable(edited(tmp_path, [[0, 0, 0, 0, 0], [15000, 100, 200, 0, 0]]))
+    with pytest.raises(ScenarioError, match=r"journey.json timing points entry 2: the running "
+                       "time 200 s from km 0 to km 15 is below its minimum"):
+        check_running_times(tight, kiss())
+    track = tmp_path / "tracks" / "CH_StGallen_Wil.json"  # the library's layout: ../tracks
+    track.parent.mkdir()
+    track.write_text("{")
+    (tmp_path / "journeys").mkdir()
+    beside = tmp_path / "journeys" / "journey.json"
+    shutil.copy(SHIPPED, beside)
+    with pytest.raises(ScenarioError, match=r"tracks/CH_StGallen_Wil.json line 1: malformed"):
+        load_timetable(beside)
+
+
+def test_the_planner_keeps_a_passing_window_or_says_it_cannot():
+    values = kiss()
+    timetable = load_timetable(SHIPPED)
+    train = TrainParameters.from_values(values)
+    table, notice = served.new_journey_table(timetable, values, timetable.line, train)
+    first, second = timetable.sections
+    own = served.section_line(timetable.line, first.start, first.end)
+    planned = dataclasses.replace(own, planned_run_time=675.0)
+    uncapped = served.ato_curve(values, planned, train)
+    assert served.passing_time(uncapped, 12500.0) > 540.0  # a single cruise passes too late
+    curve, said = served.timed_curve(values, planned, train, first, 0.0)
+    assert said == [] and not curve.notice
+    low, high = served.passing_window(first.passing[0], 0.0, 5.0)
+    assert (low, high) == (485.0, 535.0)
+    assert high - 1.0 < served.passing_time(curve, 12500.0) <= high + served.CAP_TOLERANCE
+    assert curve.planned_run_time == pytest.approx(675.0, abs=0.05)  # still on time
+    assert table.times[0, 0] == pytest.approx(curve.planned_run_time)
+    # the second: 9.6 km after km 20 take longer than its window leaves to the arrival
+    assert notice == ("km 15 - km 29.5561: km 20: the window [1200, 1250] s cannot be met "
+                      "with the arrival by this train (planned at "
+                      f"{notice.split('planned at ')[1].split(' s)')[0]} s); passing it as "
+                      "the on-time curve does")
+
+
+def synthetic(points) -> tuple:
+    """A timetable of TimingPoints (position m, earliest, latest, min m/s, max m/s) on a
+    flat 3 km line."""
+    line = Line("flat", 3000.0, (), (), (), (Section(0.0, 3000.0, 30.0),), (), (), None)
+    journey = Journey("flat_1", "TTOBench v1.5", SHIPPED, "flat",
+                      tuple(TimingPoint(*point) for point in points))
+    return journey_on(journey, line, "")
+
+
+STOPPING = (0.0, 0.0)
+POINTS = [(0.0, 0.0, 0.0, *STOPPING), (500.0, 40.0, 60.0, 5.0, 20.0),
+          (1000.0, 90.0, 110.0, *STOPPING), (1000.0, 130.0, 150.0, *STOPPING),
+          (2000.0, 230.0, 250.0, *STOPPING)]
+
+
+def run(legs):
+    """Trapezoids: (metres, seconds) legs with 20 s ramps, or a standstill (0, seconds)."""
+    knots, speeds = [0.0], [0.0]
+    for metres, seconds in legs:
+        now = knots[-1]
+        if not metres:
+            knots.append(now + seconds)
+            speeds.append(0.0)
+            continue
+        cruise = metres / (seconds - 20.0)
+        knots += [now + 20.0, now + seconds - 20.0, now + seconds]
+        speeds += [cruise, cruise, 0.0]
+    t = np.arange(round(knots[-1] / DT) + 1) * DT
+    speed = np.interp(t, knots, speeds)
+    position = np.concatenate(([0.0], np.cumsum((speed[1:] + speed[:-1]) / 2 * DT)))
+    return {"t": t, "position": position, "speed": speed, "target": speed,
+            "force": np.zeros_like(t)}
+
+
+def test_every_timing_point_is_judged():
+    timetable = synthetic(POINTS)
+    series = run([(1000.0, 100.0), (0.0, 35.0), (1000.0, 120.0), (0.0, 10.0)])
+    indices = journey_indices(series, timetable, 300.0)
+    kinds = [(p.point, p.kind) for p in indices.timing]
+    assert kinds == [("km 0.5", PASSING), ("km 1", ARRIVAL), ("km 1", DEPARTURE),
+                     ("km 2", ARRIVAL)]
+    passing, arrival, departure, last = indices.timing
+    # 125 m in the 20 s ramp to 12.5 m/s, then 375 m at it
+    assert passing.time == pytest.approx(50.0) and passing.speed == pytest.approx(12.5)
+    assert (passing.verdict, passing.miss, passing.min_speed) == (PASS, 0.0, 5.0)
+    assert (arrival.time, arrival.verdict) == (pytest.approx(100.0), PASS)
+    assert departure.verdict == PASS and 135.0 <= departure.time <= 135.0 + 1.5 * DT
+    assert (last.earliest, last.latest) == (230.0, 250.0)
+    assert last.miss == pytest.approx(5.0) and last.verdict == FAIL
+    assert last.reason == "+5.0 s outside [230, 250] s"
+    station = indices.stations[-1]
+    assert station.verdict == FAIL and "arrival +5.0 s outside its window" in station.reason
+    assert indices.stations[1].arrival_lateness == 0.0  # inside its window
+    assert indices.verdict == FAIL
+    assert worst_stations(indices)[TIMING_MISSED] == 1.0
+    assert worst_stations(indices)[WORST_ARRIVAL] == pytest.approx(5.0)
+    assert [p["kind"] for p in journey_record(indices)["timing_points"]] == [
+        PASSING, ARRIVAL, DEPARTURE, ARRIVAL]
+
+
+def test_a_passing_point_s_speed_bounds_and_a_run_that_ends_before():
+    bounded = [list(point) for point in POINTS]
+    bounded[1][3] = 15.0  # at least 54 km/h
+    series = run([(1000.0, 100.0), (0.0, 35.0), (1000.0, 115.0), (0.0, 10.0)])
+    indices = journey_indices(series, synthetic(bounded), 300.0)
+    passing = indices.timing[0]
+    assert passing.verdict == FAIL and passing.reason == "45.0 km/h below 54 km/h"
+    assert all(p.verdict == PASS for p in indices.timing[1:])
+    early = {name: values[:300] for name, values in series.items()}  # 30 s: before km 0.5
+    cut = journey_indices(early, synthetic(POINTS), 300.0)
+    assert {p.verdict for p in cut.timing} == {NOT_JUDGED}
+    assert cut.timing[0].reason == "the run ended before it"
+
+
+def test_a_timetable_file_has_no_timing_points():
+    timetable = load_timetable(config_dir() / "timetables" / "metro-line.yaml")
+    assert timetable.passing == () and not timetable.journey
+    assert all(stop.arrival_window is None for stop in timetable.stops)
