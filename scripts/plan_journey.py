@@ -6,11 +6,18 @@ its time (seed 002's dynamic programme).
 
     python scripts/plan_journey.py metro-line
     python scripts/plan_journey.py hsr-journey --compare
+    python scripts/plan_journey.py CH_StGallen_Wil_Journey_01 \
+        --train ttobench/trains/CH_Stadler_KISS_SBB.json
 
 LINE is a line file, or the name of one in msg_config/lines/ (LINE.yaml); its timetable
 is --timetable, a file or the name of one in msg_config/timetables/ (default: the line's
 own name there), which must be for that line. --train plans for another train
-preset than the timetable's (its minimum running times are checked again). Prints per
+preset than the timetable's (its minimum running times are checked again). LINE may
+instead be a TTOBench journey (a .json file from anywhere, or the id of one in
+msg_config/ttobench/journeys/) on its associated track, for the --train given (a preset
+or a TTOBench train file): its stops' windows fix each section's time (the latest
+arrival, the least energy), so each section is driven in it and nothing is split;
+each passing point's time on that run is said against its window. Prints per
 section the minimum running time (the ato curve at the full envelope share), the
 timetable's time, the allocated time and the energy of the section driven in it, and the
 totals; --compare adds the uniform allocation (the supplement in proportion to the
@@ -28,13 +35,15 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
 from ato_nodes.core.config.scenario import complete, train_preset
 from ato_nodes.core.targets import journey
-from ato_nodes.core.targets.timetable import check_minimum_times, load_timetable
+from ato_nodes.core.scoring.journey import window_text
+from ato_nodes.core.targets.timetable import (JOURNEYS, check_minimum_times, journey_file,
+                                              load_timetable)
 
 
 def parse_args():
     parser = _cli.argument_parser(__doc__)
     parser.add_argument("line", metavar="LINE", help="line file, or its name in "
-                        "msg_config/lines/")
+                        "msg_config/lines/; or a TTOBench journey, its .json file or id")
     parser.add_argument("--timetable", help="timetable file, or its name in "
                         "msg_config/timetables/ (default: LINE's name there)")
     parser.add_argument("--train", help="train preset (default: the timetable's)")
@@ -56,9 +65,30 @@ def given_file(given: str, folder: str, what: str) -> Path:
     return shipped
 
 
+def is_ttobench_journey(given: str) -> bool:
+    """A TTOBench journey's file (.json) or the id of a shipped one, not a line."""
+    return Path(given).suffix == ".json" or (JOURNEYS / f"{given}.json").is_file()
+
+
+def load_journey(args):
+    """A TTOBench journey's (timetable, run values, minimum running times), for --train."""
+    if args.train is None:
+        raise ScenarioError(f"{args.line} is a TTOBench journey, planned for no train: give "
+                            "--train (a train preset or a TTOBench train file)")
+    if args.timetable is not None or args.compare:
+        raise ScenarioError(f"{args.line} is a TTOBench journey: its stops' windows fix each "
+                            "section's time, so there is no --timetable and nothing to "
+                            "--compare")
+    timetable = load_timetable(journey_file(args.line))
+    values = complete({"plant.train": args.train}, [Path.cwd()])
+    return timetable, values, check_minimum_times(timetable, values)
+
+
 def load(args):
     """(timetable, run values, minimum running times), or one line and exit 2."""
     try:
+        if is_ttobench_journey(args.line):
+            return load_journey(args)
         line_file = given_file(args.line, "lines", "line")
         if not line_file.is_file():
             raise ScenarioError(f"no line file {line_file}")
@@ -91,9 +121,11 @@ def main() -> None:
 
 
 def report(timetable, train: str, plan: journey.JourneyPlan, comparison) -> None:
+    split = ("each section in its window's time" if timetable.journey
+             else f"marginal energy {plan.allocation.marginal:.0f} kW")
     print(f"{timetable.line.name}, train {train}: running time {timetable.running_time:g} s "
           f"(minimum {sum(plan.minimums):.1f} s + {supplement(plan, timetable):.1f} %), "
-          f"marginal energy {plan.allocation.marginal:.0f} kW")
+          f"{split}")
     extra = " | uniform s | uniform kWh" if comparison else ""
     print(f"| section | km | minimum s | timetable s | allocated s | driven s | kWh{extra} |")
     print("|---|---|---|---|---|---|---|" + ("---|---|" if comparison else ""))
@@ -107,6 +139,8 @@ def report(timetable, train: str, plan: journey.JourneyPlan, comparison) -> None
                     f"{comparison.uniform_runs[i].energy_kwh:.2f}")
         print(row + " |")
     print(f"allocation: {plan.energy_kwh:.2f} kWh")
+    for line in passing_lines(timetable, plan):
+        print(line)
     if comparison:
         uniform = sum(run.energy_kwh for run in comparison.uniform_runs)
         best = comparison.best_energy_kwh
@@ -115,6 +149,21 @@ def report(timetable, train: str, plan: journey.JourneyPlan, comparison) -> None
         print(f"allocation {100 * (plan.energy_kwh / best - 1):+.2f} % against the optimum, "
               f"{100 * (1 - plan.energy_kwh / uniform):.2f} % saved against uniform "
               f"(uniform {100 * (uniform / best - 1):+.2f} % against the optimum)")
+
+
+def passing_lines(timetable, plan: journey.JourneyPlan) -> list[str]:
+    """Each passing point of a TTOBench journey: when the section's run passes it against
+    its window (the journey's clock)."""
+    lines = []
+    for section, problem, run, stop in zip(timetable.sections, plan.sections, plan.driven,
+                                           timetable.stops, strict=False):
+        for point in section.passing:
+            passes = stop.departure + journey.passing_time(run, problem, point.position)
+            miss = point.window.miss(passes)
+            lines.append(f"{point.name}: passed at {passes:.1f} s, window "
+                         f"{window_text(point.window)}"
+                         + (f": {miss:+.1f} s outside" if miss else ": inside"))
+    return lines
 
 
 def supplement(plan: journey.JourneyPlan, timetable) -> float:

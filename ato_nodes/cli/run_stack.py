@@ -3,6 +3,7 @@ recorded to a rosbag2 MCAP bag, scored at the end.
 
     python scripts/run_stack.py                       # seed 000, paper-faithful
     python scripts/run_stack.py --scenario seed000-step --set adrc.r0=20
+    python scripts/run_stack.py --scenario stgallen-wil-journey --journey FILE_OR_ID
     python scripts/run_stack.py --external controller -- python my_controller.py
     python scripts/run_stack.py --external controller    # prints where; you start it
 
@@ -27,6 +28,7 @@ from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.core.config.schema import steps
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.scoring.catalogue import format_indices
+from ato_nodes.core.targets.timetable import journey_file
 from ato_nodes.bags.summary import bag_contents, write_summary
 
 EXIT_FAILED, EXIT_INTERRUPTED = 1, 130
@@ -41,6 +43,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="scenario name in msg_config/scenarios or a YAML file "
                              "(default seed000)")
     parser.add_argument("--duration", type=float, help="simulated seconds (overrides run.duration)")
+    parser.add_argument("--journey", metavar="FILE_OR_ID",
+                        help="drive this TTOBench journey (its .json file, or the id of one in "
+                             "msg_config/ttobench/journeys/) as the scenario's journey: sets "
+                             "profile.journey.timetable")
     parser.add_argument("--out", type=Path,
                         help="bag directory to create (default bags/<scenario>-<time>)")
     parser.add_argument("--real-time", action="store_true", help="pace the clock at wall speed")
@@ -117,6 +123,8 @@ def checked_values(args: argparse.Namespace) -> dict:
     """The run's values from the options, checked; a problem is one line and exit 2."""
     try:
         overrides = list(args.set)
+        if args.journey is not None:
+            overrides.append(f"profile.journey.timetable={journey_file(args.journey)}")
         if args.duration is not None:
             overrides.append(f"run.duration={args.duration}")
         if args.real_time:

@@ -236,6 +236,8 @@ def plan_journey(timetable: Timetable, values: dict, minimums: tuple[float, ...]
     (`values`), each section at least its minimum running time (timetable.
     check_minimum_times)."""
     sections = section_problems(timetable, values)
+    if timetable.journey:  # a TTOBench journey's windows fix each section's time
+        return windowed_plan(timetable, sections, minimums)
     total = timetable.running_time
     supplement = total - sum(minimums)
     runs = tuple(sampled_runs(section, minimum + supplement)
@@ -244,6 +246,27 @@ def plan_journey(timetable: Timetable, values: dict, minimums: tuple[float, ...]
     driven = tuple(section.driven(t)
                    for section, t in zip(sections, allocation.times, strict=True))
     return JourneyPlan(sections, minimums, runs, allocation, driven)
+
+
+def windowed_plan(timetable: Timetable, sections: tuple[SectionProblem, ...],
+                  minimums: tuple[float, ...]) -> JourneyPlan:
+    """A TTOBench journey's plan: each section driven in its own running time, its
+    arrival window's latest less its departure (the stops' windows leave no time to move
+    between sections, and a section's least energy falls with its time); no marginal
+    energy across sections (NaN)."""
+    times = tuple(section.running_time for section in timetable.sections)
+    driven = tuple(problem.driven(t) for problem, t in zip(sections, times, strict=True))
+    runs = tuple([point(run, problem)] for run, problem in zip(driven, sections, strict=True))
+    return JourneyPlan(sections, minimums, runs, Allocation(times, math.nan), driven)
+
+
+def passing_time(run: strategy.Strategy, section: SectionProblem, position: float) -> float:
+    """When `run` of `section` passes `position` (m along the line), s after its
+    departure (the train's departure time included, as its running time counts)."""
+    speeds = np.maximum(0.5 * (run.speeds[1:] + run.speeds[:-1]), 1e-6)
+    times = np.concatenate(([0.0], np.cumsum(np.diff(run.positions) / speeds)))
+    return section.departure + float(np.interp(position - section.section.start,
+                                               run.positions, times))
 
 
 class Comparison(NamedTuple):
