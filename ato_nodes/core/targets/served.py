@@ -35,6 +35,12 @@ the run's events topic ('replanned ...') and publishes it for the recorder; `rep
 derives the same from a run's positions. profile.journey.dwell_extension holds the train
 longer at given stops (an injected delay).
 
+A TTOBench journey (timetable.journey_timetable: windows at its stops, passing points
+between them) is served alike: each section on time for its arrival window's latest time
+less the recovery, held until its departure window opens; its curve capped to pass each
+passing point inside the point's window (timed_curve), or, where the train cannot with
+the arrival kept, said at start-up in the plan's notice.
+
 The tables (JourneyTable) are the sections' curves one after another, read by the same
 functions in Python and compiled code (core/run/fast_loop.py), to the same bits.
 """
@@ -70,8 +76,10 @@ AT_ORIGIN = 0.1
 
 JOURNEY_PARAMETERS = (
     param("profile.journey.timetable", "", "timetable file (msg_config/timetables/*.yaml) of "
-          "the journey to drive, of the run's line.file and plant.train; relative to the "
-          "scenario file, else to msg_config/", PROFILE_NODES),
+          "the journey to drive, of the run's line.file and plant.train, or a TTOBench "
+          "journey file (.json, msg_config/ttobench/journeys/) on the run's line.file's "
+          "track, for any train; relative to the scenario file, else to msg_config/",
+          PROFILE_NODES),
     param("profile.journey.berth", 1.0, "a train standing less than this before a stop mark, "
           "or past it, has arrived there and is held until it leaves, m", PROFILE_NODES,
           0.01, 100.0),
