@@ -24,7 +24,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import resolve_file
 from ato_nodes.core.config.scenario import complete
 from ato_nodes.core.targets import strategy
-from ato_nodes.core.train.line import load_line
+from ato_nodes.core.train.lines import load_line_file
 from ato_nodes.studies.runner import check_counts, in_pool, write_outputs
 
 SUPPLEMENTS = (0.03, 0.05, 0.10)
@@ -32,7 +32,7 @@ SUPPLEMENTS = (0.03, 0.05, 0.10)
 
 def evaluate(job: dict) -> dict:
     """One (algorithm, supplement, seed) run; the indices on the real line."""
-    line = load_line(resolve_file(job["line"], [Path.cwd()]))
+    line = load_line_file(resolve_file(job["line"], [Path.cwd()]))
     problem, planning = strategy.problems(line, complete({"plant.train": job["train"]}, []),
                                           job["ds"], job.get("ignore_neutral", False))
     outcome = strategy.evaluate(job["algorithm"], problem, planning, None,
@@ -58,7 +58,7 @@ def main() -> None:
     args = parser.parse_args()
     try:  # the counts, the line and the train, before the pool starts (its workers load them)
         check_counts(workers=args.workers, seeds=args.seeds)
-        load_line(resolve_file(args.line, [Path.cwd()]))
+        load_line_file(resolve_file(args.line, [Path.cwd()]))
         complete({"plant.train": args.train}, [])
     except ScenarioError as exc:
         _cli.fail(str(exc))

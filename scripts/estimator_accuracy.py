@@ -29,7 +29,7 @@ from ato_nodes.core.control.estimation import (PARAMETERS, estimate_series, esti
                                                load_weighing)
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.train.line import line_of
+from ato_nodes.core.train.lines import line_of
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.studies.runner import Variant, prepare_variants
 

@@ -37,7 +37,7 @@ import numpy as np
 from ato_nodes.results import jsontext
 from ato_nodes.core.targets import strategy
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.train.line import load_line
+from ato_nodes.core.train.lines import load_line_file
 from ato_nodes.core.base.paths import resolve_file
 from ato_nodes.core.config.scenario import complete, train_preset
 from ato_nodes.core.base.units import MS_TO_KMH
@@ -74,7 +74,7 @@ def main() -> None:
         _cli.fail("--share must lie in [0.1, 1]")
     try:
         line_path = resolve_file(args.line, [Path.cwd()])
-        line = load_line(line_path)
+        line = load_line_file(line_path)
         train_preset(args.train)
         values = complete({"plant.train": args.train}, [])
     except ScenarioError as exc:

@@ -28,7 +28,8 @@ from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME, defaults
 from ato_nodes.core.targets.timetable import minimum_running_time, section_line
 from ato_nodes.core.train import ttobench
-from ato_nodes.core.train.line import Line, Section, with_speed_restrictions
+from ato_nodes.core.train.line import Line
+from ato_nodes.core.train.lines import capped
 
 REAL_TRACKS = ("CH_*.json", "CN_*.json", "SE_*.json")
 PLANNED_RATES = ("profile.ato.acceleration", "profile.ato.deceleration")
@@ -57,8 +58,7 @@ def minimum_time(line: Line, train: ttobench.Train, values: dict) -> tuple[float
     """(the train's minimum running time over the line's sections, s; whether its
     maximum speed is below the line's highest limit)."""
     slower = train.max_speed < max(section.value for section in line.speed_limits)
-    if slower:
-        line = with_speed_restrictions(line, (Section(0.0, line.length, train.max_speed),))
+    line = capped(line, values["plant.max_running_speed"])  # as a run's line is
     stops = [station.position for station in line.stations]
     return sum(minimum_running_time(section_line(line, start, end), values)
                for start, end in zip(stops, stops[1:], strict=False)), slower

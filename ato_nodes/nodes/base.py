@@ -32,7 +32,7 @@ from std_msgs.msg import String
 from ato_nodes.core.base import yamlfile
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.faults import parse_fault
-from ato_nodes.core.config.scenario import complete, parameter_spec, train_preset
+from ato_nodes.core.config.scenario import complete, parameter_spec
 from ato_nodes.core.config.schema import (SPEC_BY_NAME, NodeValues, ParamSpec, for_node,
                                           load_plugins)
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
@@ -216,8 +216,7 @@ class AtoNode(Node):
             parameter_spec(name, overrides[name].value, where)  # refused as a scenario's
         given = {spec.name: spec.check(overrides[spec.name].value, self.role)
                  for spec in for_node(self.role) if spec.name in overrides}
-        if given.get("plant.train"):
-            train_preset(given["plant.train"])  # an unknown train: one line, exit 2
+        # an unknown train or a bad train file: one line, exit 2 (scenario.complete)
         values = NodeValues(self.role, complete(given, [*parameter_file_folders(), Path.cwd()]))
         live = self.live_parameters(values)
         for spec in for_node(self.role, values):  # declared with what the node runs with

@@ -11,7 +11,6 @@ component sees the same context in a node and in simulate().
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 
@@ -23,7 +22,8 @@ from ..targets import profiles, served, timetable
 from ..targets.profiles import (NO_RAMP, DepartureRamp, departing, departure_ramp,
                                 feasible_plan, plan_table)
 from ..targets.served import START
-from ..train.line import Line, line_of
+from ..train.line import Line
+from ..train.lines import line_of
 from ..train.plant import OPEN_TRACK, TrainParameters
 from .components import PROFILES
 from .schema import steps
@@ -35,11 +35,12 @@ def ato_train(values) -> TrainParameters:
     train (the nominal one itself up to a reading of 1): a lighter train could give more
     specific force (N/kN), but the command limits (controller.u_min, u_max, N/kN) are
     the nominal train's, so a plan at the light train's envelope share would ask for
-    force the limiter does not let through."""
+    force the limiter does not let through. Its resistance as the real train's grows
+    with the load (TrainParameters.loaded: plant.davis_absolute)."""
     nominal = TrainParameters.from_values(values)
     reading = values["train.mass_reading"]
-    return nominal if reading <= 1.0 else dataclasses.replace(nominal,
-                                                              mass=reading * nominal.mass)
+    return nominal if reading <= 1.0 else nominal.loaded(reading,
+                                                         values["plant.davis_absolute"])
 
 
 # The process's caches of built plans, each keyed by what its plans are built from: the

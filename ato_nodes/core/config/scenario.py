@@ -24,7 +24,8 @@ from ..base.spec import ParamSpec
 from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
-from ..train.line import line_of
+from ..train.lines import line_of
+from ..train.ttobench import load_train
 from . import plugins
 from .components import CONTROLLERS
 from .context import RunContext
@@ -138,9 +139,7 @@ def _loaded(name_or_file: str, chain: tuple[Path, ...] = ()) -> tuple[dict[str, 
         values = complete(given, [path.parent], str(path))
         check_not_derived(given, values, str(path))
         return values, str(path)
-    for name in FILE_PARAMETERS:
-        if given.get(name):
-            given[name] = resolve_file(given[name], [path.parent])
+    given = resolved_files(given, [path.parent])
     try:
         return _overridden(base_values, given), str(path)
     except ScenarioError as exc:
@@ -211,15 +210,24 @@ def complete(given: dict[str, Any], bases: list[Path], where: str = "") -> dict[
     A given parameter of a kind the run does not use is refused (`where` names the
     source). The nodes complete what their parameter file gives them the same way, and
     take the derived parameters it gives (DERIVED_PARAMETERS: their launcher's)."""
+    given = resolved_files(given, bases)
     values = defaults()
     if given.get("plant.train"):
-        values.update(train_preset(given["plant.train"]))
+        values.update(train_preset(given["plant.train"], given.get("plant.gravity")))
     values.update(given)
     check_used(given, values, where)
-    for name in FILE_PARAMETERS:
-        if given.get(name):
-            values[name] = resolve_file(given[name], bases)
     return values
+
+
+def resolved_files(given: dict[str, Any], bases: list[Path]) -> dict[str, Any]:
+    """`given` with its file parameters absolute (FILE_PARAMETERS, and plant.train when it
+    names a TTOBench train file), each from the first of `bases` that holds it, else from
+    msg_config/ (core/base/paths.resolve_file)."""
+    resolved = dict(given)
+    for name in (*FILE_PARAMETERS, "plant.train"):
+        if given.get(name) and (name != "plant.train" or is_train_file(given[name])):
+            resolved[name] = resolve_file(given[name], bases)
+    return resolved
 
 
 def check_used(given, values: dict[str, Any], where: str = "") -> None:
@@ -235,8 +243,19 @@ def train_names() -> list[str]:
     return sorted(p.stem for p in (config_dir() / "trains").glob("*.yaml"))
 
 
-def train_preset(name: str) -> dict[str, Any]:
-    """The plant.* values of msg_config/trains/NAME.yaml (a flat mapping), checked."""
+TRAIN_FILE_SUFFIX = ".json"  # plant.train names a TTOBench train file, not a preset
+
+
+def is_train_file(name: str) -> bool:
+    return Path(name).suffix.lower() == TRAIN_FILE_SUFFIX
+
+
+def train_preset(name: str, gravity: float | None = None) -> dict[str, Any]:
+    """The plant.* values of a train, checked: msg_config/trains/NAME.yaml's (a flat
+    mapping), or a TTOBench train file's (NAME a .json path, absolute: resolved_files)
+    under `gravity` (plant.gravity, m/s^2; None: the schema's), plant.train its path."""
+    if is_train_file(name):
+        return ttobench_train(name, gravity)
     path = config_dir() / "trains" / f"{name}.yaml"
     if not path.is_file():
         raise ScenarioError(f"unknown train {name!r}; known: {', '.join(train_names())}")
@@ -250,6 +269,17 @@ def train_preset(name: str) -> dict[str, Any]:
             raise ScenarioError(f"{path}: {key!r} is not a plant parameter")
         values[key] = spec.check(value, str(path))
     return {**values, "plant.train": name}
+
+
+def ttobench_train(path: str, gravity: float | None) -> dict[str, Any]:
+    """The plant.* values of a TTOBench train file (core/train/ttobench.Train.plant_values
+    under `gravity`, None: the schema's plant.gravity), each checked by its spec naming
+    the file; one ScenarioError line for a missing or bad file."""
+    if gravity is None:
+        gravity = SPEC_BY_NAME["plant.gravity"].default
+    values = {key: SPEC_BY_NAME[key].check(value, f"{path} as {key}")
+              for key, value in load_train(path).plant_values(gravity).items()}
+    return {**values, "plant.train": path}
 
 
 def _flatten(mapping: dict, prefix: str = "") -> dict[str, Any]:
@@ -319,15 +349,14 @@ def _overridden(values: dict[str, Any], overrides: list[str] | dict[str, Any]
         where = "--set"
     check_used(overrides, {**values, **overrides}, where)
     check_not_derived(overrides, {**values, **overrides}, where)
-    for name in FILE_PARAMETERS:  # relative: from the working directory, else msg_config/
-        if overrides.get(name):
-            overrides[name] = resolve_file(overrides[name], [Path.cwd()])
+    # relative: from the working directory, else msg_config/
+    overrides = resolved_files(overrides, [Path.cwd()])
     merged = {**values, **overrides}
     if named:  # added to the run's own
         merged["run.plugins"] = plugins.joined((*plugins.references(
             values.get("run.plugins", "")), *named))
     if overrides.get("plant.train"):  # a new train: its preset, then the other overrides
-        merged.update(train_preset(overrides["plant.train"]))
+        merged.update(train_preset(overrides["plant.train"], merged["plant.gravity"]))
         merged.update(overrides)
     # another kind's parameters (a base's settings of the controller the scenario replaces)
     # go back to their defaults: a run holds only defaults for the kinds it does not use

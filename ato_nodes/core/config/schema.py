@@ -90,8 +90,11 @@ BASE: tuple[ParamSpec, ...] = (
           "this jerk, m/s^3, its acceleration zero at both ends (0 = the start speed at once, "
           "a target the standing train cannot follow; the papers' setting); the ato curve, "
           "the strategy and journeys", PROFILE_NODES, 0.0, 10.0),
-    param("plant.train", "", "train preset (msg_config/trains/NAME.yaml) whose plant.* values "
-       "the scenario starts from; the scenario's own plant.* values override it", PLANT_NODES),
+    param("plant.train", "", "train preset (msg_config/trains/NAME.yaml), or a TTOBench train "
+          "file (a .json path: relative to the scenario file, else msg_config/, e.g. "
+          "ttobench/trains/CN_Beijing_Subway.json; kept as its absolute path), whose plant.* "
+          "values the scenario starts from; the scenario's own plant.* values override it",
+          PLANT_NODES),
     param("plant.gamma", 0.11, "rotating-mass coefficient", PLANT_NODES, 0.0, 1.0),
     param("plant.gravity", 9.8, "g, m/s^2 (seed 000's xi = 0.0098 / (1 + gamma))", PLANT_NODES,
           9.0, 10.5),
@@ -127,6 +130,14 @@ BASE: tuple[ParamSpec, ...] = (
     param("plant.mass_factor", 1.0, "the real train's mass over the nominal plant.mass (its "
        "load: the envelopes in kN and kW then give less specific force), unknown to the ATO",
        "plant", 0.1, 10.0),
+    param("plant.davis_absolute", False, "the basic resistance in kN does not grow with the "
+          "load: plant.mass_factor (and a weighed train.mass_reading) divide the specific "
+          "Davis coefficients (N/kN) by the factor, as a TTOBench train's whole-train r0, r1, "
+          "r2 are (its values set true; false = N/kN kept, the resistance in kN grows with "
+          "the weight)", PLANT_NODES),
+    param("plant.max_running_speed", 0.0, "the train's maximum speed: caps the line's speed "
+          "limits for the plan and the scorer's overspeed alike (a TTOBench train's values "
+          "set it), m/s (0 = none)", PLANT_NODES, 0.0, 1e3),
     param("plant.lag_factor", 1.0, "the real actuator lag over the nominal "
        "plant.actuator_lag, unknown to the ATO", "plant", 0.0, 10.0),
     param("train.load_weighing", False, "the ATO weighs its train at departure (air-spring "

@@ -15,7 +15,7 @@ from ..config.scenario import apply_overrides, load_scenario, scenario_names
 from ..control import lssvm
 from ..config.schema import SPEC_BY_NAME, NodeValues
 from ..scoring.indices import RunningIndex
-from ..train.line import line_of
+from ..train.lines import line_of
 from . import fast_loop
 from .stages import SERIES, ControllerStage, PlantStage, ProfileStage
 

@@ -16,7 +16,8 @@ from ..config.context import RunContext
 from ..config.schema import defaults
 from ..scoring.indices import tracking_indices
 from ..scoring.operation import STANDSTILL, operation_indices
-from ..train.line import Line, load_line, parse_line, planned_to
+from ..train.line import Line
+from ..train.lines import for_train, load_line_file, parse_line_file
 
 # Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
 # travel as a ROS parameter (YAML) to the recorder, whose YAML round trips mangle
@@ -105,13 +106,15 @@ def notch_level(command: np.ndarray, parameters: dict) -> np.ndarray:
 
 
 def run_line(parameters: dict) -> Line | None:
-    """The run's line: the copy the bag carries (LINE_BASE64), else the file it names;
-    planned to the run's line.planned_run_time where it gave one."""
+    """The run's line: the copy the bag carries (LINE_BASE64; its format by line.file's
+    name, which the bag keeps), else the file it names; as the run's train ran it
+    (core/train/lines.for_train: capped at its maximum speed, planned to the run's
+    line.planned_run_time where it gave one)."""
     if parameters.get(LINE_BASE64):
-        return planned_to(parse_line(base64.b64decode(parameters[LINE_BASE64]).decode(),
-                                     parameters.get("line.file") or "<bag>"), parameters)
+        return for_train(parse_line_file(base64.b64decode(parameters[LINE_BASE64]).decode(),
+                                         parameters.get("line.file") or "<bag>"), parameters)
     if parameters.get("line.file") and Path(parameters["line.file"]).is_file():
-        return planned_to(load_line(parameters["line.file"]), parameters)
+        return for_train(load_line_file(parameters["line.file"]), parameters)
     return None
 
 

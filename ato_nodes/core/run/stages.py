@@ -41,7 +41,8 @@ from ..config.context import RunContext
 from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
 from ..targets.horizons import (LOOKAHEAD, PROFILE_START, profile_step)
-from ..train.line import Line, line_of
+from ..train.line import Line
+from ..train.lines import line_of
 from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
                            sensor_reading, train_outputs)
 from .last_stop import held, last_stop, standing
@@ -128,12 +129,12 @@ class PlantStage:
 
     def __init__(self, values: dict[str, Any], line: Line | None = None):
         nominal = TrainParameters.from_values(values)  # what the ATO knows; the real train:
+        loaded = nominal.loaded(values["plant.mass_factor"], values["plant.davis_absolute"])
         factor = values["plant.resistance_factor"]
         self.params = dataclasses.replace(
-            nominal, mass=values["plant.mass_factor"] * nominal.mass,
-            actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
-            **{name: factor * getattr(nominal, name) for name in ("davis_a", "davis_b",
-                                                                   "davis_c")})
+            loaded, actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
+            **{name: factor * getattr(loaded, name) for name in ("davis_a", "davis_b",
+                                                                  "davis_c")})
         if line is None:
             line = line_of(values)
         self.train = PointMassTrain(

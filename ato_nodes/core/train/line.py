@@ -259,14 +259,9 @@ TOP_KEYS = {"name", "length", "planned_run_time", "stations", *SECTION_KEYS}
 
 
 def load_line(path: str | Path) -> Line:
+    """A project line file (a run reads line.file by core/train/lines.load_line_file,
+    which takes a TTOBench track file too)."""
     return parse_line(yamlfile.read_text(path, "line file"), Path(path))
-
-
-def line_of(values) -> Line | None:
-    """The line of a run's values: line.file's (None: the open track), planned to the
-    run's line.planned_run_time where that is given."""
-    return planned_to(load_line(values["line.file"]) if values["line.file"] else None,
-                      values)
 
 
 def planned_to(line: Line | None, values) -> Line | None:

@@ -27,6 +27,7 @@ period, the command held constant over the period (zero-order hold).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -148,6 +149,16 @@ class TrainParameters:
         """Whether the train has a traction or brake envelope (plant.envelope)."""
         return math.isfinite(self.max_traction_force + self.max_traction_power
                              + self.max_brake_force + self.max_brake_power)
+
+    def loaded(self, factor: float, davis_absolute: bool) -> TrainParameters:
+        """This train at `factor` times its mass (a load, plant.mass_factor, or the mass
+        the ATO weighs): its envelopes in kN and kW then give 1/factor the specific force.
+        Its basic resistance in kN grows with the weight (the specific Davis coefficients,
+        N/kN, kept), or with `davis_absolute` (plant.davis_absolute: a TTOBench train's
+        whole-train r0, r1, r2) stays as it is: the coefficients over the factor."""
+        davis = {name: getattr(self, name) / factor if davis_absolute else getattr(self, name)
+                 for name in ("davis_a", "davis_b", "davis_c")}
+        return dataclasses.replace(self, mass=factor * self.mass, **davis)
 
     def constants(self) -> TrainConstants:
         return TrainConstants(

@@ -22,10 +22,11 @@ How the library's quantities map onto the project's (docs/reference.md "TTOBench
   speed-dependent term (a train's extra c(A) V^2 kN in a tunnel of cross section A) is
   tunnel_drag(), which no run applies yet.
 * Trains: the library's Davis coefficients are the whole train's, in kN; the project's
-  are per kN of weight, converted here at the train's own mass. The project's
-  plant.mass_factor scales all three with the weight (air drag too); a loaded TTOBench
-  train is instead plant.mass at the loaded mass with specific_davis() at that mass,
-  which keeps the library's absolute coefficients (Train.davis).
+  are per kN of weight, converted here at the train's own mass. A train's values set
+  plant.davis_absolute, under which plant.mass_factor (a load) leaves the resistance in
+  kN as it is (the library's absolute coefficients: air drag does not grow with the
+  load), and plant.max_running_speed, the train's maximum speed, which caps the line's
+  limits (core/train/lines.py).
 * Envelopes: traction the library's force and power, the brake the blended one
   (regenerative plus pneumatic), each capped at the comfort limit of the effective mass
   (Train.traction_envelope, Train.brake_envelope); what the library leaves out of a
@@ -253,9 +254,13 @@ def mean_curvature(radius_start: float, radius_end: float) -> float:
 
 def load_track(path: str | Path) -> Track:
     """A TTOBench track file, validated (one ScenarioError line naming file and field)."""
+    return parse_track(yamlfile.read_text(path, "TTOBench track"), path)
+
+
+def parse_track(text: str, path: str | Path) -> Track:
+    """load_track of a track file's `text` (a copy kept in a bag); `path` names it."""
     path = Path(path)
-    fields = Fields(path, read_json(path, "TTOBench track"), "track", TRACK_FIELDS,
-                    TRACK_OPTIONAL)
+    fields = Fields(path, parse_json(text, path), "track", TRACK_FIELDS, TRACK_OPTIONAL)
     metadata = fields.metadata()
     stops = _stops(fields)
     length = stops[-1]
@@ -667,13 +672,15 @@ class Train:
 
     def plant_values(self, gravity: float) -> dict[str, Any]:
         """The project's plant.* values of the train (a train preset's), under `gravity`
-        (plant.gravity): mass t, gamma = rho / 100, Davis per kN at its own mass, the
-        envelopes in kN and kW, plant.efficiency the traction efficiency, the length where
-        known (else the schema's point mass)."""
+        (plant.gravity): mass t, gamma = rho / 100, Davis per kN at its own mass and kept
+        absolute under a load (plant.davis_absolute), the envelopes in kN and kW, the
+        maximum speed (plant.max_running_speed), plant.efficiency the traction efficiency,
+        the length where known (else the schema's point mass)."""
         a, b, c = self.specific_davis(self.mass / 1000.0, gravity)
         traction, brake = self.traction_envelope(), self.brake_envelope()
         values = {"plant.mass": self.mass / 1000.0, "plant.gamma": self.rotating_share,
                   "plant.davis_a": a, "plant.davis_b": b, "plant.davis_c": c,
+                  "plant.davis_absolute": True, "plant.max_running_speed": self.max_speed,
                   "plant.envelope": True,
                   "plant.max_traction_force": traction[0] / KN,
                   "plant.max_traction_power": traction[1] / KW,

@@ -1,0 +1,68 @@
+"""A run's line from its file, whichever of the two formats it is in, as the run's train
+may run it: every reader of line.file (validation, the stages, the scorer, a bag's copy)
+reads it here.
+
+* A project line file (msg_config/lines/*.yaml): core/train/line.py.
+* A TTOBench track file (a .json path, msg_config/ttobench/tracks/): the Line of
+  core/train/ttobench.Track.line(), a station at every stop of the track.
+
+The format follows the file's name (TRACK_SUFFIX), so a bag, which keeps line.file's
+path and its text, re-reads the same line from its copy. The run's train caps the line's
+limits at its maximum speed (plant.max_running_speed: a TTOBench train's), so that the
+plan and the scorer's overspeed read the limits the train runs under.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+from ..base import yamlfile
+from .line import Line, Section, parse_line, planned_to, with_speed_restrictions
+from .ttobench import parse_track
+
+TRACK_SUFFIX = ".json"  # a TTOBench track file; any other name is a project line file
+
+
+def is_track_file(path: str | Path) -> bool:
+    return Path(path).suffix.lower() == TRACK_SUFFIX
+
+
+def load_line_file(path: str | Path) -> Line:
+    """The Line of a line file or of a TTOBench track file (by its name), validated: one
+    ScenarioError line naming the file and the field."""
+    what = "TTOBench track" if is_track_file(path) else "line file"
+    return parse_line_file(yamlfile.read_text(path, what), str(path))
+
+
+@functools.lru_cache(maxsize=32)
+def parse_line_file(text: str, path: str) -> Line:
+    """load_line_file of a file's `text` (a bag's copy), its format by `path`'s name.
+    Cached (a Line is immutable): a run's validation, stages and scorer read the same."""
+    if is_track_file(path):
+        return parse_track(text, path).line()
+    return parse_line(text, path)
+
+
+def line_of(values) -> Line | None:
+    """The line of a run's values: line.file's (None: the open track), its limits capped
+    at plant.max_running_speed, planned to the run's line.planned_run_time where that is
+    given."""
+    if not values["line.file"]:
+        return None
+    return for_train(load_line_file(values["line.file"]), values)
+
+
+def for_train(line: Line, values) -> Line:
+    """`line` as the run's train (`values`) runs it: its limits capped at
+    plant.max_running_speed (0: none; values without it, a bag recorded before it
+    existed, none), planned to line.planned_run_time (core/train/line.planned_to)."""
+    return planned_to(capped(line, values.get("plant.max_running_speed", 0.0)), values)
+
+
+def capped(line: Line, max_speed: float) -> Line:
+    """`line` with no speed limit above `max_speed` (m/s; 0: as it is): a train's maximum
+    speed below the line's limits (core/train/line.with_speed_restrictions)."""
+    if not max_speed or all(section.value <= max_speed for section in line.speed_limits):
+        return line
+    return with_speed_restrictions(line, (Section(0.0, line.length, max_speed),))

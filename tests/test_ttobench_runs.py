@@ -1,0 +1,127 @@
+"""Runs on TTOBench's files: line.file takes a track file and plant.train a train file, by
+path (relative to the scenario, else msg_config/), in-process and in the nodes alike; a
+TTOBench train keeps its resistance in kN under a load (plant.davis_absolute), and its
+maximum speed caps the line's limits for the plan and the scorer (plant.max_running_speed);
+a bag's copy of a track re-reads as the same line."""
+
+import base64
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.base.paths import config_dir
+from ato_nodes.core.base.units import KMH
+from ato_nodes.core.config.context import RunContext, ato_train
+from ato_nodes.core.config.scenario import load_scenario, prepare
+from ato_nodes.core.config.schema import NodeValues
+from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, run_line
+from ato_nodes.core.run.stages import PlantStage
+from ato_nodes.core.train.lines import line_of
+from ato_nodes.launcher.launch import node_environment
+from commands import ROOT, one_line_exit_2, script
+
+DATA = config_dir() / "ttobench"
+TRAIN = "ttobench/trains/CN_Beijing_Subway.json"
+TRACK = "ttobench/tracks/CN_Songjiazhuang_Yizhuang.json"
+ON_TTOBENCH = [f"plant.train={TRAIN}", f"line.file={TRACK}"]
+
+
+def kilonewtons(train, speed: float) -> float:
+    """The train's basic resistance at `speed` (m/s) in kN: w0 (N/kN) times its weight."""
+    return train.resistance(speed) * train.mass * train.gravity / 1000.0
+
+
+def test_a_loaded_ttobench_train_keeps_its_resistance_in_kilonewtons():
+    """CN_Beijing_Subway: r0 = 3.9476 kN, r1 = 0, r2 = 0.0022294 kN/(km/h)^2; at 80 km/h
+    3.9476 + 0.0022294 x 80^2 = 3.9476 + 14.26816 = 18.21576 kN, whatever the load: the
+    real train at plant.mass_factor 1.3 and the ATO's weighed train at a reading of 1.3
+    alike. The project's own trains (davis_absolute false) keep N/kN: 1.3 times the kN."""
+    values = prepare("seed004-metro", {**dict(item.split("=") for item in ON_TTOBENCH),
+                                       "plant.mass_factor": 1.3, "train.mass_reading": 1.3})
+    assert values["plant.davis_absolute"] is True
+    real = PlantStage(NodeValues("plant", values)).params
+    weighed = ato_train(NodeValues("profile", values))
+    for train in (real, weighed):
+        assert train.mass == pytest.approx(1.3 * 278.0)
+        assert kilonewtons(train, 80 * KMH) == pytest.approx(18.21576, rel=1e-12)
+    metro = prepare("seed004-metro", {"plant.mass_factor": 1.3})
+    nominal = PlantStage(NodeValues("plant", {**metro, "plant.mass_factor": 1.0})).params
+    assert kilonewtons(PlantStage(NodeValues("plant", metro)).params, 20.0) == pytest.approx(
+        1.3 * kilonewtons(nominal, 20.0), rel=1e-12)
+
+
+def test_the_train_file_and_the_track_file_are_read_by_path(tmp_path):
+    """Relative to the scenario file, else msg_config/; plant.train keeps the resolved
+    path; the line is the track's, every stop a station."""
+    shutil.copy(DATA / "trains" / "CN_Beijing_Subway.json", tmp_path / "beijing.json")
+    scenario = tmp_path / "run.yaml"
+    scenario.write_text(f"base: seed004-metro\n/**:\n  ros__parameters:\n"
+                        f"    plant.train: beijing.json\n    line.file: {TRACK}\n"
+                        "    line.planned_run_time: 1500.0\n")
+    values = load_scenario(str(scenario))
+    assert values["plant.train"] == str(tmp_path / "beijing.json")
+    assert values["plant.mass"] == 278.0 and values["plant.max_running_speed"] == 80 * KMH
+    assert values["line.file"] == str((DATA / "tracks" / TRACK.split("/")[-1]).resolve())
+    line = line_of(values)
+    assert len(line.stations) == 14 and line.length == 22728.0
+
+
+def test_the_trains_maximum_speed_caps_the_line_for_the_plan_and_the_scorer():
+    """The track's 84 km/h limits are above the Beijing train's 80 km/h: every reader of
+    the run's line (the plan, the scorer's limits, a bag's copy) sees 80."""
+    values = prepare("seed004-metro", [*ON_TTOBENCH, "line.planned_run_time=1500"])
+    line = line_of(values)
+    assert max(section.value for section in line.speed_limits) == pytest.approx(80 * KMH)
+    assert min(section.value for section in line.speed_limits) == pytest.approx(50 * KMH)
+    plan = RunContext(NodeValues("profile", values)).plan
+    positions = np.linspace(0.0, line.length, 2000)
+    assert max(plan.speed(0.0, position) for position in positions) <= 80 * KMH
+    kept = {**values, LINE_BASE64: encode_line((config_dir() / TRACK).read_text())}
+    assert run_line(kept) == line
+    assert run_line({**kept, "plant.max_running_speed": 0.0}) != line
+
+
+def test_a_bags_copy_of_a_track_reads_by_the_name_it_kept():
+    text = (config_dir() / TRACK).read_text()
+    kept = {"line.file": "/elsewhere/CN_Songjiazhuang_Yizhuang.json",
+            LINE_BASE64: base64.b64encode(text.encode()).decode()}
+    assert len(run_line(kept).stations) == 14
+    with pytest.raises(ScenarioError, match="elsewhere/bad.json: missing field 'stops'"):
+        run_line({**kept, "line.file": "/elsewhere/bad.json",
+                  LINE_BASE64: encode_line('{"metadata": {}}')})
+
+
+@pytest.mark.parametrize("train, words", [
+    ("missing.json", ["cannot read TTOBench train", "missing.json"]),
+    ("bad.json", ["bad.json", "max speed"]),
+])
+def test_a_missing_or_bad_train_file_is_one_line_and_exit_2(tmp_path, train, words):
+    bad = (DATA / "trains" / "CN_Beijing_Subway.json").read_text().replace(
+        '"max speed"', '"max speeds"')
+    (tmp_path / "bad.json").write_text(bad)
+    with pytest.raises(ScenarioError) as refused:
+        prepare("seed004-metro", [f"plant.train={tmp_path / train}"])
+    assert all(word in str(refused.value) for word in words)
+    one_line_exit_2(script("run_stack", "--scenario", "seed004-metro", "--set",
+                           f"plant.train={tmp_path / train}", "--out", tmp_path / "bag"),
+                    *words)
+    assert not (tmp_path / "bag").exists()
+
+
+@pytest.mark.integration
+def test_a_node_refuses_a_bad_train_file_as_in_process(tmp_path, ros_domain):
+    """A node started from a scenario file naming a train file it cannot read: the same
+    one line (exit 2) as prepare() gives."""
+    scenario = tmp_path / "run.yaml"
+    scenario.write_text("/**:\n  ros__parameters:\n    plant.train: missing.json\n")
+    result = subprocess.run([sys.executable, "-m", "ato_nodes.nodes.plant", "--ros-args",
+                             "--params-file", str(scenario)], capture_output=True, text=True,
+                            timeout=60, cwd=ROOT, env=node_environment(ros_domain.domain_id))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    (line,) = [line for line in result.stderr.splitlines() if "INFO" not in line]
+    assert line.startswith("plant: error: cannot read TTOBench train ")
+    assert line.endswith("missing.json: No such file or directory")
