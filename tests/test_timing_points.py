@@ -5,6 +5,7 @@
 import dataclasses
 import json
 import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -20,7 +21,14 @@ from ato_nodes.core.targets.timetable import (JOURNEYS, Window, check_running_ti
 from ato_nodes.core.train.line import Line, Section
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.core.train.ttobench import Journey, TimingPoint, load_train
-from ato_nodes.results.journeys import TIMING_MISSED, WORST_ARRIVAL, worst_stations
+from ato_nodes.results.journeys import (TIMETABLE, TIMING_MISSED, WORST_ARRIVAL, run_timetable,
+                                        score_run, worst_stations)
+from ato_nodes.bags.bagio import read_run
+from ato_nodes.core.config.scenario import prepare
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.scoring import kept_files
+from bagfile import write_run_bag
+from commands import ROOT, invocation
 
 SHIPPED = JOURNEYS / "CH_StGallen_Wil_Journey_01.json"
 DT = 0.1  # s, the synthetic runs' period
@@ -201,3 +209,33 @@ def test_a_timetable_file_has_no_timing_points():
     timetable = load_timetable(config_dir() / "timetables" / "metro-line.yaml")
     assert timetable.passing == () and not timetable.journey
     assert all(stop.arrival_window is None for stop in timetable.stops)
+
+
+def test_a_bag_keeps_the_journey_and_is_judged_on_its_copy(tmp_path):
+    values = prepare("stgallen-wil-journey", ["run.duration=750"])  # standing at km 15
+    bag = write_run_bag(tmp_path / "bag", simulate(values),
+                        {**values, **kept_files(values)}, status="completed")
+    run = read_run(bag)
+    moved = {**run.parameters, TIMETABLE: str(tmp_path / "gone" / SHIPPED.name)}
+    timetable = run_timetable(moved)  # the bag's copy, on the bag's line
+    assert timetable.journey == "CH_StGallen_Wil_Journey_01"
+    assert timetable.stops == load_timetable(SHIPPED).stops
+    record = score_run(run.series, moved)["journey"]
+    verdicts = [(p["point"], p["kind"], p["verdict"]) for p in record["timing_points"]]
+    assert verdicts == [("km 12.5", PASSING, PASS), ("km 15", ARRIVAL, PASS),
+                        ("km 15", DEPARTURE, NOT_JUDGED), ("km 20", PASSING, NOT_JUDGED),
+                        ("km 29.5561", ARRIVAL, NOT_JUDGED)]
+    assert 535.0 - 1.0 < record["timing_points"][0]["time"] <= 540.0  # 5 s inside
+
+
+def test_a_refused_journey_is_one_line_in_the_stack_and_in_process(tmp_path):
+    tight = edited(tmp_path, [[0, 0, 0, 0, 0], [15000, 100, 200, 0, 0]])
+    with pytest.raises(ScenarioError) as refused:
+        prepare("stgallen-wil-journey", [f"profile.journey.timetable={tight}"])
+    assert "timing points entry 2: the running time 200 s" in str(refused.value)
+    bag = tmp_path / "bag"
+    done = subprocess.run([*invocation("run_stack"), "--scenario", "stgallen-wil-journey",
+                           "--journey", tight, "--out", str(bag)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert (done.returncode, done.stderr) == (2, f"error: {refused.value}\n")
+    assert not bag.exists()
