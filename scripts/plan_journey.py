@@ -117,7 +117,7 @@ def main() -> None:
         comparison = journey.compare(plan, timetable.running_time) if args.compare else None
     except ValueError as exc:
         _cli.fail(str(exc))
-    report(timetable, values["plant.train"], plan, comparison)
+    report(timetable, Path(values["plant.train"]).stem, plan, comparison)
 
 
 def report(timetable, train: str, plan: journey.JourneyPlan, comparison) -> None:
