@@ -93,6 +93,17 @@ def test_bad_journeys_are_one_line_naming_the_file_and_entry(tmp_path):
     with pytest.raises(ScenarioError, match=r"journey.json: timing points entry 2: a stop "
                        "needs a lower or an upper time constraint"):
         load_timetable(untimed)
+    far = edited(tmp_path, [[0, 0, 0, 0, 0], [15000, 100, 1e9, 0, 0]])
+    with pytest.raises(ScenarioError, match=r"journey.json: timing points entry 2: a time more "
+                       r"than 604800 s \(7 days\)"):
+        load_timetable(far)
+    # departing at 200 s (its arrival's latest, after its own earliest 150 s), then due
+    # at the next stop by 200 s: the library's rules allow it, the planner has no time
+    no_time = edited(tmp_path, [[0, 0, 0, 0, 0], [5000, 100, 200, 0, 0], [5000, 150, 300, 0, 0],
+                                [15000, 180, 200, 0, 0]])
+    with pytest.raises(ScenarioError, match=r"journey.json: timing points entry 4: the arrival "
+                       "200 s at 15000 m is not after the departure 200 s from km 5"):
+        load_timetable(no_time)
     tight = load_timetable(edited(tmp_path, [[0, 0, 0, 0, 0], [15000, 100, 200, 0, 0]]))
     with pytest.raises(ScenarioError, match=r"journey.json timing points entry 2: the running "
                        "time 200 s from km 0 to km 15 is below its minimum"):

@@ -322,7 +322,8 @@ def journey_on(journey: ttobench.Journey, line: Line, line_file: str) -> Timetab
     stopping point, arriving at its window's latest time (the least-energy choice a
     cruise curve has), departing at its window's earliest (not before the arrival); the
     passing points between; ScenarioError (one line, the file and the entry) for a
-    stop the planner has no time for or times that do not increase."""
+    stop the planner has no time for, times that do not increase or a time beyond
+    LATEST_TIME."""
     beyond = next((p for p in journey.points if p.position > line.length), None)
     if beyond is not None:
         raise ScenarioError(f"{journey.path}: timing points: {beyond.position:g} m is beyond "
@@ -332,6 +333,10 @@ def journey_on(journey: ttobench.Journey, line: Line, line_file: str) -> Timetab
     passing: list[PassingPoint] = []
     for number, point in enumerate(journey.points, 1):
         window = Window(point.earliest, point.latest)
+        if max(filter(None, window), default=0.0) > LATEST_TIME:
+            raise ScenarioError(f"{journey.path}: timing points entry {number}: a time more "
+                                f"than {LATEST_TIME:g} s ({LATEST_TIME / DAY:g} days) from the "
+                                "journey's start")
         name = names.get(point.position, kilometre(point.position))
         if not point.stopping:
             passing.append(PassingPoint(kilometre(point.position), point.position, window,
