@@ -24,11 +24,13 @@ from ato_nodes.core.train.ttobench import Journey, TimingPoint, load_train
 from ato_nodes.results.journeys import (TIMETABLE, TIMING_MISSED, WORST_ARRIVAL, run_timetable,
                                         score_run, worst_stations)
 from ato_nodes.bags.bagio import read_run
+from ato_nodes.results import jsontext
 from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import kept_files
 from bagfile import write_run_bag
 from commands import ROOT, invocation
+from commands import run_stack as stack_run
 
 SHIPPED = JOURNEYS / "CH_StGallen_Wil_Journey_01.json"
 DT = 0.1  # s, the synthetic runs' period
@@ -250,3 +252,18 @@ def test_a_refused_journey_is_one_line_in_the_stack_and_in_process(tmp_path):
                           capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert (done.returncode, done.stderr) == (2, f"error: {refused.value}\n")
     assert not bag.exists()
+
+
+@pytest.mark.integration
+def test_the_stack_drives_a_ttobench_journey_to_the_in_process_bits(tmp_path):
+    overrides = ["run.duration=700"]  # past km 12.5, standing at km 15
+    bag = tmp_path / "bag"
+    stack_run("stgallen-wil-journey", bag, overrides)
+    run, values = read_run(bag), prepare("stgallen-wil-journey", overrides)
+    series = simulate(values)
+    for name in ("position", "speed", "target", "command"):
+        assert np.array_equal(run.series[name], series[name]), name
+    recorded = score_run(run.series, run.parameters)["journey"]["timing_points"]
+    assert jsontext.dumps(recorded) == jsontext.dumps(
+        score_run(series, values)["journey"]["timing_points"])
+    assert [p["verdict"] for p in recorded[:2]] == [PASS, PASS]
