@@ -267,3 +267,13 @@ def test_the_stack_drives_a_ttobench_journey_to_the_in_process_bits(tmp_path):
     assert jsontext.dumps(recorded) == jsontext.dumps(
         score_run(series, values)["journey"]["timing_points"])
     assert [p["verdict"] for p in recorded[:2]] == [PASS, PASS]
+
+
+def test_a_journey_is_checked_on_the_line_as_the_train_runs_it():
+    with pytest.raises(ScenarioError, match=r"timing points entry 3: the running time 680 s "
+                       r"from km 0 to km 15 is below its minimum 760\.\d s"):
+        prepare("stgallen-wil-journey",  # 80 km/h at most: the line capped under its 125
+                ["plant.train=ttobench/trains/CN_Beijing_Subway.json"])
+    with pytest.raises(ScenarioError, match="is of line .*CH_StGallen_Wil.json, the run's "
+                       "line.file is .*CH_Fribourg_Bern.json"):
+        prepare("stgallen-wil-journey", ["line.file=ttobench/tracks/CH_Fribourg_Bern.json"])

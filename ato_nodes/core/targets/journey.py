@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..train.lines import for_train
 from ..train.plant import TrainParameters
 from . import strategy
 from .profiles import departure_time
@@ -85,9 +86,10 @@ def section_problems(timetable: Timetable, values: dict) -> tuple[SectionProblem
     """Each section of the journey for the run's nominal train (`values`: plant.* and
     profile.ato.*)."""
     train = TrainParameters.from_values(values)
+    runs = for_train(timetable.line, values)  # its limits capped at the train's top speed
     problems = []
     for section in timetable.sections:
-        line = section_line(timetable.line, section.start, section.end)
+        line = section_line(runs, section.start, section.end)
         length = section.end - section.start
         track = strategy.Track.of(line, train, min(STAGE_LENGTH, length / MIN_STAGES),
                                   margin=values["profile.ato.margin"])

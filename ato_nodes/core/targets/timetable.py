@@ -42,6 +42,7 @@ from ..base.paths import config_dir, resolve_file
 from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
                           node_error, node_number, node_value)
 from ..train import ttobench
+from ..train.lines import for_train
 from ..train.plant import TrainParameters
 from .profiles import ato_curve_arguments, new_ato_curve
 
@@ -427,16 +428,19 @@ def check_minimum_times(timetable: Timetable, values: dict) -> tuple[float, ...]
     section the timetable gives less than that train's minimum at the timetable's
     load."""
     check_running_times(timetable, values)
-    return tuple(minimum_running_time(section_line(timetable.line, s.start, s.end), values)
+    line = for_train(timetable.line, values)
+    return tuple(minimum_running_time(section_line(line, s.start, s.end), values)
                  for s in timetable.sections)
 
 
 def check_running_times(timetable: Timetable, values: dict) -> None:
     """ScenarioError (the file and the stop's line) for a section the timetable gives less
     than its minimum running time at the timetable's load, the train's of `values`: a
-    timetable no such train can keep (what a run checks before it starts)."""
+    timetable no such train can keep (what a run checks before it starts), on the line
+    as that train runs it (its limits capped at its maximum speed: lines.for_train)."""
+    runs = for_train(timetable.line, values)
     for section, stop in zip(timetable.sections, timetable.stops[1:], strict=True):
-        line = section_line(timetable.line, section.start, section.end)
+        line = section_line(runs, section.start, section.end)
         loaded = minimum_running_time(line, values, timetable.load)
         if section.running_time < loaded:
             raise ScenarioError(
