@@ -36,8 +36,8 @@ import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies.backend import Backend, ClusterLost, Progress, check_cluster
-from ato_nodes.studies.robustness import (COLUMNS, FACTORS, INDICES, RANGES, run_sample,
-                                          run_sample_in_stack, summarise)
+from ato_nodes.studies.robustness import (FACTORS, INDICES, RANGES, run_sample,
+                                          run_sample_in_stack, study_columns, summarise)
 from ato_nodes.studies.runner import Variant, check_counts, prepare_variants
 from ato_nodes.studies.samples import SampleFailed, SampleStudy, write_json_with_rows
 
@@ -121,7 +121,7 @@ def main() -> None:
                 **({"external": args.nodes} if args.nodes else {})}
     study = None
     try:
-        study = SampleStudy(args.out, settings, base, COLUMNS, args.samples, args.resume)
+        study = SampleStudy(args.out, settings, base, study_columns(base), args.samples, args.resume)
         run_missing(study, base, ranges, args)
     except ScenarioError as exc:  # refused before anything was written
         _cli.fail(str(exc))

@@ -66,3 +66,19 @@ def test_bad_robustness_ranges_are_one_line(tmp_path, args, words):
     result = script("seed004-metro", *args, "--out", tmp_path / "r")
     assert result.returncode == 2 and words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_timing_point_journey_counts_its_timing_points_and_others_keep_their_columns():
+    from ato_nodes.results.journeys import TIMING_MISSED
+    from ato_nodes.studies.robustness import COLUMNS, WITHIN, study_columns, summarise
+    assert study_columns(load_scenario("seed004-metro-line")) == COLUMNS
+    columns = list(study_columns(load_scenario("stgallen-wil-journey")))
+    assert columns == [*COLUMNS, TIMING_MISSED]
+    kept = next(text for key, _, text in WITHIN if key == TIMING_MISSED)
+    values = np.zeros((3, len(columns)))
+    values[:, columns.index(TIMING_MISSED)] = [0.0, 1.0, 0.0]
+    _, within = summarise(values, np.ones(values.shape, dtype=bool), columns)
+    assert within[kept] == 2
+    _, within = summarise(values[:, :-1], np.ones((3, len(COLUMNS)), dtype=bool),
+                          list(COLUMNS))
+    assert kept not in within

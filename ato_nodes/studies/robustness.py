@@ -15,7 +15,9 @@ import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides
-from ato_nodes.results.journeys import WORST_ARRIVAL, WORST_STOP, score_with_journey
+from ato_nodes.core.targets.timetable import load_timetable
+from ato_nodes.results.journeys import (TIMING_MISSED, WORST_ARRIVAL, WORST_STOP,
+                                        score_with_journey)
 from ato_nodes.studies.samples import NUMBER, SampleFailed
 
 FACTORS = {  # the real train's shares of the nominal values, and the option of each range
@@ -33,6 +35,7 @@ INDICES = (  # key, heading; worst is the largest
     ("itae", "ITAE"),
     (WORST_STOP, "journey: worst stop m"),
     (WORST_ARRIVAL, "journey: worst arrival s"),
+    (TIMING_MISSED, "journey: timing points missed"),
 )
 WITHIN = (  # key, bound, what the count says
     ("max_abs_error_kmh", 1.0, "within 1 km/h"),
@@ -40,12 +43,23 @@ WITHIN = (  # key, bound, what the count says
     ("abs_running_time_error", 5.0, "arrivals within 5 s"),
     (WORST_STOP, 0.1, "every stop of the journey within 0.1 m"),
     (WORST_ARRIVAL, 5.0, "every arrival of the journey within 5 s"),
+    (TIMING_MISSED, 0.0, "every timing point of the journey kept"),
 )
 COLUMNS = {  # a sample's row (after its number): its draw, what the ATO knew, its indices
     **dict.fromkeys(FACTORS, float), **dict.fromkeys(SEEDS, int), "train.mass_reading": float,
-    **{key: float for key, _ in INDICES}, "running_time_error": float,
+    **{key: float for key, _ in INDICES if key != TIMING_MISSED}, "running_time_error": float,
     "abs_running_time_error": float}
 SEED_BOUND = 2**31 - 1  # the schema's bound of a noise or weighing seed
+
+
+def study_columns(base: Mapping[str, Any]) -> dict[str, type]:
+    """The samples' columns of a study on `base`: COLUMNS, and the timing points missed
+    when its journey has timing points (a TTOBench journey's): a column only those
+    studies have, so that a study recorded without it still resumes."""
+    if base["profile.kind"] == "journey" and \
+            load_timetable(base["profile.journey.timetable"]).journey:
+        return {**COLUMNS, TIMING_MISSED: float}
+    return COLUMNS
 
 
 def draw_train(ranges: Mapping[str, tuple[float, float]], seed: int, number: int) -> dict:
@@ -118,11 +132,15 @@ def summarise(values: np.ndarray, present: np.ndarray, columns: list[str]
     (SampleFile.table(), its `columns`)."""
     summary, within = {}, {}
     for key, _ in INDICES:
+        if key not in columns:
+            continue
         has = present[:, columns.index(key)]
         if has.any():
             column = values[has, columns.index(key)]
             summary[key] = {"median": float(np.median(column)), "worst": float(np.max(column))}
     for key, bound, text in WITHIN:
+        if key not in columns:
+            continue
         has = present[:, columns.index(key)]
         if has.any():
             within[text] = int(np.count_nonzero(values[has, columns.index(key)] <= bound))
