@@ -121,7 +121,8 @@ def main() -> None:
                 **({"external": args.nodes} if args.nodes else {})}
     study = None
     try:
-        study = SampleStudy(args.out, settings, base, study_columns(base), args.samples, args.resume)
+        study = SampleStudy(args.out, settings, base, study_columns(base), args.samples,
+                            args.resume)
         run_missing(study, base, ranges, args)
     except ScenarioError as exc:  # refused before anything was written
         _cli.fail(str(exc))
