@@ -7,6 +7,7 @@ from __future__ import annotations
 from ..base.errors import ScenarioError
 from ..scoring.journey import check_stop_window
 from ..targets.timetable import check_running_times, load_timetable
+from ..train.lines import for_train
 
 
 def check_journey(values, line) -> None:
@@ -23,7 +24,7 @@ def check_journey(values, line) -> None:
                             "not apply to a journey (profile.kind journey): its timetable "
                             f"{path} gives each section's running time")
     timetable = load_timetable(path)
-    if timetable.line != line or timetable.train != values["plant.train"]:
+    if for_train(timetable.line, values) != line or timetable.train != values["plant.train"]:
         return
     try:
         check_stop_window(timetable)

@@ -55,6 +55,7 @@ from ..base.spec import PROFILE_NODES, TextForm, param
 from .profiles import (ATO_PARAMETERS, AtoCurve, DepartureRamp, PlanTable, ato_curve, cell_of,
                        departing, departure_ramp, rows_speed, table_limit)
 from .restriction import SPEED_RESTRICTION, restricted_line
+from ..train.lines import for_train
 from .timetable import Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
@@ -422,7 +423,8 @@ def _journey(values, context) -> JourneyPlan:
     if context.line is None:
         raise ScenarioError("profile.kind is journey but line.file is empty")
     timetable = load_timetable(path)
-    if timetable.line != context.line:  # by contents: a bag's copies have other paths
+    # by contents (a bag's copies have other paths), as the run's train runs the line
+    if for_train(timetable.line, values) != context.line:
         raise ScenarioError(f"timetable {path} is of line {timetable.line_file}, the run's "
                             f"line.file is {values['line.file']} (their contents differ)")
     if timetable.train != values["plant.train"]:

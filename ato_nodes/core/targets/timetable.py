@@ -39,8 +39,9 @@ import yaml
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import resolve_file
-from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
+from ..train.line import (Line, Section, Station, mapping_fields, node_entries,
                           node_error, node_number, node_value)
+from ..train.lines import load_line_file
 from ..train.plant import TrainParameters
 from .profiles import ato_curve_arguments, new_ato_curve
 
@@ -109,7 +110,7 @@ def load_timetable(path: str | Path) -> Timetable:
     fields = _fields(path, text)
     line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
     try:
-        line = load_line(line_file)
+        line = load_line_file(line_file)
     except ScenarioError as exc:  # the file the user gave, then what is wrong with its line
         raise node_error(path, fields["line"], f"line: {exc}") from None
     return timetable_on(text, path, line, line_file)
@@ -141,7 +142,9 @@ def _timetable(path, fields: dict[str, yaml.Node], line: Line, line_file: str) -
     if not NOMINAL_LOAD <= load <= HEAVIEST_LOAD:
         raise node_error(path, fields["load"], f"load must be from 1 (the nominal train) to "
                          f"{HEAVIEST_LOAD:g} times the train's mass, not {load:g}")
-    return Timetable(str(path), line_file, line, _text(fields["train"]), stops, load)
+    train = _text(fields["train"])  # a preset's name, or a TTOBench train file by its path
+    train = resolve_file(train, [Path(path).parent]) if train.endswith(".json") else train
+    return Timetable(str(path), line_file, line, train, stops, load)
 
 
 def _text(node: yaml.Node) -> str:
@@ -237,7 +240,7 @@ def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -
     nominal = TrainParameters.from_values(values)
     fastest = {**values, "profile.envelope_share": 1.0, "profile.ato.on_time": True}
     return _minimum_running_time(ato_curve_arguments(
-        fastest, line, dataclasses.replace(nominal, mass=load * nominal.mass)))
+        fastest, line, nominal.loaded(load, values["plant.davis_absolute"])))
 
 
 # Its own cache, keyed by what the curve is built from: a run's timetable is checked at each
