@@ -157,3 +157,19 @@ def test_a_timetable_names_a_track_and_a_train_file_relative_to_itself():
     assert len(timetable.sections) == 13
     plan = RunContext(NodeValues("profile", values)).plan
     assert plan.journey_end == 22728.0 - values["profile.journey.berth"]
+
+
+@pytest.mark.parametrize("scenario", ["seed004-yizhuang", "yizhuang-line"])
+def test_a_bag_of_a_run_on_ttobench_files_runs_again_bit_for_bit(scenario, tmp_path):
+    """From the bag alone: its copies of the track (re-read as JSON by the name it kept)
+    and of the timetable (whose train file, named relative to msg_config/, is the run's)."""
+    from bagfile import write_run_bag
+
+    from ato_nodes.bags.bagio import read_run, resimulate
+    from ato_nodes.core.config.scenario import apply_overrides
+    from ato_nodes.core.run.loop import simulate
+    from ato_nodes.core.run.scoring import kept_files
+    values = apply_overrides(load_scenario(scenario), ["run.duration=120"])
+    bag = write_run_bag(tmp_path / "bag", simulate(values),
+                        {**values, **kept_files(values)}, status="completed")
+    assert resimulate(read_run(bag))[1] == []
