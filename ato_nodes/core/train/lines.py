@@ -63,6 +63,9 @@ def for_train(line: Line, values) -> Line:
     return planned_to(capped(ended, values.get("plant.max_running_speed", 0.0)), values)
 
 
+# Cached (a Line is immutable, and hashed by its contents): every stage and the scorer of a
+# run ask for the same line, which then keeps the tables it computed (Line.tables).
+@functools.lru_cache(maxsize=32)
 def ended_at(line: Line, end: float) -> Line:
     """`line` ending at `end` (m; 0: as it is): the sections beyond it dropped, those across
     it cut there but a tunnel (its resistance is its whole length's), the stations beyond
@@ -84,6 +87,7 @@ def ended_at(line: Line, end: float) -> Line:
         stations=tuple(s for s in line.stations if s.position <= end))
 
 
+@functools.lru_cache(maxsize=32)
 def capped(line: Line, max_speed: float) -> Line:
     """`line` with no speed limit above `max_speed` (m/s; 0: as it is): a train's maximum
     speed below the line's limits (core/train/line.with_speed_restrictions)."""
