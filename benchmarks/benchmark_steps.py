@@ -29,7 +29,7 @@ from ato_nodes.core.config.scenario import apply_overrides, prepare, scenario_na
 from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run import fast_loop
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.train.line import line_of
+from ato_nodes.core.train.lines import line_of
 
 
 def per_step(values: dict, repeats: int, compiled: bool) -> tuple[float, int]:

@@ -18,7 +18,7 @@ from commands import one_line_exit_2, script
 ROOT = Path(__file__).resolve().parents[1]
 BUILT_ON_THE_ATO = ("hsr-neutral-ato", "seed001-crh380al-ato", "seed002-hsr-ato",
                     "seed003-maglev-ato", "seed004-metro-ato", "seed002-journey",
-                    "seed004-metro-line")
+                    "seed004-metro-line", "seed004-yizhuang-ato", "yizhuang-line")
 
 
 def written_out(path: Path) -> dict:

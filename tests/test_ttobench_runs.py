@@ -125,3 +125,51 @@ def test_a_node_refuses_a_bad_train_file_as_in_process(tmp_path, ros_domain):
     (line,) = [line for line in result.stderr.splitlines() if "INFO" not in line]
     assert line.startswith("plant: error: cannot read TTOBench train ")
     assert line.endswith("missing.json: No such file or directory")
+
+
+def test_line_end_makes_a_tracks_first_interstation_for_every_reader():
+    """seed004-yizhuang: the Yizhuang track ended at its second stop, 2,631 m: two
+    stations, every section cut there; a bag's copy of the whole track with the run's
+    parameters reads the same line; an end beyond the track is one line."""
+    values = load_scenario("seed004-yizhuang")
+    line = line_of(values)
+    assert line.length == 2631.0 and [s.position for s in line.stations] == [0.0, 2631.0]
+    assert all(s.end <= 2631.0 for kind in (line.gradients, line.speed_limits) for s in kind)
+    assert line.speed_limits[-1].end == line.gradients[-1].end == 2631.0
+    assert line.planned_run_time == 180.0
+    kept = {**values, LINE_BASE64: encode_line((config_dir() / TRACK).read_text())}
+    assert run_line(kept) == line
+    with pytest.raises(ScenarioError, match="line.end 30000 m is beyond the end of line "
+                       "'CN_Songjiazhuang_Yizhuang' \\(22728 m\\)"):
+        prepare("seed004-yizhuang", ["line.end=30000"])
+
+
+def test_a_timetable_names_a_track_and_a_train_file_relative_to_itself():
+    """yizhuang-line's timetable: `line:` the track, `train:` the train file, each by a
+    path relative to the timetable; the run's plant.train (the same file, absolute) and
+    its capped line are the timetable's, so the journey plans."""
+    from ato_nodes.core.targets.timetable import load_timetable
+    values = load_scenario("yizhuang-line")
+    timetable = load_timetable(values["profile.journey.timetable"])
+    assert timetable.train == values["plant.train"] == str(
+        (DATA / "trains" / "CN_Beijing_Subway.json").resolve())
+    assert timetable.line == line_of({**values, "plant.max_running_speed": 0.0})
+    assert len(timetable.sections) == 13
+    plan = RunContext(NodeValues("profile", values)).plan
+    assert plan.journey_end == 22728.0 - values["profile.journey.berth"]
+
+
+@pytest.mark.parametrize("scenario", ["seed004-yizhuang", "yizhuang-line"])
+def test_a_bag_of_a_run_on_ttobench_files_runs_again_bit_for_bit(scenario, tmp_path):
+    """From the bag alone: its copies of the track (re-read as JSON by the name it kept)
+    and of the timetable (whose train file, named relative to msg_config/, is the run's)."""
+    from bagfile import write_run_bag
+
+    from ato_nodes.bags.bagio import read_run, resimulate
+    from ato_nodes.core.config.scenario import apply_overrides
+    from ato_nodes.core.run.loop import simulate
+    from ato_nodes.core.run.scoring import kept_files
+    values = apply_overrides(load_scenario(scenario), ["run.duration=120"])
+    bag = write_run_bag(tmp_path / "bag", simulate(values),
+                        {**values, **kept_files(values)}, status="completed")
+    assert resimulate(read_run(bag))[1] == []

@@ -63,6 +63,10 @@ BASE: tuple[ParamSpec, ...] = (
     param("line.file", "", "line file (msg_config/lines/*.yaml): gradients, curves, tunnels, "
           "limits, neutral sections, stations; relative to the scenario file, else to "
           "msg_config/; empty = open track", LOOP_NODES),
+    param("line.end", 0.0, "the run's line ends here, m from the file's origin: its sections "
+          "and stations beyond dropped, a tunnel across it kept whole (e.g. a track file's "
+          "first interstation: its second stop's position); 0 = the file's end", LOOP_NODES,
+          0.0, 2.0e6),
     param("line.planned_run_time", 0.0, "the running time the run is planned to and judged "
           "against, standstill to standstill, in place of the line file's planned_run_time: a "
           "service timetabled for another train (0 = the line file's), s", LOOP_NODES,

@@ -23,7 +23,7 @@ def check_journey(values, line) -> None:
                             "not apply to a journey (profile.kind journey): its timetable "
                             f"{path} gives each section's running time")
     timetable = load_timetable(path)
-    if not (timetable.on_line(line) and timetable.for_train(values["plant.train"])):
+    if not (timetable.on_line(line, values) and timetable.for_train(values["plant.train"])):
         return
     try:
         check_stop_window(timetable)

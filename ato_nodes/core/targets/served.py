@@ -532,7 +532,7 @@ def _journey(values, context) -> JourneyPlan:
     if context.line is None:
         raise ScenarioError("profile.kind is journey but line.file is empty")
     timetable = load_timetable(path)
-    if not timetable.on_line(context.line):  # by contents: a bag's copies have other paths
+    if not timetable.on_line(context.line, values):  # by contents: a bag copy has another path
         raise ScenarioError(f"timetable {path} is of line {timetable.line_file}, the run's "
                             f"line.file is {values['line.file']} (their contents differ)")
     if not timetable.for_train(values["plant.train"]):

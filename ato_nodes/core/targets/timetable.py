@@ -39,10 +39,10 @@ import yaml
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from ..base.paths import config_dir, resolve_file
-from ..train.line import (Line, Section, Station, load_line, mapping_fields, node_entries,
-                          node_error, node_number, node_value)
 from ..train import ttobench
-from ..train.lines import for_train
+from ..train.line import (Line, Section, Station, mapping_fields, node_entries, node_error,
+                          node_number, node_value)
+from ..train.lines import for_train, load_line_file
 from ..train.plant import TrainParameters
 from .profiles import ato_curve_arguments, new_ato_curve
 
@@ -146,12 +146,13 @@ class Timetable:
         return (f"timing points entry {source_line}" if self.journey
                 else f"line {source_line}")
 
-    def on_line(self, line: Line) -> bool:
-        """Whether a run of `line` (by contents) may drive it: a timetable file's own line;
-        a TTOBench journey's track (its geometry: with or without a station at each of its
+    def on_line(self, line: Line, values) -> bool:
+        """Whether a run of `line` (by contents) with `values` may drive it: a timetable
+        file's own line as the run's train runs it (lines.for_train: ended, capped); a
+        TTOBench journey's track (its geometry: with or without a station at each of its
         stops, its limits capped at the run's train's maximum speed or not)."""
         if not self.journey:
-            return self.line == line
+            return for_train(self.line, values) == line
         return _geometry(self.line) == _geometry(line)
 
     def for_train(self, train: str) -> bool:
@@ -174,7 +175,7 @@ def load_timetable(path: str | Path) -> Timetable:
     fields = _fields(path, text)
     line_file = resolve_file(_text(fields["line"]), [Path(path).parent])
     try:
-        line = load_line(line_file)
+        line = load_line_file(line_file)
     except ScenarioError as exc:  # the file the user gave, then what is wrong with its line
         raise node_error(path, fields["line"], f"line: {exc}") from None
     return timetable_on(text, path, line, line_file)
@@ -209,7 +210,9 @@ def _timetable(path, fields: dict[str, yaml.Node], line: Line, line_file: str) -
     if not NOMINAL_LOAD <= load <= HEAVIEST_LOAD:
         raise node_error(path, fields["load"], f"load must be from 1 (the nominal train) to "
                          f"{HEAVIEST_LOAD:g} times the train's mass, not {load:g}")
-    return Timetable(str(path), line_file, line, _text(fields["train"]), stops, load)
+    train = _text(fields["train"])  # a preset's name, or a TTOBench train file by its path
+    train = resolve_file(train, [Path(path).parent]) if train.endswith(".json") else train
+    return Timetable(str(path), line_file, line, train, stops, load)
 
 
 def _text(node: yaml.Node) -> str:
@@ -411,7 +414,7 @@ def minimum_running_time(line: Line, values: dict, load: float = NOMINAL_LOAD) -
     nominal = TrainParameters.from_values(values)
     fastest = {**values, "profile.envelope_share": 1.0, "profile.ato.on_time": True}
     return _minimum_running_time(ato_curve_arguments(
-        fastest, line, dataclasses.replace(nominal, mass=load * nominal.mass)))
+        fastest, line, nominal.loaded(load, values["plant.davis_absolute"])))
 
 
 # Its own cache, keyed by what the curve is built from: a run's timetable is checked at each

@@ -675,12 +675,14 @@ class Train:
         (plant.gravity): mass t, gamma = rho / 100, Davis per kN at its own mass and kept
         absolute under a load (plant.davis_absolute), the envelopes in kN and kW, the
         maximum speed (plant.max_running_speed), plant.efficiency the traction efficiency,
-        the length where known (else the schema's point mass)."""
+        the length where known (else the schema's point mass); no seed 000 test
+        disturbance (plant.disturbance.amplitude 0, as every realistic preset)."""
         a, b, c = self.specific_davis(self.mass / 1000.0, gravity)
         traction, brake = self.traction_envelope(), self.brake_envelope()
         values = {"plant.mass": self.mass / 1000.0, "plant.gamma": self.rotating_share,
                   "plant.davis_a": a, "plant.davis_b": b, "plant.davis_c": c,
                   "plant.davis_absolute": True, "plant.max_running_speed": self.max_speed,
+                  "plant.disturbance.amplitude": 0.0,
                   "plant.envelope": True,
                   "plant.max_traction_force": traction[0] / KN,
                   "plant.max_traction_power": traction[1] / KW,
