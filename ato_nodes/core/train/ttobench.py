@@ -661,8 +661,9 @@ class Train:
     def plant_values(self, gravity: float) -> dict[str, Any]:
         """The project's plant.* values of the train (a train preset's), under `gravity`
         (plant.gravity): mass t, gamma = rho / 100, Davis per kN at its own mass, the
-        envelopes in kN and kW, plant.efficiency the traction efficiency, the length where
-        known (else the schema's point mass)."""
+        envelopes in kN and kW, plant.efficiency the traction efficiency, the regenerative
+        brake's force, power and efficiency (plant.regenerative_*), the length where known
+        (else the schema's point mass)."""
         a, b, c = self.specific_davis(self.mass / 1000.0, gravity)
         traction, brake = self.traction_envelope(), self.brake_envelope()
         values = {"plant.mass": self.mass / 1000.0, "plant.gamma": self.rotating_share,
@@ -671,8 +672,13 @@ class Train:
                   "plant.max_traction_force": traction[0] / KN,
                   "plant.max_traction_power": traction[1] / KW,
                   "plant.max_brake_force": brake[0] / KN, "plant.max_brake_power": brake[1] / KW}
+        values["plant.regenerative_limits"] = True
+        values["plant.regenerative_force"] = self.regenerative_force / KN
+        values["plant.regenerative_power"] = self.regenerative_power / KW
         if self.traction_efficiency is not None:
             values["plant.efficiency"] = self.traction_efficiency
+        if self.regenerative_efficiency is not None:
+            values["plant.regenerative_efficiency"] = self.regenerative_efficiency
         if self.train_length is not None:
             values["plant.length"] = self.train_length
         return values
