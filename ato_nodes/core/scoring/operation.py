@@ -42,6 +42,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..base.kernels import jitable
 from ..base.units import MS_TO_KMH
 from .indices import _integral
 
@@ -100,12 +101,20 @@ class Regeneration(NamedTuple):
 
     def electric_power(self, brake: np.ndarray, speed: np.ndarray) -> np.ndarray:
         """The braking power the drive regenerates (before its efficiency), kW, of the
-        braking force `brake` (kN, >= 0) at `speed` (m/s, >= 0): min(B, F_r) v, at most P_r."""
-        return np.minimum(np.minimum(brake, self.force) * speed, self.power)
+        braking force `brake` (kN, >= 0) at `speed` (m/s, >= 0)."""
+        return electric_force(brake, speed, self.force, self.power) * speed
 
     def returned(self, efficiency: float) -> float:
         """The regeneration efficiency, the traction's `efficiency` where none is given."""
         return efficiency if self.efficiency is None else self.efficiency
+
+
+@jitable
+def electric_force(brake, speed, force, power):
+    """The share of the braking force `brake` (kN, >= 0) at `speed` (m/s, >= 0) that the
+    drive brakes electrically, min(B, F_r, P_r / v), kN (F_r kN, P_r kW; inf: no limit);
+    the rest is pneumatic."""
+    return np.minimum(np.minimum(brake, force), power / np.maximum(speed, 1e-9))
 
 
 ALL_REGENERATIVE = Regeneration()  # today's model: every brake force regenerates
