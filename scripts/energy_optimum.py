@@ -119,7 +119,7 @@ def departure(values, args) -> float:
         else 0.0
 
 
-def study(line, stops, total, values, args):
+def study(line, stops, total, values, args, levels):
     """The grid study's table; the last grid's sections."""
     moving = total - departure(values, args) * (len(stops) - 1)
     print(f"{line.name}: {len(stops) - 1} sections, running time {total:g} s "
@@ -128,7 +128,7 @@ def study(line, stops, total, values, args):
     print("| ds m | dv m/s | kWh | change | price kW | section times s | seconds |")
     print("|---|---|---|---|---|---|---|")
     previous, sections, price = None, None, None
-    for ds, dv in grids(args.grid):
+    for ds, dv in levels:
         started = time.monotonic()
         sections = sections_of(line, stops, values, args, ds, dv)
         found = optimum.journey_optimum(sections, moving, price)
@@ -142,7 +142,7 @@ def study(line, stops, total, values, args):
     fastest = [optimum.run_at(section, optimum.HIGHEST_PRICE) for section in sections]
     print(f"minimum-time run: {sum(run.time for run in fastest) + total - moving:.1f} s, "
           f"{sum(run.net_kwh for run in fastest):.3f} kWh ({args.objective})")
-    return sections, price
+    return sections
 
 
 def compare(timetable, values, sections, args) -> None:
@@ -161,13 +161,21 @@ def compare(timetable, values, sections, args) -> None:
     print(f"journey: planner {plan.energy_kwh:.3f} kWh")
 
 
-def each(times_text: str, sections, values, args) -> None:
+def section_times(text: str | None, count: int) -> list[float] | None:
+    """--times' running times, one a section, s (None: not given)."""
+    if text is None:
+        return None
     try:
-        times = [float(x) for x in times_text.split(",")]
+        times = [float(x) for x in text.split(",")]
     except ValueError:
         times = []
-    if len(times) != len(sections) or not all(math.isfinite(t) for t in times):
-        raise ScenarioError(f"--times: {len(sections)} running times, comma-separated")
+    if len(times) != count or not all(math.isfinite(t) and t > 0.0 for t in times):
+        raise ScenarioError(f"--times {text!r}: {count} running times above 0 s, "
+                            "comma-separated")
+    return times
+
+
+def each(times: list[float], sections, values, args) -> None:
     print("\n| section | s | optimum kWh |\n|---|---|---|")
     total = 0.0
     for i, (section, seconds) in enumerate(zip(sections, times, strict=True)):
@@ -180,14 +188,16 @@ def each(times_text: str, sections, values, args) -> None:
 def main() -> None:
     args = parse_args()
     try:
+        levels = grids(args.grid)
         line, stops, total, values, timetable = load(args)
+        times = section_times(args.times, len(stops) - 1)
         if args.compare and timetable is None:
             raise ScenarioError("--compare needs a TIMETABLE (the planner's allocation)")
-        sections, price = study(line, stops, total, values, args)
+        sections = study(line, stops, total, values, args, levels)
         if args.compare:
             compare(timetable, values, sections, args)
-        if args.times:
-            each(args.times, sections, values, args)
+        if times:
+            each(times, sections, values, args)
     except (ScenarioError, ValueError) as exc:
         _cli.fail(str(exc))
 

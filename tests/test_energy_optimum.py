@@ -1,7 +1,10 @@
 """The independent dynamic programme of the least-energy run, against runs worked by hand."""
 
+import subprocess
+
 import numpy as np
 import pytest
+from commands import invocation
 
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.scoring.operation import Regeneration
@@ -60,3 +63,17 @@ def test_a_time_below_the_fastest_run_is_refused():
     section = optimum.section_of(line(), TRAIN, 0.9, Regeneration(force=0.0), 20.0, 0.1)
     with pytest.raises(ValueError, match="shorter than the fastest"):
         optimum.journey_optimum([section], 30.0)
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["metro-line", "--grid", "20:0"], "--grid '20:0'"),
+    (["--time", "100"], "give a TIMETABLE or --line"),
+    (["no-such-timetable"], "no-such-timetable"),
+    (["metro-line", "--times", "1,2"], "--times '1,2': 6 running times"),
+])
+def test_bad_input_is_one_line_and_exit_2(args, expected):
+    done = subprocess.run([*invocation("energy_optimum.py"), *args], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 2 and done.stdout == ""
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and expected in lines[0]
