@@ -69,7 +69,9 @@ def run_journey(series: dict[str, np.ndarray], parameters: dict, timetable: Time
     series = common_steps(series)
     neutral = pantograph_in_neutral(series, parameters, run_line(parameters)) \
         if "position" in series else None  # without it, journey_indices says what is missing
-    return journey_indices(series, timetable, **energy_terms(parameters), neutral=neutral)
+    terms = energy_terms(parameters)
+    return journey_indices(series, timetable, terms["mass"], terms["gravity"],
+                           terms["efficiency"], neutral=neutral)
 
 
 def score_run(series: dict[str, np.ndarray], parameters: dict | None) -> dict:

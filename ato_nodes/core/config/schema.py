@@ -164,6 +164,17 @@ BASE: tuple[ParamSpec, ...] = (
           "given (1 = the nominal train)", PROFILE_NODES, 0.1, 10.0),
     param("plant.efficiency", 0.9, "drive efficiency for the energy indices (seed 002); read by "
        "the scorer from the bag's run parameters", PLANT_NODES, 0.01, 1.0),
+    param("plant.regenerative_limits", False, "the drive regenerates braking only up to "
+          "min(plant.regenerative_force, plant.regenerative_power / v), the rest is pneumatic "
+          "and regenerates nothing (false = all braking regenerative); read by the scorer",
+          PLANT_NODES),
+    param("plant.regenerative_force", 213.6, "regenerative braking force limit, kN (the real "
+          "train's, at any load)", PLANT_NODES, 0.0, 1e5),
+    param("plant.regenerative_power", 12000.0, "regenerative braking power limit, kW",
+          PLANT_NODES, 0.0, 1e6),
+    param("plant.regenerative_efficiency", 0.0, "share of the regenerative braking energy "
+          "returned to the supply (0 = plant.efficiency, one efficiency both ways); read by "
+          "the scorer", PLANT_NODES, 0.0, 1.0),
     param("plant.speed_noise", 0.0, "speed sensor noise, standard deviation, m/s", PLANT_NODES,
        0.0, 10.0),
     param("plant.speed_quantum", 0.0, "speed sensor resolution, m/s (0 = exact)", PLANT_NODES,

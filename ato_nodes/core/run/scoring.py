@@ -15,7 +15,7 @@ from ..config.components import CONTROLLERS
 from ..config.context import RunContext
 from ..config.schema import defaults
 from ..scoring.indices import tracking_indices
-from ..scoring.operation import STANDSTILL, operation_indices
+from ..scoring.operation import STANDSTILL, Regeneration, operation_indices
 from ..train.line import Line
 from ..train.lines import for_train, load_line_file, parse_line_file
 
@@ -83,12 +83,13 @@ def common_steps(series: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {name: values[:length] for name, values in series.items()}
 
 
-def energy_terms(parameters: dict) -> dict[str, float]:
+def energy_terms(parameters: dict) -> dict:
     """operation_indices' mass (the real train's: the nominal times its load factor),
-    gravity and efficiency, from the run's parameters."""
+    gravity, efficiency and regeneration, from the run's parameters."""
     mass = parameters.get("plant.mass", math.nan) * parameters.get("plant.mass_factor", 1.0)
     return {"mass": mass, "gravity": parameters.get("plant.gravity", 9.8),
-            "efficiency": parameters.get("plant.efficiency", 0.9)}
+            "efficiency": parameters.get("plant.efficiency", 0.9),
+            "regeneration": Regeneration.of(parameters)}
 
 
 LIMITED = 1e5  # N/kN: a controller limit below this is a real one (defaults are 1e6)

@@ -8,8 +8,11 @@ kN is force * mass * gravity / 1000 with the mass in t.
 
 - traction_energy_kwh: integral of max(F, 0) max(v, 0) dt / efficiency, kWh drawn
   from the supply.
-- regenerated_energy_kwh: integral of max(-F, 0) max(v, 0) dt * efficiency, kWh.
-  Assumes all braking is electric and regenerative, at the same efficiency.
+- regenerated_energy_kwh: integral of min(B, F_r, P_r / v) max(v, 0) dt * eta_r, kWh,
+  with B = max(-F, 0) in kN: the drive brakes electrically up to its regenerative force
+  F_r (kN) and power P_r (kW), the rest of the braking is pneumatic and regenerates
+  nothing; eta_r the regeneration efficiency (`Regeneration`). Its defaults are no
+  limits and eta_r = efficiency: all braking regenerative at the traction's efficiency.
 - net_energy_kwh: traction minus regenerated, kWh.
 - max_jerk: largest mean jerk over JERK_WINDOW (1 s): |a(t + 1 s) - a(t)| / 1 s, m/s^3.
   Comfort standards judge jerk over about a second (EN 12299 smooths over 1 s); a
@@ -34,8 +37,12 @@ kN is force * mass * gravity / 1000 with the mass in t.
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import numpy as np
 
+from ..base.kernels import jitable
 from ..base.units import MS_TO_KMH
 from .indices import _integral
 
@@ -73,6 +80,46 @@ def _arrival_time(t: np.ndarray, speed: np.ndarray) -> float:
     return float(t[moving[-1] + 1])
 
 
+class Regeneration(NamedTuple):
+    """How a train's braking regenerates: electrically up to min(force, power / v), the
+    real train's (kN, kW; inf: no limit), the rest pneumatic; the electric part returned
+    to the supply at `efficiency` (None: the traction efficiency)."""
+
+    force: float = math.inf       # kN
+    power: float = math.inf       # kW
+    efficiency: float | None = None
+
+    @classmethod
+    def of(cls, values) -> Regeneration:
+        """From a run's plant.regenerative_* values: limits only with plant.regenerative_
+        limits, an efficiency only above 0 (a run recorded without them had neither)."""
+        limited = values.get("plant.regenerative_limits", False)
+        efficiency = float(values.get("plant.regenerative_efficiency", 0.0))
+        return cls(values["plant.regenerative_force"] if limited else math.inf,
+                   values["plant.regenerative_power"] if limited else math.inf,
+                   efficiency if efficiency > 0.0 else None)
+
+    def electric_power(self, brake: np.ndarray, speed: np.ndarray) -> np.ndarray:
+        """The braking power the drive regenerates (before its efficiency), kW, of the
+        braking force `brake` (kN, >= 0) at `speed` (m/s, >= 0)."""
+        return electric_force(brake, speed, self.force, self.power) * speed
+
+    def returned(self, efficiency: float) -> float:
+        """The regeneration efficiency, the traction's `efficiency` where none is given."""
+        return efficiency if self.efficiency is None else self.efficiency
+
+
+@jitable
+def electric_force(brake, speed, force, power):
+    """The share of the braking force `brake` (kN, >= 0) at `speed` (m/s, >= 0) that the
+    drive brakes electrically, min(B, F_r, P_r / v), kN (F_r kN, P_r kW; inf: no limit);
+    the rest is pneumatic."""
+    return np.minimum(np.minimum(brake, force), power / np.maximum(speed, 1e-9))
+
+
+ALL_REGENERATIVE = Regeneration()  # today's model: every brake force regenerates
+
+
 def traction_energy_kwh(t: np.ndarray, speed: np.ndarray, force: np.ndarray, mass: float,
                         gravity: float = 9.8, efficiency: float = 0.9) -> float:
     """Energy drawn from the supply for traction over the samples, kWh (force in N/kN,
@@ -93,16 +140,19 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
                       efficiency: float = 0.9, stop_position: float | None = None,
                       planned_run_time: float | None = None,
                       switch_threshold: float = SWITCH_THRESHOLD,
-                      neutral: np.ndarray | None = None) -> dict[str, float]:
+                      neutral: np.ndarray | None = None,
+                      regeneration: Regeneration = ALL_REGENERATIVE) -> dict[str, float]:
     """Every operation index of a run, as a flat dict (see the module docstring);
-    `neutral` the samples with the pantograph inside a neutral section."""
+    `neutral` the samples with the pantograph inside a neutral section, `regeneration`
+    how the braking regenerates (default: all of it, at `efficiency`)."""
     t, position, speed, acceleration, force = (
         np.asarray(series[name], dtype=float)
         for name in ("t", "position", "speed", "acceleration", "force"))
     force_kn = force * mass * gravity / 1000.0
     v = np.maximum(speed, 0.0)
     traction = traction_energy_kwh(t, speed, force, mass, gravity, efficiency)
-    regenerated = _integral(t, np.maximum(-force_kn, 0.0) * v) * efficiency / KJ_PER_KWH
+    regenerated = (_integral(t, regeneration.electric_power(np.maximum(-force_kn, 0.0), v))
+                   * regeneration.returned(efficiency) / KJ_PER_KWH)
     dt = np.diff(t)
     da = np.diff(acceleration)
     span = float(t[-1] - t[0]) if len(t) > 1 else 0.0

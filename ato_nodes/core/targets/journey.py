@@ -43,6 +43,15 @@ CURVE_RESOLUTION = 0.01  # the energy curve's points at most this share of its t
 MIN_PRICE_RATIO = 1.02   # ... unless their prices are this close (a jump of the optimum)
 MAX_CURVE_POINTS = 120
 SPLIT_STEP = 0.1         # s: the grid of best_split's running times
+# The programme's choices for a section: seed 002's CONTROLS and gentler traction and
+# braking (1/10, 1/20 of the envelope), on a finer speed grid than seed 002's: a metro
+# section's least-energy run tops its speed up by a little where a limit rises and holds
+# a limit on a descent, which the coarser choices buy dearer (the independent programme of
+# studies/energy_optimum.py put those sections 4-8 % below the coarser ones' runs).
+FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.1, 0.05)
+SECTION_CONTROLS = (*(("traction", f) for f in FRACTIONS), ("cruise", 0.0), ("coast", 0.0),
+                    *(("brake", f) for f in reversed(FRACTIONS)))
+SECTION_SPEED_STEP = 0.05  # m/s
 
 
 class EnergyCurve(NamedTuple):
@@ -72,14 +81,16 @@ class SectionProblem:
         """The energy-optimal run at `price` (kW per s of running time)."""
         problem = self.problem
         return strategy.solve(problem.track, problem.train, problem.efficiency, None,
-                              lam=price)
+                              lam=price, controls=SECTION_CONTROLS,
+                              speed_step=SECTION_SPEED_STEP)
 
     def driven(self, running_time: float) -> strategy.Strategy:
         """The energy-optimal run in `running_time` (s, standstill to standstill; it may
         arrive up to a jump of the programme's optimum early)."""
         problem = self.problem
         return strategy.solve(problem.track, problem.train, problem.efficiency,
-                              running_time - self.departure)
+                              running_time - self.departure, controls=SECTION_CONTROLS,
+                              speed_step=SECTION_SPEED_STEP)
 
 
 def section_problems(timetable: Timetable, values: dict) -> tuple[SectionProblem, ...]:

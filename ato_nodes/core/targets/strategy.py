@@ -47,7 +47,6 @@ CONTROLS = (("traction", 1.0), ("traction", 0.75), ("traction", 0.5), ("traction
             ("cruise", 0.0), ("coast", 0.0), ("brake", 0.25), ("brake", 0.5),
             ("brake", 1.0))
 MODE = {"traction": 1, "cruise": 0, "coast": 0, "brake": -1}
-CRUISE = [kind for kind, _ in CONTROLS].index("cruise")
 
 
 @dataclass(frozen=True)
@@ -118,11 +117,12 @@ class Problem:
     rest is a reserve for a heavier or more resisted train than the one planned for)."""
 
     def __init__(self, track: Track, train: TrainParameters, efficiency: float,
-                 share: float = 1.0):
+                 share: float = 1.0, controls: tuple[tuple[str, float], ...] = CONTROLS):
         if not 0.0 < share <= 1.0:
             raise ValueError(f"the envelope share {share:g} is outside (0, 1]")
         self.track, self.train, self.efficiency = track, train, efficiency
-        self.share = share
+        self.share, self.controls = share, controls
+        self.cruise = [kind for kind, _ in controls].index("cruise")
         self.xi = train.xi
         self.physics = Physics(track.ds, track.line_resistance, track.cap, track.powered,
                                train.xi, train.davis_a, train.davis_b, train.davis_c,
@@ -134,7 +134,7 @@ class Problem:
         brake, traction = self.limits(v)
         resistance = self.resistance(v) + self.track.line_resistance[stage]
         rows = []
-        for kind, fraction in CONTROLS:
+        for kind, fraction in self.controls:
             if kind == "traction":
                 row = fraction * traction
             elif kind == "brake":
@@ -246,7 +246,8 @@ def _stage_costs(problem: Problem, stage: int, grid: np.ndarray):
     forces = problem.forces(stage, grid)
     with np.errstate(invalid="ignore"):
         following = problem.step(stage, grid[None, :], np.nan_to_num(forces))
-    following[CRUISE] = np.where(np.isnan(forces[CRUISE]), 0.0, grid)  # exactly held
+    cruise = problem.cruise
+    following[cruise] = np.where(np.isnan(forces[cruise]), 0.0, grid)  # exactly held
     mean = 0.5 * (grid[None, :] + following)
     with np.errstate(divide="ignore"):
         seconds = np.where(mean > 1e-6, problem.track.ds / mean, np.inf)
@@ -257,11 +258,13 @@ def _stage_costs(problem: Problem, stage: int, grid: np.ndarray):
 
 def solve(track: Track, train: TrainParameters, efficiency: float, planned_time: float | None,
           *, speed_step: float = 0.25, energy_weight: float = 1.0,
-          lam: float | None = None, iterations: int = 40) -> Strategy:
+          lam: float | None = None, iterations: int = 40,
+          controls: tuple[tuple[str, float], ...] = CONTROLS) -> Strategy:
     """The energy-optimal strategy that arrives in `planned_time` (lambda bisected), or
     for a given price of a second `lam`; energy_weight 0 (and any lam > 0) is the
-    minimum-time run. Raises ValueError if the planned time cannot be met."""
-    problem = Problem(track, train, efficiency)
+    minimum-time run; `controls` the choices at every node (seed 002's CONTROLS). Raises
+    ValueError if the planned time cannot be met."""
+    problem = Problem(track, train, efficiency, controls=controls)
     grid = np.arange(0.0, float(track.cap.max()) + speed_step, speed_step)
     if lam is not None or planned_time is None:
         return _forward(problem, grid, energy_weight, 1.0 if lam is None else lam)
@@ -327,8 +330,8 @@ def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: floa
                              f"{speeds[-1]:.2f} m/s")
         speeds.append(float(following[pick, 0]))
         forces_taken.append(float(forces[pick, 0]))
-        controls.append(CONTROLS[pick])
-        modes.append(MODE[CONTROLS[pick][0]])
+        controls.append(problem.controls[pick])
+        modes.append(MODE[problem.controls[pick][0]])
         energy_total += float(energy[pick, 0])
         time_total += float(seconds[pick, 0])
     return Strategy(track.boundaries, np.array(speeds), np.array(forces_taken),

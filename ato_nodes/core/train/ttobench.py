@@ -675,8 +675,9 @@ class Train:
         (plant.gravity): mass t, gamma = rho / 100, Davis per kN at its own mass and kept
         absolute under a load (plant.davis_absolute), the envelopes in kN and kW, the
         maximum speed (plant.max_running_speed), plant.efficiency the traction efficiency,
-        the length where known (else the schema's point mass); no seed 000 test
-        disturbance (plant.disturbance.amplitude 0, as every realistic preset)."""
+        the regenerative brake's force, power and efficiency (plant.regenerative_*), the
+        length where known (else the schema's point mass); no seed 000 test disturbance
+        (plant.disturbance.amplitude 0, as every realistic preset)."""
         a, b, c = self.specific_davis(self.mass / 1000.0, gravity)
         traction, brake = self.traction_envelope(), self.brake_envelope()
         values = {"plant.mass": self.mass / 1000.0, "plant.gamma": self.rotating_share,
@@ -686,9 +687,14 @@ class Train:
                   "plant.envelope": True,
                   "plant.max_traction_force": traction[0] / KN,
                   "plant.max_traction_power": traction[1] / KW,
-                  "plant.max_brake_force": brake[0] / KN, "plant.max_brake_power": brake[1] / KW}
+                  "plant.max_brake_force": brake[0] / KN, "plant.max_brake_power": brake[1] / KW,
+                  "plant.regenerative_limits": True,
+                  "plant.regenerative_force": self.regenerative_force / KN,
+                  "plant.regenerative_power": self.regenerative_power / KW}
         if self.traction_efficiency is not None:
             values["plant.efficiency"] = self.traction_efficiency
+        if self.regenerative_efficiency is not None:
+            values["plant.regenerative_efficiency"] = self.regenerative_efficiency
         if self.train_length is not None:
             values["plant.length"] = self.train_length
         return values
