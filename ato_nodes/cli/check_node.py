@@ -238,6 +238,9 @@ class Harness:
         try:
             self.spin_until(lambda: self.session.ready or ended.is_set(), READY_TIMEOUT)
             if self.session.ready:
+                # the node's readers matched our writers too (discovery goes each way
+                # apart): a step sent before would be lost, the node starved of inputs
+                self.spin_until(self.inputs_matched, READY_TIMEOUT)
                 self.session.clock_subscribed = self.clock.get_subscription_count() > 0
                 self.run_steps()
                 self.announce("shutdown")
@@ -266,6 +269,11 @@ class Harness:
         subscriptions("parameter_changes", lambda msg: None)
         node.create_subscription(String, topics["events"].name, self.on_event,
                                  QOS["events"])
+
+    def inputs_matched(self) -> bool:
+        """Whether the node subscribes the measured speed and the horizons we send."""
+        return self.speeds.get_subscription_count() > 0 and \
+            self.horizons.get_subscription_count() > 0
 
     def on_outputs(self, msg) -> None:
         label = msg.layout.dim[0].label if msg.layout.dim else ""
