@@ -19,9 +19,6 @@ timetable read), then each figure is the median of --repeats:
 
 from __future__ import annotations
 
-import statistics
-import time
-from collections.abc import Callable
 
 import _cli
 
@@ -32,16 +29,6 @@ from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.train.lines import line_of
 from ato_nodes.results.journeys import score_with_journey
-
-
-def median_seconds(work: Callable[[int], object], repeats: int) -> float:
-    """Median wall seconds of work(i) over i in range(repeats)."""
-    times = []
-    for repeat in range(repeats):
-        started = time.perf_counter()
-        work(repeat)
-        times.append(time.perf_counter() - started)
-    return statistics.median(times)
 
 
 def main() -> None:
@@ -66,11 +53,11 @@ def main() -> None:
         return prepare(args.scenario, {"plant.mass_factor": 1.3, "train.load_weighing": True,
                                        "train.load_weighing_seed": 100 + repeat})
 
-    figures = {"plan": median_seconds(plan, args.repeats),
-               "prepare": median_seconds(heavy, args.repeats)}
+    figures = {"plan": _cli.median_seconds(plan, args.repeats),
+               "prepare": _cli.median_seconds(heavy, args.repeats)}
     prepare(args.scenario)  # its plan cached again
-    figures["simulate"] = median_seconds(lambda _: simulate(values), args.repeats)
-    figures["score"] = median_seconds(lambda _: score_with_journey(values, series),
+    figures["simulate"] = _cli.median_seconds(lambda _: simulate(values), args.repeats)
+    figures["score"] = _cli.median_seconds(lambda _: score_with_journey(values, series),
                                       args.repeats)
     print(f"{args.scenario}: {len(series['t'])} steps, {series['t'][-1]:.1f} s simulated; "
           f"median of {args.repeats}")

@@ -12,7 +12,6 @@ cache, the line parsed); the median of the --trains timed calls after it is prin
 
 from __future__ import annotations
 
-import statistics
 import time
 
 import _cli
@@ -28,12 +27,8 @@ PLANNED = ("seed000-ato", "seed000-realistic-ato", "seed001-crh380al-ato", "seed
 def per_train(name: str, trains: int) -> float:
     """Median seconds of prepare(`name`) over `trains` trains, each of its own mass."""
     prepare(name, {"plant.mass_factor": 1.0})
-    times = []
-    for train in range(trains):
-        started = time.perf_counter()
-        prepare(name, {"plant.mass_factor": 1.01 + 0.01 * train})
-        times.append(time.perf_counter() - started)
-    return statistics.median(times)
+    return _cli.median_seconds(
+        lambda train: prepare(name, {"plant.mass_factor": 1.01 + 0.01 * train}), trains)
 
 
 def main() -> None:
