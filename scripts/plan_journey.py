@@ -35,7 +35,6 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
 from ato_nodes.core.config.scenario import complete, train_preset
 from ato_nodes.core.targets import journey
-from ato_nodes.core.scoring.journey import window_text
 from ato_nodes.core.targets.timetable import (JOURNEYS, check_minimum_times, journey_file,
                                               load_timetable)
 
@@ -161,7 +160,7 @@ def passing_lines(timetable, plan: journey.JourneyPlan) -> list[str]:
             passes = stop.departure + journey.passing_time(run, problem, point.position)
             miss = point.window.miss(passes)
             lines.append(f"{point.name}: passed at {passes:.1f} s, window "
-                         f"{window_text(point.window)}"
+                         f"{point.window.text()}"
                          + (f": {miss:+.1f} s outside" if miss else ": inside"))
     return lines
 

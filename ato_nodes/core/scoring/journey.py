@@ -247,7 +247,7 @@ def _timed_point(station: StationIndices, kind: str, window: Window, time: float
                               reason=station.reason or station.outcome)
     miss = window.miss(time + clock)
     return point._replace(time=time, miss=miss, verdict=FAIL if miss else PASS,
-                          reason=f"{miss:+.1f} s outside {window_text(window)}" if miss else "")
+                          reason=f"{miss:+.1f} s outside {window.text()}" if miss else "")
 
 
 def _bounds(window: Window, low: float | None = None, high: float | None = None
@@ -271,7 +271,7 @@ def _passing(point: PassingPoint, t: np.ndarray, position: np.ndarray, speed: np
     time = float(t[k - 1] + share * (t[k] - t[k - 1]))
     passed = float(speed[k - 1] + share * (speed[k] - speed[k - 1]))
     miss = point.window.miss(time + clock)
-    broken = [f"{miss:+.1f} s outside {window_text(point.window)}"] if miss else []
+    broken = [f"{miss:+.1f} s outside {point.window.text()}"] if miss else []
     if point.min_speed is not None and passed < point.min_speed:
         broken.append(f"{passed * MS_TO_KMH:.1f} km/h below {point.min_speed * MS_TO_KMH:g} km/h")
     if point.max_speed is not None and passed > point.max_speed:
@@ -367,18 +367,12 @@ def _lateness(time: float, planned: float | None, window: Window | None, clock: 
 def _window_verdict(stop: Stop, station: StationIndices) -> tuple[str, str]:
     """A TTOBench stop's verdict on its windows: the arrival inside its window, and the
     departure inside its window once the train has left."""
-    broken = [f"{what} {lateness:+.1f} s outside its window {window_text(window)}"
+    broken = [f"{what} {lateness:+.1f} s outside its window {window.text()}"
               for what, lateness, window in (
                   ("arrival", station.arrival_lateness, stop.arrival_window),
                   ("departure", station.departure_lateness, stop.departure_window))
               if window is not None and math.isfinite(lateness) and lateness != 0.0]
     return (FAIL, "; ".join(broken)) if broken else (PASS, "")
-
-
-def window_text(window: Window) -> str:
-    """A window as the verdicts say it: [earliest, latest] s on the timetable's clock."""
-    return (f"[{'-' if window.earliest is None else f'{window.earliest:g}'}, "
-            f"{'-' if window.latest is None else f'{window.latest:g}'}] s")
 
 
 def _verdict(station: StationIndices, requirements: StationRequirements, t: np.ndarray,

@@ -407,7 +407,7 @@ def timed_curve(values, line, train, section: JourneySection, departure: float
         late = passes > high
         capped = _capped_at(values, line, train, caps, at, high if late else low, late)
         if capped is None:
-            said.append(f"{point.name}: the window {_window_text(point.window)} cannot be "
+            said.append(f"{point.name}: the window {point.window.text()} cannot be "
                         f"met with the arrival by this train (planned at "
                         f"{departure + passes:.1f} s); passing it as the on-time curve does")
             continue
@@ -464,11 +464,6 @@ def _capped_at(values, line, train, caps: tuple, at: float, wanted: float, late:
 
 
 CAP_TOLERANCE = 0.5  # s a capped curve may pass beyond the window it was bisected to
-
-
-def _window_text(window) -> str:
-    return f"[{'-' if window.earliest is None else f'{window.earliest:g}'}, " \
-           f"{'-' if window.latest is None else f'{window.latest:g}'}] s"
 
 
 def _speed_bounds(curve: AtoCurve, section: JourneySection, values) -> list[str]:

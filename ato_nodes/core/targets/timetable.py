@@ -73,6 +73,11 @@ class Window(NamedTuple):
             return time - self.latest
         return 0.0
 
+    def text(self) -> str:
+        """The window as notices and verdicts say it: [earliest, latest] s ('-' unset)."""
+        return (f"[{'-' if self.earliest is None else f'{self.earliest:g}'}, "
+                f"{'-' if self.latest is None else f'{self.latest:g}'}] s")
+
 
 class PassingPoint(NamedTuple):
     """A TTOBench journey's timing point the train passes without stopping."""
