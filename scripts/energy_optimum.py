@@ -16,7 +16,9 @@ sections' times, and how far it moved from the grid before; --compare then drive
 section by the project's planner (core/targets/journey.py) in its allocated time and sets
 its energy against the programme of this script at the same time, on the same problem
 (--like-planner: the planner keeps profile.ato.margin under the limits and its run starts
-moving at once, the departure time added) and as the line allows; --times T,T,...: each
+moving at once, the departure time added) and as the line allows; --like-ato SCENARIO: the
+problem the scenario's ATO drives (its train, margin, envelope share, the ato curve's
+planned acceleration and braking as force caps, its departure time); --times T,T,...: each
 section's least energy alone in its time (e.g. a tracked run's). The energy is the traction
 energy at the pantograph (--objective traction, the planner's), or the net energy of the
 scorer (--objective net: less what the braking regenerates, plant.regenerative_*).
@@ -25,6 +27,7 @@ Bad input: one line, exit 2.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -33,7 +36,7 @@ import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
-from ato_nodes.core.config.scenario import complete
+from ato_nodes.core.config.scenario import complete, prepare
 from ato_nodes.core.scoring.operation import Regeneration
 from ato_nodes.core.targets import journey
 from ato_nodes.core.targets.profiles import departure_time
@@ -58,6 +61,11 @@ def parse_args():
     parser.add_argument("--objective", choices=("traction", "net"), default="traction")
     parser.add_argument("--like-planner", action="store_true", help="the planner's problem: "
                         "profile.ato.margin under the limits, the departure time added")
+    parser.add_argument("--like-ato", metavar="SCENARIO", help="the problem SCENARIO's ATO "
+                        "drives: its train and timetable (unless given), profile.ato.margin "
+                        "under the limits, the envelope at profile.envelope_share with its "
+                        "forces capped at the curve's planned acceleration and braking, the "
+                        "departure time added")
     parser.add_argument("--compare", action="store_true", help="the planner's sections "
                         "at their allocated times against the programme (the last grid)")
     parser.add_argument("--times", help="each section's running time, s, comma-separated")
@@ -83,6 +91,8 @@ def given(name: str | None, folder: str) -> Path | None:
 
 def load(args):
     """(line, stop positions, running time, values, timetable or None)."""
+    if args.like_ato:
+        return like_ato(args)
     if (args.timetable is None) == (args.line is None):
         raise ScenarioError("give a TIMETABLE or --line, one of them")
     timetable = None
@@ -104,19 +114,48 @@ def load(args):
     return line, stops, total, values, timetable
 
 
+def like_ato(args):
+    """load() for --like-ato: the scenario's values, its timetable unless one is given."""
+    if args.line or args.train:
+        raise ScenarioError("--like-ato takes the scenario's line and train: no --line, --train")
+    values = prepare(args.like_ato)
+    timetable = load_timetable(given(args.timetable, "timetables") if args.timetable
+                               else values["profile.journey.timetable"] or None)
+    total = args.time if args.time is not None else timetable.running_time
+    return (timetable.line, [stop.position for stop in timetable.stops], total, values,
+            timetable)
+
+
+def ato_limited(train: TrainParameters, values) -> TrainParameters:
+    """The train as the scenario's ato curve may drive it (--like-ato): its envelope at
+    profile.envelope_share, the forces at most what gives the curve's planned acceleration
+    and braking on the level (mass x (1 + rotating share) x rate)."""
+    share = values["profile.envelope_share"] or 1.0
+    inertia = train.mass * (1.0 + train.gamma)
+    return dataclasses.replace(
+        train, max_traction_force=min(share * train.max_traction_force,
+                                      inertia * values["profile.ato.acceleration"]),
+        max_traction_power=share * train.max_traction_power,
+        max_brake_force=min(share * train.max_brake_force,
+                            inertia * values["profile.ato.deceleration"]),
+        max_brake_power=share * train.max_brake_power)
+
+
 def sections_of(line, stops, values, args, ds, dv):
     train = TrainParameters.from_values(values)
+    if args.like_ato:
+        train = ato_limited(train, values)
     regeneration = (Regeneration(force=0.0) if args.objective == "traction"
                     else Regeneration.of(values))
-    margin = values["profile.ato.margin"] if args.like_planner else 0.0
+    margin = values["profile.ato.margin"] if args.like_planner or args.like_ato else 0.0
     return [optimum.section_of(section_line(line, a, b), train, values["plant.efficiency"],
                                regeneration, ds, dv, margin)
             for a, b in zip(stops, stops[1:], strict=False)]
 
 
 def departure(values, args) -> float:
-    return departure_time(values, TrainParameters.from_values(values)) if args.like_planner \
-        else 0.0
+    return departure_time(values, TrainParameters.from_values(values)) \
+        if args.like_planner or args.like_ato else 0.0
 
 
 def study(line, stops, total, values, args, levels):

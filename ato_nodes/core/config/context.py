@@ -18,7 +18,7 @@ from ..base.errors import ScenarioError
 import numpy as np
 
 from ..targets.horizons import ProfileSettings, plan_horizon, plan_speed_limit
-from ..targets import profiles, served, timetable
+from ..targets import least_energy, profiles, served, timetable
 from ..targets.profiles import (NO_RAMP, DepartureRamp, departing, departure_ramp,
                                 feasible_plan, plan_table)
 from ..targets.served import START
@@ -47,7 +47,7 @@ def ato_train(values) -> TrainParameters:
 # plan a run's validation builds is the one its simulation reads, and runs that share a
 # plan (a tuning's candidates, a set of trains run again) share it.
 PLAN_CACHES = (profiles._ato_curve, profiles.feasible_plan, profiles._driven_again,
-               served._journey_tables, timetable._minimum_running_time)
+               served._journey_tables, least_energy._runs, timetable._minimum_running_time)
 
 
 def forget_plans() -> None:

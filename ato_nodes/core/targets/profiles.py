@@ -316,6 +316,15 @@ class Cells(NamedTuple):
     share: float
 
 
+class Ceiling(NamedTuple):
+    """A speed profile an ato curve keeps under besides the limits: a run to follow (its
+    coasting), its squares read between its points linearly (a constant force's); tuples,
+    so a curve's cache can key on it."""
+
+    positions: tuple[float, ...]  # m from the curve's departure point, increasing
+    speeds: tuple[float, ...]     # m/s
+
+
 class AtoCurve(Plan):
     """Distance-indexed ATO target curve of one interstation run (seed 004).
 
@@ -376,7 +385,7 @@ class AtoCurve(Plan):
                  power_speed: float = math.inf, stop_jerk: float = 0.0,
                  train: TrainParameters | None = None, envelope_share: float = 0.0,
                  jerk: float = 0.0, departure: float | None = None,
-                 neutral_runout: float = 0.0):
+                 neutral_runout: float = 0.0, ceiling: Ceiling | None = None):
         self.line = line
         self.neutral_runout = neutral_runout
         stop = line.stop_position
@@ -386,7 +395,11 @@ class AtoCurve(Plan):
         self.acceleration, self.deceleration = acceleration, deceleration
         self.power_speed, self.stop_jerk = power_speed, stop_jerk
         self.start_speed = start_speed
-        self.caps = np.maximum(self.limits - margin, start_speed)
+        caps = self.limits - margin
+        if ceiling is not None:  # a run to keep under besides the limits (least_energy.py)
+            squared = np.interp(self.positions, ceiling.positions, np.square(ceiling.speeds))
+            caps = np.minimum(caps, np.sqrt(squared))
+        self.caps = np.maximum(caps, start_speed)
         self.margin, self.jerk, self.departure = margin, jerk, departure
         self.cells: Cells | None = None  # set by _feasible
         self.feasible = (self._feasible(train, envelope_share, train_length)
@@ -608,10 +621,11 @@ backward_pass = compiled(_backward_pass) or _backward_pass
 LATE_NOTICE = 0.05  # s an on-time curve may miss the planned time by without a notice
 
 
-def ato_curve(values: dict, line, train: TrainParameters) -> AtoCurve:
+def ato_curve(values: dict, line, train: TrainParameters, ceiling: Ceiling | None = None
+              ) -> AtoCurve:
     """The ATO curve a run's profile.ato.* parameters give on `line` for `train` (the
-    run context's: the train the ATO knows)."""
-    return _ato_curve(*ato_curve_arguments(values, line, train))
+    run context's: the train the ATO knows), kept under `ceiling` if given."""
+    return _ato_curve(*ato_curve_arguments(values, line, train), ceiling)
 
 
 def ato_curve_arguments(values: dict, line, train: TrainParameters) -> tuple:
@@ -681,12 +695,12 @@ def departing(ramp: DepartureRamp, since: float, target: float) -> float:
 
 def new_ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
                   power_speed, stop_jerk, train, envelope_share, jerk, departure,
-                  neutral_runout) -> AtoCurve:
-    """The curve of ato_curve_arguments, built anew."""
+                  neutral_runout, ceiling: Ceiling | None = None) -> AtoCurve:
+    """The curve of ato_curve_arguments (and a ceiling), built anew."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
                     power_speed=power_speed, stop_jerk=stop_jerk, train=train,
                     envelope_share=envelope_share, jerk=jerk, departure=departure,
-                    neutral_runout=neutral_runout)
+                    neutral_runout=neutral_runout, ceiling=ceiling)
 
 
 # One curve per distinct line and parameters (the profile and the scorer both need it; the

@@ -60,8 +60,10 @@ from ..base.registry import Component, Plan
 from ..base.spec import PROFILE_NODES, TextForm, param
 from ..base.units import MS_TO_KMH
 from ..train.line import Section, with_speed_restrictions
-from .profiles import (ATO_PARAMETERS, AtoCurve, DepartureRamp, PlanTable, ato_curve, cell_of,
-                       departing, departure_ramp, rows_speed, table_limit)
+from ..train.plant import TrainParameters
+from . import least_energy
+from .profiles import (ATO_PARAMETERS, AtoCurve, Ceiling, DepartureRamp, PlanTable, ato_curve,
+                       cell_of, departing, departure_ramp, rows_speed, table_limit)
 from .restriction import SPEED_RESTRICTION, restricted_line
 from .curve_passes import cell_times
 from .timetable import JourneySection, PassingPoint, Timetable, load_timetable, section_line
@@ -74,6 +76,7 @@ LONGEST_EXTENSION = 3600.0  # s: a dwell extended longer is a service cancelled,
 # 100 m): a start that far off puts the train off every section's curve.
 AT_ORIGIN = 0.1
 
+DRIVINGS = ("cruise", "least_energy")
 JOURNEY_PARAMETERS = (
     param("profile.journey.timetable", "", "timetable file (msg_config/timetables/*.yaml) of "
           "the journey to drive, of the run's line.file and plant.train, or a TTOBench "
@@ -87,6 +90,11 @@ JOURNEY_PARAMETERS = (
           "its running time (with profile.ato.on_time), kept back for what the curve does not "
           "count (the holding brake's release, the tracking's lag); an early train waits for "
           "its departure at the next stop, s", PROFILE_NODES, 0.0, 60.0),
+    param("profile.journey.driving", "cruise", "how each section is driven on time: cruise, "
+          "the ato curve at the lowest cruise speed that meets its running time; least_energy, "
+          "the ato curve kept under the section's least-energy run for the nominal train "
+          "(core/targets/least_energy.py: it runs faster and coasts), its top speeds capped "
+          "to meet the time", PROFILE_NODES, choices=DRIVINGS),
     param("profile.journey.catch_up", 8, "faster curves planned per section beside its on-time "
           "one (cruise speeds up to the highest, at profile.journey.catch_up_share): a train "
           "that leaves a stop late drives the slowest that wins its lateness back, else the "
@@ -310,12 +318,13 @@ def replans(plan: JourneyPlan, period: float, position: np.ndarray) -> list[Repl
     return copy.replans
 
 
-def catch_up_curves(on_time: AtoCurve, fastest: AtoCurve, levels: int
+def catch_up_curves(on_time: AtoCurve, fastest: AtoCurve, levels: int, slowest: float
                     ) -> tuple[list[np.ndarray], list[float]]:
     """A section's on-time curve and levels - 1 faster ones, and their running times: the
-    `fastest` curve's shape (its share) at cruise speeds from the on-time curve's up to its
-    highest, evenly spaced in 1 / cruise (what a cruise's time goes with)."""
-    cruises = 1.0 / np.linspace(1.0 / on_time.cruise, 1.0 / fastest.cruise, levels)[1:]
+    `fastest` curve's shape (its share) at cruise speeds from `slowest` (the on-time cruise
+    curve's) up to its highest, evenly spaced in 1 / cruise (what a cruise's time goes
+    with)."""
+    cruises = 1.0 / np.linspace(1.0 / slowest, 1.0 / fastest.cruise, levels)[1:]
     faster = [fastest.curve(cruise) for cruise in cruises]
     return ([on_time.speeds, *faster],
             [on_time.planned_run_time, *(fastest.time_of(speeds) for speeds in faster)])
@@ -330,30 +339,32 @@ TABLE_INPUTS = tuple(sorted({*(spec.name for spec in (*JOURNEY_PARAMETERS, SPEED
                              "plant.length"}))
 
 
-def journey_table(timetable: Timetable, values, line, train) -> tuple[JourneyTable, str | None]:
-    """new_journey_table, once per process for each distinct timetable, line, train (all
-    three compared by their contents) and TABLE_INPUTS values: the plan a run's validation
+def journey_table(timetable: Timetable, values, line, train, nominal=None
+                  ) -> tuple[JourneyTable, str | None]:
+    """new_journey_table, once per process for each distinct timetable, line, train, nominal
+    train (all compared by their contents) and TABLE_INPUTS values: the plan a run's validation
     built is the one its simulation reads, and so are a tuning's candidates' (their gains
     are not its inputs). Never changed by a caller (JourneyPlan only reads it)."""
-    return _journey_tables(timetable, line, train,
+    return _journey_tables(timetable, line, train, nominal or train,
                            tuple((name, values[name]) for name in TABLE_INPUTS))
 
 
 # A long journey's tables are tens of MB (seed002-journey's 61 MB: 3 sections x 9 curves
 # x 10^5 cells): two kept, enough for a run's validation and simulation, a tuning's runs.
 @functools.lru_cache(maxsize=2)
-def _journey_tables(timetable: Timetable, line, train, inputs: tuple
+def _journey_tables(timetable: Timetable, line, train, nominal, inputs: tuple
                     ) -> tuple[JourneyTable, str | None]:
-    return new_journey_table(timetable, dict(inputs), line, train)
+    return new_journey_table(timetable, dict(inputs), line, train, nominal)
 
 
-def new_journey_table(timetable: Timetable, values, line, train
+def new_journey_table(timetable: Timetable, values, line, train, nominal=None
                       ) -> tuple[JourneyTable, str | None]:
     """The sections' ato curves on `line` for `train`, each on time for its running time
-    in the timetable less the recovery (with profile.ato.on_time) and its faster curves
-    (profile.journey.catch_up), under the run's speed restrictions
-    (profile.journey.speed_restriction); and the notices of the running times they
-    cannot meet, in one line."""
+    in the timetable less the recovery (with profile.ato.on_time; driven as
+    profile.journey.driving says, least_energy under the runs planned for the `nominal`
+    train, `train` if None) and its faster curves (profile.journey.catch_up), under the
+    run's speed restrictions (profile.journey.speed_restriction); and the notices of the
+    running times they cannot meet, in one line."""
     levels = 1 + values["profile.journey.catch_up"]
     line = restricted_line(values, line)
     curves, times, notices = [], [], []
@@ -363,12 +374,18 @@ def new_journey_table(timetable: Timetable, values, line, train
                                       strict=False):
         own = dataclasses.replace(section_line(line, section.start, section.end),
                                   planned_run_time=planned)
-        curve, said = timed_curve(values, own, train, section, stop.departure)
+        ceilings = (least_energy.ceilings(values, own, nominal or train)
+                    if values["profile.journey.driving"] == "least_energy" else (None,))
+        curve, said = timed_curve(values, own, train, section, stop.departure, ceilings)
         if curve.notice:
             notices.append(f"{section.origin} - {section.destination}: {curve.notice}")
         notices += [f"{section.origin} - {section.destination}: {text}" for text in said]
-        speeds, section_times = (catch_up_curves(curve, fastest_curve(values, own, train), levels)
-                                 if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
+        # a least-energy curve's faster ones start from the cruise curve of its time: its
+        # own cap is its run's top speed, whose cruise curve would win back far more
+        slowest = ato_curve(values, own, train).cruise if ceilings[0] else curve.cruise
+        speeds, section_times = (
+            catch_up_curves(curve, fastest_curve(values, own, train), levels, slowest)
+            if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
         curves += [(curve.positions, level, curve.limits) for level in speeds]
         times.append(section_times)
     stops = timetable.stops
@@ -387,15 +404,26 @@ def new_journey_table(timetable: Timetable, values, line, train
         " | ".join(notices) or None
 
 
-def timed_curve(values, line, train, section: JourneySection, departure: float
-                ) -> tuple[AtoCurve, list[str]]:
-    """The section's on-time curve on `line` (its own, planned to its running time) kept
-    to its passing points' windows (passing_window), each in turn: a curve that passes a
-    point too late is capped after it, one too early before it, at the cruise that
-    passes it at the window's nearer edge (the least change from the on-time curve,
-    which a cruise curve's energy favours); and what cannot be kept, in one line each:
-    a window the curve cannot meet together with the arrival, a speed bound it breaks."""
-    curve, said, caps = ato_curve(values, line, train), [], ()
+def timed_curve(values, line, train, section: JourneySection, departure: float,
+                ceilings: tuple[Ceiling | None, ...] = (None,)) -> tuple[AtoCurve, list[str]]:
+    """The section's on-time curve on `line` (its own, planned to its running time; kept
+    under the first of `ceilings` that meets that time and passes no passing point after
+    its window, else the last) kept to its passing points' windows (passing_window), each
+    in turn: a curve that passes a point too late is capped after it, one too early
+    before it, at the cruise that passes it at the window's nearer edge (the least change
+    from the on-time curve, which a cruise curve's energy favours); and what cannot be
+    kept, in one line each: a window the curve cannot meet together with the arrival, a
+    speed bound it breaks."""
+    ceiling = ceilings[-1]
+    for candidate in ceilings:
+        curve = ato_curve(values, line, train, candidate)
+        if not curve.notice and not any(
+                passing_time(curve, point.position - section.start)
+                > passing_window(point, departure, values["profile.journey.recovery"])[1]
+                for point in section.passing):
+            ceiling = candidate
+            break
+    curve, said, caps = ato_curve(values, line, train, ceiling), [], ()
     for point in section.passing:
         if curve.notice:  # not even the arrival is met: no window to keep besides
             break
@@ -405,7 +433,8 @@ def timed_curve(values, line, train, section: JourneySection, departure: float
         if low <= passes <= high:
             continue
         late = passes > high
-        capped = _capped_at(values, line, train, caps, at, high if late else low, late)
+        capped = _capped_at(values, line, train, ceiling, caps, at, high if late else low,
+                            late)
         if capped is None:
             said.append(f"{point.name}: the window {point.window.text()} cannot be "
                         f"met with the arrival by this train (planned at "
@@ -436,8 +465,8 @@ def passing_time(curve: AtoCurve, at: float) -> float:
 CAP_STEPS = 24  # bisections of a passing point's cap: the cruise to ~1e-7 of its range
 
 
-def _capped_at(values, line, train, caps: tuple, at: float, wanted: float, late: bool
-               ) -> tuple[AtoCurve, tuple] | None:
+def _capped_at(values, line, train, ceiling: Ceiling | None, caps: tuple, at: float,
+               wanted: float, late: bool) -> tuple[AtoCurve, tuple] | None:
     """The on-time curve passing `at` (m) at `wanted` (s after the departure), the line
     capped after `at` (a curve that passed `late`) or before it (early) at the cruise
     bisected for it, with the caps `caps` already set; None when no cap does it and
@@ -445,7 +474,7 @@ def _capped_at(values, line, train, caps: tuple, at: float, wanted: float, late:
     def capped(cap: float) -> tuple[AtoCurve, tuple]:
         stretch = Section(at, line.stop_position, cap) if late else Section(0.0, at, cap)
         limits = (*caps, stretch)
-        return ato_curve(values, with_speed_restrictions(line, limits), train), limits
+        return ato_curve(values, with_speed_restrictions(line, limits), train, ceiling), limits
 
     low, high = values["profile.ato.start_speed"] + values["profile.ato.margin"], \
         max(section.value for section in line.speed_limits)
@@ -539,7 +568,8 @@ def _journey(values, context) -> JourneyPlan:
                             f"({first.position:g} m); plant.initial_position is "
                             f"{values['plant.initial_position']:g} m (at most {AT_ORIGIN:g} m "
                             f"from it)")
-    return JourneyPlan(*journey_table(timetable, values, context.line, context.train),
+    return JourneyPlan(*journey_table(timetable, values, context.line, context.train,
+                                      TrainParameters.from_values(values)),
                        tuple(stop.station for stop in timetable.stops))
 
 
