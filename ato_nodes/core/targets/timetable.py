@@ -174,7 +174,7 @@ def load_timetable(path: str | Path) -> Timetable:
     """A timetable file on the line its `line:` names, checked against that line (not
     yet against a train: see check_minimum_times); a TTOBench journey file (.json) on its
     associated track (journey_timetable)."""
-    if Path(path).suffix == ".json":
+    if ttobench.is_library_file(path):
         return journey_timetable(path)
     text = yamlfile.read_text(path, "timetable file")
     fields = _fields(path, text)
@@ -193,7 +193,7 @@ def timetable_on(text: str, path: str | Path, line: Line, line_file: str) -> Tim
     """A timetable from its text (a bag's copy of the file at `path`) on `line`, the line
     the run drove (`line_file` names it), whatever the text's `line:` names now; a
     TTOBench journey's (.json) on that line alike."""
-    if Path(path).suffix == ".json":
+    if ttobench.is_library_file(path):
         return journey_on(ttobench.parse_journey(text, path), line, line_file)
     return _timetable(path, _fields(path, text), line, line_file)
 
@@ -216,7 +216,8 @@ def _timetable(path, fields: dict[str, yaml.Node], line: Line, line_file: str) -
         raise node_error(path, fields["load"], f"load must be from 1 (the nominal train) to "
                          f"{HEAVIEST_LOAD:g} times the train's mass, not {load:g}")
     train = _text(fields["train"])  # a preset's name, or a TTOBench train file by its path
-    train = resolve_file(train, [Path(path).parent]) if train.endswith(".json") else train
+    if ttobench.is_library_file(train):
+        train = resolve_file(train, [Path(path).parent])
     return Timetable(str(path), line_file, line, train, stops, load)
 
 
@@ -297,7 +298,7 @@ def journey_file(given: str) -> str:
     suffix, from anywhere), else the id of one in msg_config/ttobench/journeys/;
     ScenarioError naming what was given."""
     path = Path(given)
-    if path.suffix == ".json" or len(path.parts) > 1:
+    if ttobench.is_library_file(path) or len(path.parts) > 1:
         return str(path.resolve())
     shipped = JOURNEYS / f"{given}.json"
     if not shipped.is_file():

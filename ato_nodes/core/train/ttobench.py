@@ -52,6 +52,16 @@ VERSIONS = tuple(f"TTOBench v1.{minor}" for minor in range(1, 6))
 IDENTIFIER = re.compile(r"[A-Za-z0-9_]+")
 METADATA_REQUIRED = ("id", "library version")
 DEFAULT_DWELL = 0.0  # s at a stop no journey gives a dwell for: none required (line files')
+LIBRARY_SUFFIX = ".json"  # the library's files are JSON; the project's own are YAML
+
+
+def is_library_file(path: str | Path) -> bool:
+    """Whether a file parameter (line.file, plant.train, a timetable, a timetable's train)
+    names a TTOBench file rather than one of the project's (a line file, a train preset,
+    a timetable file): by its name, so a bag's copy, which keeps the name, reads as the
+    original did."""
+    return Path(path).suffix.lower() == LIBRARY_SUFFIX
+
 
 # ------------------------------------------------------------------ reading JSON ----
 
