@@ -162,8 +162,14 @@ class Timetable:
 
     def for_train(self, train: str) -> bool:
         """Whether a run of train `train` (plant.train) may drive it: a timetable file's
-        own train; a TTOBench journey (planned for none) any."""
-        return bool(self.journey) or self.train == train
+        own train, a TTOBench train file by its contents (ttobench.same_train: a copy, or
+        a bag's run recorded in another checkout, has another path); a TTOBench journey
+        (planned for none) any."""
+        if self.journey:
+            return True
+        if ttobench.is_library_file(self.train) and ttobench.is_library_file(train):
+            return ttobench.same_train(self.train, train)
+        return self.train == train
 
 
 def _geometry(line: Line) -> Line:

@@ -39,7 +39,7 @@ import json
 import math
 import re
 import reprlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -757,6 +757,17 @@ def load_train(path: str | Path) -> Train:
         regenerative_efficiency=_efficiency(fields, "efficiency reg brake"),
         length=fields.quantity("length", "m", 0.0, above=True),
         tunnel_coefficients=_tunnel_coefficients(fields))
+
+
+def same_train(path: str | Path, other: str | Path) -> bool:
+    """Whether two TTOBench train files give the same train: the same path, or the same
+    contents wherever each lies (a copy, a bag's run recorded in another checkout); one
+    ScenarioError line for a file that cannot be read."""
+    return Path(path) == Path(other) or _wherever(path) == _wherever(other)
+
+
+def _wherever(path: str | Path) -> Train:
+    return replace(load_train(path), path=Path())
 
 
 def _forces(fields: Fields) -> dict[str, float]:
