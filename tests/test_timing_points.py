@@ -254,6 +254,12 @@ def test_a_refused_journey_is_one_line_in_the_stack_and_in_process(tmp_path):
     assert not bag.exists()
 
 
+def test_a_journey_kind_on_the_open_track_is_one_line():
+    """A TTOBench journey needs a line to be on: without line.file the plan says so."""
+    with pytest.raises(ScenarioError, match="profile.kind is journey but line.file is empty"):
+        prepare("seed000", ["profile.kind=journey", f"profile.journey.timetable={SHIPPED}"])
+
+
 @pytest.mark.integration
 def test_the_stack_drives_a_ttobench_journey_to_the_in_process_bits(tmp_path):
     overrides = ["run.duration=700"]  # past km 12.5, standing at km 15

@@ -151,11 +151,14 @@ class Timetable:
         return (f"timing points entry {source_line}" if self.journey
                 else f"line {source_line}")
 
-    def on_line(self, line: Line, values) -> bool:
-        """Whether a run of `line` (by contents) with `values` may drive it: a timetable
-        file's own line as the run's train runs it (lines.for_train: ended, capped); a
-        TTOBench journey's track (its geometry: with or without a station at each of its
-        stops, its limits capped at the run's train's maximum speed or not)."""
+    def on_line(self, line: Line | None, values) -> bool:
+        """Whether a run of `line` (by contents; None: the open track, no line) with
+        `values` may drive it: a timetable file's own line as the run's train runs it
+        (lines.for_train: ended, capped); a TTOBench journey's track (its geometry: with
+        or without a station at each of its stops, its limits capped at the run's train's
+        maximum speed or not)."""
+        if line is None:
+            return False
         if not self.journey:
             return for_train(self.line, values) == line
         return _geometry(self.line) == _geometry(line)
