@@ -254,6 +254,32 @@ def test_a_refused_journey_is_one_line_in_the_stack_and_in_process(tmp_path):
     assert not bag.exists()
 
 
+def test_journey_on_a_scenario_that_is_no_journey_names_journey(tmp_path, capsys):
+    """seed000 (profile.kind seed000) with --journey: one line naming --journey, not the
+    parameter it sets, exit 2, nothing on disk, in-process and through run_stack.py."""
+    from ato_nodes.cli.run_stack import checked_values, parse_args
+    bag = tmp_path / "bag"
+    argv = ["--scenario", "seed000", "--journey", "CH_StGallen_Wil_Journey_01",
+            "--out", str(bag)]
+    with pytest.raises(SystemExit) as exited:
+        checked_values(parse_args(argv))
+    said = capsys.readouterr().err
+    assert exited.value.code == 2 and said.count("\n") == 1
+    assert said.startswith("error: --journey CH_StGallen_Wil_Journey_01: scenario seed000 is "
+                           "not a journey (its profile.kind is seed000)")
+    assert "profile.journey.timetable" not in said
+    done = subprocess.run([*invocation("run_stack"), *argv], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300)
+    assert (done.returncode, done.stderr) == (2, said)
+    assert not bag.exists()
+
+
+def test_a_journey_kind_on_the_open_track_is_one_line():
+    """A TTOBench journey needs a line to be on: without line.file the plan says so."""
+    with pytest.raises(ScenarioError, match="profile.kind is journey but line.file is empty"):
+        prepare("seed000", ["profile.kind=journey", f"profile.journey.timetable={SHIPPED}"])
+
+
 @pytest.mark.integration
 def test_the_stack_drives_a_ttobench_journey_to_the_in_process_bits(tmp_path):
     overrides = ["run.duration=700"]  # past km 12.5, standing at km 15

@@ -7,16 +7,21 @@ import copy
 import csv
 import json
 import math
+import shutil
 import subprocess
 
 import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
+from ato_nodes.core.config.scenario import train_preset
+from ato_nodes.core.targets.timetable import journey_file, load_timetable
+from ato_nodes.core.train.lines import load_line_file
 from ato_nodes.core.train.line import CURVE_CONSTANT, TUNNEL_CONSTANT
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.core.train.ttobench import (
     Curvature,
+    is_library_file,
     load_journey,
     load_track,
     load_train,
@@ -219,6 +224,30 @@ def test_the_journey_is_read_with_its_stops_and_dwells():
     assert [(s.position, s.dwell) for s in line.stations] == [
         (0.0, 0.0), (15000.0, 120.0), (29556.1, 0.0)]
     assert [s.position for s in track.line().stations] == [0.0, 29556.1]
+
+
+def test_a_library_file_is_known_by_its_json_name_in_every_reader(tmp_path, monkeypatch):
+    """One predicate (is_library_file), .json in any case: a track as line.file, a train
+    as plant.train and as a timetable's train, a journey as a timetable and as
+    --journey's; any other name is the project's own file (a line file, a preset, a
+    timetable file)."""
+    for folder, stem, name in [("tracks", "CN_Songjiazhuang_Yizhuang", "track.JSON"),
+                               ("trains", "CN_Beijing_Subway", "train.JSON"),
+                               ("journeys", "CH_StGallen_Wil_Journey_01", "journey.JSON")]:
+        shutil.copy(DATA / folder / f"{stem}.json", tmp_path / name)
+    assert load_line_file(tmp_path / "track.JSON") == load_line_file(
+        DATA / "tracks" / "CN_Songjiazhuang_Yizhuang.json")
+    assert train_preset(str(tmp_path / "train.JSON"))["plant.mass"] == 278.0
+    assert load_timetable(tmp_path / "journey.JSON").journey == "CH_StGallen_Wil_Journey_01"
+    monkeypatch.chdir(tmp_path)
+    assert journey_file("journey.JSON") == str((tmp_path / "journey.JSON").resolve())
+    shipped = (config_dir() / "timetables" / "yizhuang-line.yaml").read_text()
+    (tmp_path / "timetable.yaml").write_text(
+        shipped.replace("ttobench/trains/CN_Beijing_Subway.json", "train.JSON"))
+    assert load_timetable(tmp_path / "timetable.yaml").train == str(
+        (tmp_path / "train.JSON").resolve())
+    assert [is_library_file(name) for name in ("metro-b", "lines/metro-line.yaml",
+                                               "timetables/yizhuang-line.yaml")] == [False] * 3
 
 
 def edited(document: dict, edit) -> dict:

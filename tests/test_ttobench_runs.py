@@ -159,6 +159,52 @@ def test_a_timetable_names_a_track_and_a_train_file_relative_to_itself():
     assert plan.journey_end == 22728.0 - values["profile.journey.berth"]
 
 
+def test_a_timetables_train_is_the_files_contents_at_any_path(tmp_path):
+    """yizhuang-line's timetable names the repository's Beijing train: a copy elsewhere
+    (under any name) is the same train and runs with the same values; a copy of other
+    contents (a tonne heavier) is refused in one line, in-process and by run_stack.py."""
+    shutil.copy(DATA / "trains" / "CN_Beijing_Subway.json", tmp_path / "beijing.json")
+    values = prepare("yizhuang-line", [f"plant.train={tmp_path / 'beijing.json'}"])
+    assert values == {**prepare("yizhuang-line"), "plant.train": str(tmp_path / "beijing.json")}
+    heavier = (tmp_path / "beijing.json").read_text().replace('"value": 278000',
+                                                              '"value": 279000')
+    (tmp_path / "heavier.json").write_text(heavier)
+    words = ["is planned for train", "CN_Beijing_Subway.json", "heavier.json"]
+    with pytest.raises(ScenarioError) as refused:
+        prepare("yizhuang-line", [f"plant.train={tmp_path / 'heavier.json'}"])
+    assert all(word in str(refused.value) for word in words)
+    one_line_exit_2(script("run_stack", "--scenario", "yizhuang-line", "--set",
+                           f"plant.train={tmp_path / 'heavier.json'}", "--out",
+                           tmp_path / "bag"), *words)
+    assert not (tmp_path / "bag").exists()
+
+
+def test_a_bag_recorded_in_another_checkout_runs_again_bit_for_bit(tmp_path):
+    """A yizhuang-line run whose plant.train is another checkout's copy of the train:
+    its bag re-runs here (its timetable's copy names the train relative to msg_config/,
+    this checkout's file) to the bits of a run on this checkout's file; with that
+    checkout gone, one line names the train file it cannot read."""
+    from bagfile import write_run_bag
+
+    from ato_nodes.bags.bagio import BagError, read_run, resimulate
+    from ato_nodes.core.config.scenario import apply_overrides
+    from ato_nodes.core.run.loop import simulate
+    from ato_nodes.core.run.scoring import kept_files
+    elsewhere = tmp_path / "checkout" / "msg_config" / TRAIN
+    elsewhere.parent.mkdir(parents=True)
+    shutil.copy(DATA / "trains" / "CN_Beijing_Subway.json", elsewhere)
+    here = apply_overrides(load_scenario("yizhuang-line"), ["run.duration=120"])
+    values = apply_overrides(here, {"plant.train": str(elsewhere)})
+    bag = write_run_bag(tmp_path / "bag", simulate(values),
+                        {**values, **kept_files(values)}, status="completed")
+    series, differ = resimulate(read_run(bag))
+    assert differ == []
+    assert all(np.array_equal(series[name], ours) for name, ours in simulate(here).items())
+    shutil.rmtree(tmp_path / "checkout")
+    with pytest.raises(BagError, match=f"cannot read TTOBench train {elsewhere}: No such"):
+        resimulate(read_run(bag))
+
+
 @pytest.mark.parametrize("scenario", ["seed004-yizhuang", "yizhuang-line"])
 def test_a_bag_of_a_run_on_ttobench_files_runs_again_bit_for_bit(scenario, tmp_path):
     """From the bag alone: its copies of the track (re-read as JSON by the name it kept)

@@ -123,19 +123,40 @@ def checked_values(args: argparse.Namespace) -> dict:
     """The run's values from the options, checked; a problem is one line and exit 2."""
     try:
         overrides = list(args.set)
-        if args.journey is not None:
-            overrides.append(f"profile.journey.timetable={journey_file(args.journey)}")
         if args.duration is not None:
             overrides.append(f"run.duration={args.duration}")
         if args.real_time:
             overrides.append("run.real_time=true")
-        values = prepare(args.scenario, overrides)
+        if args.journey is None:
+            values = prepare(args.scenario, overrides)
+        else:
+            values = journey_values(args.scenario, overrides, args.journey)
         check_launcher_free(values)
     except ScenarioError as exc:
         cli.fail(str(exc))
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         cli.fail(f"--domain-id {args.domain_id} is outside 0-232")
     return values
+
+
+def journey_values(scenario: str, overrides: list[str], journey: str) -> dict:
+    """prepare() with --journey's timetable as profile.journey.timetable; a scenario
+    that is not a journey (its profile.kind, after the --set overrides) refused naming
+    --journey, which the user gave, not the parameter it sets."""
+    timetable = f"profile.journey.timetable={journey_file(journey)}"
+    try:
+        return prepare(scenario, [*overrides, timetable])
+    except ScenarioError as refused:
+        try:  # the run's kind, to say why (a journey kind may need --journey's timetable)
+            kind = prepare(scenario, overrides)["profile.kind"]
+        except ScenarioError:
+            raise refused from None
+        if kind != "journey":
+            raise ScenarioError(f"--journey {journey}: scenario {scenario} is not a journey "
+                                f"(its profile.kind is {kind}): --journey gives the timetable "
+                                "of a journey scenario, e.g. --scenario "
+                                "stgallen-wil-journey") from None
+        raise
 
 
 def summarized(name: str, bag: Path, outcome, params_yaml: str) -> dict:

@@ -25,7 +25,7 @@ from ..control.estimation import load_weighing
 from ..control.limiter import CommandLimiter
 from ..scoring.catalogue import Requirement
 from ..train.lines import line_of
-from ..train.ttobench import load_train
+from ..train.ttobench import is_library_file, load_train
 from . import plugins
 from .components import CONTROLLERS
 from .context import RunContext
@@ -225,7 +225,7 @@ def resolved_files(given: dict[str, Any], bases: list[Path]) -> dict[str, Any]:
     msg_config/ (core/base/paths.resolve_file)."""
     resolved = dict(given)
     for name in (*FILE_PARAMETERS, "plant.train"):
-        if given.get(name) and (name != "plant.train" or is_train_file(given[name])):
+        if given.get(name) and (name != "plant.train" or is_library_file(given[name])):
             resolved[name] = resolve_file(given[name], bases)
     return resolved
 
@@ -243,18 +243,11 @@ def train_names() -> list[str]:
     return sorted(p.stem for p in (config_dir() / "trains").glob("*.yaml"))
 
 
-TRAIN_FILE_SUFFIX = ".json"  # plant.train names a TTOBench train file, not a preset
-
-
-def is_train_file(name: str) -> bool:
-    return Path(name).suffix.lower() == TRAIN_FILE_SUFFIX
-
-
 def train_preset(name: str, gravity: float | None = None) -> dict[str, Any]:
     """The plant.* values of a train, checked: msg_config/trains/NAME.yaml's (a flat
     mapping), or a TTOBench train file's (NAME a .json path, absolute: resolved_files)
     under `gravity` (plant.gravity, m/s^2; None: the schema's), plant.train its path."""
-    if is_train_file(name):
+    if is_library_file(name):
         return ttobench_train(name, gravity)
     path = config_dir() / "trains" / f"{name}.yaml"
     if not path.is_file():

@@ -151,19 +151,28 @@ class Timetable:
         return (f"timing points entry {source_line}" if self.journey
                 else f"line {source_line}")
 
-    def on_line(self, line: Line, values) -> bool:
-        """Whether a run of `line` (by contents) with `values` may drive it: a timetable
-        file's own line as the run's train runs it (lines.for_train: ended, capped); a
-        TTOBench journey's track (its geometry: with or without a station at each of its
-        stops, its limits capped at the run's train's maximum speed or not)."""
+    def on_line(self, line: Line | None, values) -> bool:
+        """Whether a run of `line` (by contents; None: the open track, no line) with
+        `values` may drive it: a timetable file's own line as the run's train runs it
+        (lines.for_train: ended, capped); a TTOBench journey's track (its geometry: with
+        or without a station at each of its stops, its limits capped at the run's train's
+        maximum speed or not)."""
+        if line is None:
+            return False
         if not self.journey:
             return for_train(self.line, values) == line
         return _geometry(self.line) == _geometry(line)
 
     def for_train(self, train: str) -> bool:
         """Whether a run of train `train` (plant.train) may drive it: a timetable file's
-        own train; a TTOBench journey (planned for none) any."""
-        return bool(self.journey) or self.train == train
+        own train, a TTOBench train file by its contents (ttobench.same_train: a copy, or
+        a bag's run recorded in another checkout, has another path); a TTOBench journey
+        (planned for none) any."""
+        if self.journey:
+            return True
+        if ttobench.is_library_file(self.train) and ttobench.is_library_file(train):
+            return ttobench.same_train(self.train, train)
+        return self.train == train
 
 
 def _geometry(line: Line) -> Line:
@@ -174,7 +183,7 @@ def load_timetable(path: str | Path) -> Timetable:
     """A timetable file on the line its `line:` names, checked against that line (not
     yet against a train: see check_minimum_times); a TTOBench journey file (.json) on its
     associated track (journey_timetable)."""
-    if Path(path).suffix == ".json":
+    if ttobench.is_library_file(path):
         return journey_timetable(path)
     text = yamlfile.read_text(path, "timetable file")
     fields = _fields(path, text)
@@ -193,7 +202,7 @@ def timetable_on(text: str, path: str | Path, line: Line, line_file: str) -> Tim
     """A timetable from its text (a bag's copy of the file at `path`) on `line`, the line
     the run drove (`line_file` names it), whatever the text's `line:` names now; a
     TTOBench journey's (.json) on that line alike."""
-    if Path(path).suffix == ".json":
+    if ttobench.is_library_file(path):
         return journey_on(ttobench.parse_journey(text, path), line, line_file)
     return _timetable(path, _fields(path, text), line, line_file)
 
@@ -216,7 +225,8 @@ def _timetable(path, fields: dict[str, yaml.Node], line: Line, line_file: str) -
         raise node_error(path, fields["load"], f"load must be from 1 (the nominal train) to "
                          f"{HEAVIEST_LOAD:g} times the train's mass, not {load:g}")
     train = _text(fields["train"])  # a preset's name, or a TTOBench train file by its path
-    train = resolve_file(train, [Path(path).parent]) if train.endswith(".json") else train
+    if ttobench.is_library_file(train):
+        train = resolve_file(train, [Path(path).parent])
     return Timetable(str(path), line_file, line, train, stops, load)
 
 
@@ -297,7 +307,7 @@ def journey_file(given: str) -> str:
     suffix, from anywhere), else the id of one in msg_config/ttobench/journeys/;
     ScenarioError naming what was given."""
     path = Path(given)
-    if path.suffix == ".json" or len(path.parts) > 1:
+    if ttobench.is_library_file(path) or len(path.parts) > 1:
         return str(path.resolve())
     shipped = JOURNEYS / f"{given}.json"
     if not shipped.is_file():

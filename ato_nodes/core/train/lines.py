@@ -6,8 +6,8 @@ reads it here.
 * A TTOBench track file (a .json path, msg_config/ttobench/tracks/): the Line of
   core/train/ttobench.Track.line(), a station at every stop of the track.
 
-The format follows the file's name (TRACK_SUFFIX), so a bag, which keeps line.file's
-path and its text, re-reads the same line from its copy. The run may end the line early
+The format follows the file's name (ttobench.is_library_file), so a bag, which keeps
+line.file's path and its text, re-reads the same line from its copy. The run may end the line early
 (line.end: a track's first interstation), and the run's train caps the line's limits at
 its maximum speed (plant.max_running_speed: a TTOBench train's), so that the plan and the
 scorer's overspeed read the limits the train runs under.
@@ -22,19 +22,13 @@ from pathlib import Path
 from ..base import yamlfile
 from ..base.errors import ScenarioError
 from .line import Line, Section, parse_line, planned_to, with_speed_restrictions
-from .ttobench import parse_track
-
-TRACK_SUFFIX = ".json"  # a TTOBench track file; any other name is a project line file
-
-
-def is_track_file(path: str | Path) -> bool:
-    return Path(path).suffix.lower() == TRACK_SUFFIX
+from .ttobench import is_library_file, parse_track
 
 
 def load_line_file(path: str | Path) -> Line:
     """The Line of a line file or of a TTOBench track file (by its name), validated: one
     ScenarioError line naming the file and the field."""
-    what = "TTOBench track" if is_track_file(path) else "line file"
+    what = "TTOBench track" if is_library_file(path) else "line file"
     return parse_line_file(yamlfile.read_text(path, what), str(path))
 
 
@@ -42,7 +36,7 @@ def load_line_file(path: str | Path) -> Line:
 def parse_line_file(text: str, path: str) -> Line:
     """load_line_file of a file's `text` (a bag's copy), its format by `path`'s name.
     Cached (a Line is immutable): a run's validation, stages and scorer read the same."""
-    if is_track_file(path):
+    if is_library_file(path):
         return parse_track(text, path).line()
     return parse_line(text, path)
 

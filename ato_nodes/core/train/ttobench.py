@@ -39,7 +39,7 @@ import json
 import math
 import re
 import reprlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +52,16 @@ VERSIONS = tuple(f"TTOBench v1.{minor}" for minor in range(1, 6))
 IDENTIFIER = re.compile(r"[A-Za-z0-9_]+")
 METADATA_REQUIRED = ("id", "library version")
 DEFAULT_DWELL = 0.0  # s at a stop no journey gives a dwell for: none required (line files')
+LIBRARY_SUFFIX = ".json"  # the library's files are JSON; the project's own are YAML
+
+
+def is_library_file(path: str | Path) -> bool:
+    """Whether a file parameter (line.file, plant.train, a timetable, a timetable's train)
+    names a TTOBench file rather than one of the project's (a line file, a train preset,
+    a timetable file): by its name, so a bag's copy, which keeps the name, reads as the
+    original did."""
+    return Path(path).suffix.lower() == LIBRARY_SUFFIX
+
 
 # ------------------------------------------------------------------ reading JSON ----
 
@@ -747,6 +757,17 @@ def load_train(path: str | Path) -> Train:
         regenerative_efficiency=_efficiency(fields, "efficiency reg brake"),
         length=fields.quantity("length", "m", 0.0, above=True),
         tunnel_coefficients=_tunnel_coefficients(fields))
+
+
+def same_train(path: str | Path, other: str | Path) -> bool:
+    """Whether two TTOBench train files give the same train: the same path, or the same
+    contents wherever each lies (a copy, a bag's run recorded in another checkout); one
+    ScenarioError line for a file that cannot be read."""
+    return Path(path) == Path(other) or _wherever(path) == _wherever(other)
+
+
+def _wherever(path: str | Path) -> Train:
+    return replace(load_train(path), path=Path())
 
 
 def _forces(fields: Fields) -> dict[str, float]:
