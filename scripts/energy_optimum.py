@@ -119,8 +119,10 @@ def like_ato(args):
     if args.line or args.train:
         raise ScenarioError("--like-ato takes the scenario's line and train: no --line, --train")
     values = prepare(args.like_ato)
+    if not (args.timetable or values["profile.journey.timetable"]):
+        raise ScenarioError(f"--like-ato {args.like_ato}: not a journey; give its TIMETABLE")
     timetable = load_timetable(given(args.timetable, "timetables") if args.timetable
-                               else values["profile.journey.timetable"] or None)
+                               else values["profile.journey.timetable"])
     total = args.time if args.time is not None else timetable.running_time
     return (timetable.line, [stop.position for stop in timetable.stops], total, values,
             timetable)

@@ -70,6 +70,10 @@ def test_a_time_below_the_fastest_run_is_refused():
     (["--time", "100"], "give a TIMETABLE or --line"),
     (["no-such-timetable"], "no-such-timetable"),
     (["metro-line", "--times", "1,2"], "--times '1,2': 6 running times"),
+    (["--like-ato", "seed004-metro-line", "--train", "metro-b"],
+     "--like-ato takes the scenario's line and train"),
+    (["--like-ato", "seed004-metro-ato"], "--like-ato seed004-metro-ato: not a journey"),
+    (["--like-ato", "no-such-scenario"], "no-such-scenario"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, expected):
     done = subprocess.run([*invocation("energy_optimum.py"), *args], capture_output=True,
@@ -77,3 +81,20 @@ def test_bad_input_is_one_line_and_exit_2(args, expected):
     assert done.returncode == 2 and done.stdout == ""
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: ") and expected in lines[0]
+
+
+def journey_energy(*args: str) -> float:
+    """The journey's least energy the script prints for its one grid, kWh."""
+    done = subprocess.run([*invocation("energy_optimum.py"), *args], capture_output=True,
+                          text=True, timeout=600, check=True)
+    row = next(line for line in done.stdout.splitlines() if line.startswith("| 40 |"))
+    return float(row.split("|")[3])
+
+
+@pytest.mark.slow
+def test_the_ato_s_problem_costs_more_than_the_line_allows():
+    common = ["--time", "840", "--grid", "40:0.2"]
+    like_ato = journey_energy("--like-ato", "seed004-metro-line", *common)
+    as_allowed = journey_energy("metro-line", *common)
+    # the same train and time under the curve's margin and planned rates, its departure
+    assert like_ato > as_allowed
