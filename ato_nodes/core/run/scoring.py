@@ -18,6 +18,7 @@ from ..scoring.indices import tracking_indices
 from ..scoring.operation import STANDSTILL, Regeneration, operation_indices
 from ..train.line import Line
 from ..train.lines import for_train, load_line_file, parse_line_file
+from ..train.ttobench import is_library_file
 
 # Run-parameter key of the line file's text, kept in the bag. Base64: the parameters
 # travel as a ROS parameter (YAML) to the recorder, whose YAML round trips mangle
@@ -32,13 +33,14 @@ def encode_line(text: str) -> str:
 # Other files a run reads, kept in the bag as <name>.sha256 and <name>.base64, so a
 # bag re-runs without them (the line is kept as LINE_BASE64, which the scorer reads).
 KEPT_FILES = ("profile.table.file", "profile.strategy.file", "gpc.model",
-              "profile.journey.timetable")
+              "profile.journey.timetable", "plant.train")
 
 
 def kept_files(values: dict) -> dict[str, str]:
     kept = {}
     for name in KEPT_FILES:
-        if values.get(name):
+        # plant.train names a file only as a TTOBench train (else a preset)
+        if values.get(name) and (name != "plant.train" or is_library_file(values[name])):
             content = Path(values[name]).read_bytes()
             kept[f"{name}.sha256"] = hashlib.sha256(content).hexdigest()
             kept[f"{name}.base64"] = base64.b64encode(content).decode()
