@@ -70,6 +70,28 @@ def test_traction_is_off_through_every_neutral_section_and_the_cap_holds():
         assert np.all(result.speeds <= 69.44 - strategy.MARGIN + 1e-9)
 
 
+def test_the_landing_control_reaches_the_cap_and_the_stop_exactly():
+    """LAND takes the train onto the stage's cap (a speed off the grid) and into the stop;
+    its stages' modes follow its force. Seed 002's CONTROLS have no such control."""
+    metro = TrainParameters.from_values(complete({"plant.train": "metro-b"}, []))
+    track = strategy.Track.of(line(length=2000.0, limit=16.67), metro, ds=20.0)
+    cap = float(track.cap[0])
+    assert cap / 0.05 % 1.0 > 0.01  # not a speed of the grid
+    controls = (*strategy.CONTROLS, (strategy.LAND, 0.0))
+    landed = strategy.solve(track, metro, 0.9, None, lam=2000.0, controls=controls,
+                            speed_step=0.05)
+    assert np.any(landed.speeds == cap) and np.all(landed.speeds <= cap + 1e-9)
+    assert landed.speeds[-1] == 0.0
+    kinds = [kind for kind, _ in landed.controls]
+    assert strategy.LAND in kinds
+    for kind, force, mode in zip(kinds, landed.forces, landed.modes, strict=True):
+        if kind == strategy.LAND:
+            assert mode == np.sign(force)
+    plain = strategy.solve(track, metro, 0.9, None, lam=2000.0, speed_step=0.05)
+    assert strategy.LAND not in [kind for kind, _ in plain.controls]
+    assert not np.any(plain.speeds == cap)
+
+
 def test_a_planned_time_below_the_flat_out_run_is_refused():
     track = strategy.Track.of(line(), CRH5, ds=200.0)
     fastest = strategy.solve(track, CRH5, 0.9, None, energy_weight=0.0)

@@ -43,14 +43,18 @@ CURVE_RESOLUTION = 0.01  # the energy curve's points at most this share of its t
 MIN_PRICE_RATIO = 1.02   # ... unless their prices are this close (a jump of the optimum)
 MAX_CURVE_POINTS = 120
 SPLIT_STEP = 0.1         # s: the grid of best_split's running times
-# The programme's choices for a section: seed 002's CONTROLS and gentler traction and
-# braking (1/10, 1/20 of the envelope), on a finer speed grid than seed 002's: a metro
-# section's least-energy run tops its speed up by a little where a limit rises and holds
-# a limit on a descent, which the coarser choices buy dearer (the independent programme of
-# studies/energy_optimum.py put those sections 4-8 % below the coarser ones' runs).
+# The programme's choices for a section: seed 002's CONTROLS, gentler traction and
+# braking (1/10, 1/20 of the envelope) and a landing exactly on the stage's cap or on the
+# highest speed the rest of the run allows (strategy.LAND), on a finer speed grid than
+# seed 002's: a metro section's least-energy run tops its speed up by a little where a
+# limit rises, holds a limit on a descent and brakes along its braking curve into the
+# stop, which fractions of the envelope alone buy dearer (the independent programme of
+# studies/energy_optimum.py put those sections 4-8 % below seed 002's choices' runs, and
+# still 1-2 % below the fractions' without the landing: each braking stage a little under
+# the curve, the stop reached later).
 FRACTIONS = (1.0, 0.75, 0.5, 0.25, 0.1, 0.05)
 SECTION_CONTROLS = (*(("traction", f) for f in FRACTIONS), ("cruise", 0.0), ("coast", 0.0),
-                    *(("brake", f) for f in reversed(FRACTIONS)))
+                    *(("brake", f) for f in reversed(FRACTIONS)), (strategy.LAND, 0.0))
 SECTION_SPEED_STEP = 0.05  # m/s
 
 

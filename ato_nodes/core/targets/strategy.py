@@ -17,7 +17,10 @@ Dynamic programming (`solve`), backwards over stages of `ds` metres, on a grid o
 speeds; at every node, each control of CONTROLS (full, 3/4, 1/2 and 1/4 traction,
 cruise: F = the resistance, coasting, 1/4, 1/2 and full braking) leads to a next
 speed, at which the next stage's value is interpolated (no snapping of transitions
-to the grid, so coasting stays coasting). The cost is energy + lambda * time;
+to the grid, so coasting stays coasting); a control "land" (not in CONTROLS) takes the
+train exactly onto the stage's cap or the highest grid speed from which the rest of the
+run is feasible, whichever is lower (a top-up to a limit, a stop on the braking curve),
+where the envelope allows it. The cost is energy + lambda * time;
 lambda, the price of a second, is bisected (on a log scale) until the run meets the
 planned time. The terminal state is standstill at the stop mark. `solve(..., lam=None,
 energy_weight=0)` is the minimum-time (flat-out) run.
@@ -47,6 +50,7 @@ CONTROLS = (("traction", 1.0), ("traction", 0.75), ("traction", 0.5), ("traction
             ("cruise", 0.0), ("coast", 0.0), ("brake", 0.25), ("brake", 0.5),
             ("brake", 1.0))
 MODE = {"traction": 1, "cruise": 0, "coast": 0, "brake": -1}
+LAND = "land"  # the kind of the control that lands on a target speed (mode by its sign)
 
 
 @dataclass(frozen=True)
@@ -122,15 +126,18 @@ class Problem:
             raise ValueError(f"the envelope share {share:g} is outside (0, 1]")
         self.track, self.train, self.efficiency = track, train, efficiency
         self.share, self.controls = share, controls
-        self.cruise = [kind for kind, _ in controls].index("cruise")
+        kinds = [kind for kind, _ in controls]
+        self.cruise = kinds.index("cruise")
+        self.land = kinds.index(LAND) if LAND in kinds else None
         self.xi = train.xi
         self.physics = Physics(track.ds, track.line_resistance, track.cap, track.powered,
                                train.xi, train.davis_a, train.davis_b, train.davis_c,
                                train.envelope, share, efficiency)
 
-    def forces(self, stage: int, v: np.ndarray) -> np.ndarray:
+    def forces(self, stage: int, v: np.ndarray, target: float = math.nan) -> np.ndarray:
         """(controls x speeds) specific force of every control at speeds v, N/kN; NaN
-        where the control is not available (traction in a neutral section)."""
+        where the control is not available (traction in a neutral section, a landing on
+        `target` m/s beyond the envelope)."""
         brake, traction = self.limits(v)
         resistance = self.resistance(v) + self.track.line_resistance[stage]
         rows = []
@@ -141,6 +148,10 @@ class Problem:
                 row = fraction * brake
             elif kind == "cruise":  # hold the speed if the envelope allows it
                 row = np.where((resistance <= traction) & (resistance >= brake), resistance,
+                               np.nan)
+            elif kind == LAND:
+                row = _force_for(self.physics, stage, v, target)
+                row = np.where((row <= traction) & (row >= brake) & (v + target > 0.0), row,
                                np.nan)
             else:
                 row = np.zeros_like(v)
@@ -242,12 +253,14 @@ def _track_columns(tables, starts, ds, train_length, pantograph_offset, line_len
 track_columns = compiled(_track_columns) or _track_columns
 
 
-def _stage_costs(problem: Problem, stage: int, grid: np.ndarray):
-    forces = problem.forces(stage, grid)
+def _stage_costs(problem: Problem, stage: int, grid: np.ndarray, target: float = math.nan):
+    forces = problem.forces(stage, grid, target)
     with np.errstate(invalid="ignore"):
         following = problem.step(stage, grid[None, :], np.nan_to_num(forces))
     cruise = problem.cruise
     following[cruise] = np.where(np.isnan(forces[cruise]), 0.0, grid)  # exactly held
+    if problem.land is not None:  # exactly landed
+        following[problem.land] = np.where(np.isnan(forces[problem.land]), 0.0, target)
     mean = 0.5 * (grid[None, :] + following)
     with np.errstate(divide="ignore"):
         seconds = np.where(mean > 1e-6, problem.track.ds / mean, np.inf)
@@ -293,13 +306,26 @@ def _choices(problem: Problem, stage: int, speeds: np.ndarray, following_value: 
              grid: np.ndarray, energy_weight: float, lam: float):
     """Total cost of every control from every speed (controls x speeds), and what the
     controls do: forces, end speeds, times, energies."""
-    forces, following, seconds, energy, feasible = _stage_costs(problem, stage, speeds)
+    forces, following, seconds, energy, feasible = _stage_costs(
+        problem, stage, speeds, _landing(problem, stage, following_value, grid))
     if stage < len(problem.track.positions) - 1:  # a train stopped short is stuck
         feasible &= following > 1e-9
     future = np.interp(following, grid, following_value)
     total = np.where(feasible & (future < INFEASIBLE / 2),
                      energy_weight * energy + lam * seconds + future, INFEASIBLE)
     return total, forces, following, seconds, energy
+
+
+def _landing(problem: Problem, stage: int, following_value: np.ndarray, grid: np.ndarray
+             ) -> float:
+    """Where the control LAND takes the train over the stage, m/s: the stage's cap or the
+    highest grid speed of the next boundary with a feasible value, the lower (NaN: no
+    such control)."""
+    if problem.land is None:
+        return math.nan
+    reachable = np.flatnonzero(following_value < INFEASIBLE / 2)
+    top = float(grid[reachable[-1]]) if len(reachable) else 0.0
+    return min(float(problem.track.cap[stage]), top)
 
 
 def _values(problem: Problem, grid: np.ndarray, energy_weight: float, lam: float) -> list:
@@ -331,7 +357,8 @@ def _forward(problem: Problem, grid: np.ndarray, energy_weight: float, lam: floa
         speeds.append(float(following[pick, 0]))
         forces_taken.append(float(forces[pick, 0]))
         controls.append(problem.controls[pick])
-        modes.append(MODE[problem.controls[pick][0]])
+        kind = problem.controls[pick][0]
+        modes.append(int(np.sign(forces[pick, 0])) if kind == LAND else MODE[kind])
         energy_total += float(energy[pick, 0])
         time_total += float(seconds[pick, 0])
     return Strategy(track.boundaries, np.array(speeds), np.array(forces_taken),
