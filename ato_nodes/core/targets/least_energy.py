@@ -15,9 +15,11 @@ The price is bisected on the curve's own running time (standstill to standstill)
 nominal train (plant.*), whose runs are kept per process: every train the ATO weighs
 heavier shares them. A run's curve, for the weighed train, is never faster than the run
 (the ceiling only lowers it), so the train takes the slowest of those runs whose curve
-still meets the time and passes no passing point after its window (served.timed_curve),
-and the curve's cruise bisection caps that run's top speeds to meet the time to the
-curve's bits (AtoCurve._cruise); passing windows then cap it as they cap a cruise curve.
+still meets the time and, at its fastest, passes no passing point after its window
+(served.timed_curve), and the curve's cruise bisection caps that run's top speeds to meet
+the time to the curve's bits (AtoCurve._cruise); passing windows then cap it as they cap
+a cruise curve (one that passes a point late is capped after it, its top speeds before it
+rising back towards the run's).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from ..train.line import Line
 from ..train.plant import TrainParameters
 from . import strategy
 from .journey import MIN_STAGES, SECTION_CONTROLS, SECTION_SPEED_STEP, STAGE_LENGTH
-from .profiles import Ceiling, ato_curve
+from .profiles import AtoCurve, Ceiling, ato_curve
 
 PRICE_STEPS = 9          # bisections of the price: the bracket's ends 1.05 apart at the end
 LOWEST_PRICE = 1.0       # kW per s of running time: a run far slower than any timetable's
@@ -60,10 +62,14 @@ def run_ceiling(track: strategy.Track, train: TrainParameters, price: float) -> 
     return Ceiling(tuple(run.positions.tolist()), tuple(run.speeds.tolist()))
 
 
+def curve_of(values, line: Line, train: TrainParameters, ceiling: Ceiling) -> AtoCurve:
+    """`train`'s ato curve on `line` under `ceiling`, uncapped (its fastest)."""
+    return ato_curve(values, dataclasses.replace(line, planned_run_time=None), train, ceiling)
+
+
 def curve_time(values, line: Line, train: TrainParameters, ceiling: Ceiling) -> float:
     """The running time of `train`'s ato curve on `line` under `ceiling`, uncapped, s."""
-    return ato_curve(values, dataclasses.replace(line, planned_run_time=None), train,
-                     ceiling).planned_run_time
+    return curve_of(values, line, train, ceiling).planned_run_time
 
 
 def runs(values, line: Line, nominal: TrainParameters) -> tuple[tuple[float, Ceiling], ...]:

@@ -19,7 +19,7 @@ from ..base.spec import MAX_PREVIEW, PROFILE_NODES, param
 from ..base.units import KMH
 from ..train.line import Line
 from ..train.plant import TrainParameters, basic_resistance, force_limits
-from .curve_passes import (ROUNDING_WIDTH, CurveGrid, capped_curve, forward_pass,
+from .curve_passes import (ROUNDING_WIDTH, CurveGrid, capped_curve, cell_times, forward_pass,
                            interpolated_in, round_corners, rounded_curve, running_time,
                            shaped_curve, sloped)
 
@@ -577,6 +577,12 @@ class AtoCurve(Plan):
         x = self.positions
         eased = 0.5 * (2.0 * (x[-1] - x[-2]) / (v[-2] + v[-1])) if self.stop_jerk > 0.0 else 0.0
         return cells + self.departure + eased
+
+    def passing_time(self, at: float) -> float:
+        """When the curve passes `at` (m from its start), s after its departure (its time
+        from standstill, as its running time counts)."""
+        cells = np.concatenate(([0.0], np.cumsum(cell_times(self.positions, self.speeds))))
+        return (self.departure or 0.0) + float(np.interp(at, self.positions, cells))
 
     def speed(self, t: float, position: float = 0.0) -> float:
         if position >= self.positions[-1]:

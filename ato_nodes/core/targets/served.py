@@ -65,7 +65,6 @@ from . import least_energy
 from .profiles import (ATO_PARAMETERS, AtoCurve, Ceiling, DepartureRamp, PlanTable, ato_curve,
                        cell_of, departing, departure_ramp, rows_speed, table_limit)
 from .restriction import SPEED_RESTRICTION, restricted_line
-from .curve_passes import cell_times
 from .timetable import JourneySection, PassingPoint, Timetable, load_timetable, section_line
 
 STANDSTILL = 0.01  # m/s: slower over a step counts as standing (a held train does not move)
@@ -407,18 +406,18 @@ def new_journey_table(timetable: Timetable, values, line, train, nominal=None
 def timed_curve(values, line, train, section: JourneySection, departure: float,
                 ceilings: tuple[Ceiling | None, ...] = (None,)) -> tuple[AtoCurve, list[str]]:
     """The section's on-time curve on `line` (its own, planned to its running time; kept
-    under the first of `ceilings` that meets that time and passes no passing point after
-    its window, else the last) kept to its passing points' windows (passing_window), each
-    in turn: a curve that passes a point too late is capped after it, one too early
-    before it, at the cruise that passes it at the window's nearer edge (the least change
-    from the on-time curve, which a cruise curve's energy favours); and what cannot be
-    kept, in one line each: a window the curve cannot meet together with the arrival, a
-    speed bound it breaks."""
+    under the first of `ceilings` that meets that time and, at its fastest, passes no
+    passing point after its window, else the last) kept to its passing points' windows
+    (passing_window), each in turn: a curve that passes a point too late is capped after
+    it, one too early before it, at the cruise that passes it at the window's nearer edge
+    (the least change from the on-time curve, which a cruise curve's energy favours); and
+    what cannot be kept, in one line each: a window the curve cannot meet together with
+    the arrival, a speed bound it breaks."""
     ceiling = ceilings[-1]
-    for candidate in ceilings:
-        curve = ato_curve(values, line, train, candidate)
-        if not curve.notice and not any(
-                passing_time(curve, point.position - section.start)
+    for candidate in ceilings[:-1]:
+        fastest = least_energy.curve_of(values, line, train, candidate)
+        if not ato_curve(values, line, train, candidate).notice and not any(
+                fastest.passing_time(point.position - section.start)
                 > passing_window(point, departure, values["profile.journey.recovery"])[1]
                 for point in section.passing):
             ceiling = candidate
@@ -429,7 +428,7 @@ def timed_curve(values, line, train, section: JourneySection, departure: float,
             break
         low, high = passing_window(point, departure, values["profile.journey.recovery"])
         at = point.position - section.start
-        passes = passing_time(curve, at)
+        passes = curve.passing_time(at)
         if low <= passes <= high:
             continue
         late = passes > high
@@ -455,13 +454,6 @@ def passing_window(point: PassingPoint, departure: float, recovery: float
     return low + recovery, high - recovery
 
 
-def passing_time(curve: AtoCurve, at: float) -> float:
-    """When the curve passes `at` (m from its start), s after its departure (its time from
-    standstill, as its running time counts)."""
-    cells = np.concatenate(([0.0], np.cumsum(cell_times(curve.positions, curve.speeds))))
-    return (curve.departure or 0.0) + float(np.interp(at, curve.positions, cells))
-
-
 CAP_STEPS = 24  # bisections of a passing point's cap: the cruise to ~1e-7 of its range
 
 
@@ -482,12 +474,12 @@ def _capped_at(values, line, train, ceiling: Ceiling | None, caps: tuple, at: fl
         middle = 0.5 * (low + high)
         curve, _limits = capped(middle)
         # a lower cap after the point passes it earlier; before it, later
-        if (passing_time(curve, at) > wanted) == late:
+        if (curve.passing_time(at) > wanted) == late:
             high = middle
         else:
             low = middle
     found = capped(low)  # the side that passes within the window
-    passes = passing_time(found[0], at)
+    passes = found[0].passing_time(at)
     met = passes <= wanted + CAP_TOLERANCE if late else passes >= wanted - CAP_TOLERANCE
     return found if met and not found[0].notice else None
 
