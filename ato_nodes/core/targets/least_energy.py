@@ -31,12 +31,13 @@ import math
 from ..train.line import Line
 from ..train.plant import TrainParameters
 from . import strategy
-from .journey import MIN_STAGES, SECTION_CONTROLS, SECTION_SPEED_STEP, STAGE_LENGTH
+from .journey import (HIGHEST_PRICE, MIN_STAGES, SECTION_CONTROLS, SECTION_SPEED_STEP,
+                      STAGE_LENGTH)
 from .profiles import AtoCurve, Ceiling, ato_curve
 
-PRICE_STEPS = 9          # bisections of the price: the bracket's ends 1.05 apart at the end
-LOWEST_PRICE = 1.0       # kW per s of running time: a run far slower than any timetable's
-HIGHEST_PRICE = 1.0e5    # kW per s: the programme's flat-out run (journey.HIGHEST_PRICE)
+PRICE_STEPS = 9     # bisections of the price (journey.HIGHEST_PRICE down to LOWEST_PRICE):
+                    # the bracket's ends 1.02 apart at the end
+LOWEST_PRICE = 1.0  # kW per s of running time: a run far slower than any timetable's
 
 
 def programme_train(train: TrainParameters, values) -> TrainParameters:
