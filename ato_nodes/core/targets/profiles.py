@@ -394,7 +394,7 @@ class AtoCurve(Plan):
         self.limits = self._belt_limits(self.positions, line, train_length)
         self.acceleration, self.deceleration = acceleration, deceleration
         self.power_speed, self.stop_jerk = power_speed, stop_jerk
-        self.start_speed = start_speed
+        self.start_speed, self.ceiling = start_speed, ceiling
         caps = self.limits - margin
         if ceiling is not None:  # a run to keep under besides the limits (least_energy.py)
             squared = np.interp(self.positions, ceiling.positions, np.square(ceiling.speeds))

@@ -381,7 +381,8 @@ def new_journey_table(timetable: Timetable, values, line, train, nominal=None
         notices += [f"{section.origin} - {section.destination}: {text}" for text in said]
         # a least-energy curve's faster ones start from the cruise curve of its time: its
         # own cap is its run's top speed, whose cruise curve would win back far more
-        slowest = ato_curve(values, own, train).cruise if ceilings[0] else curve.cruise
+        slowest = curve.cruise if curve.ceiling is None else ato_curve(values, own,
+                                                                        train).cruise
         speeds, section_times = (
             catch_up_curves(curve, fastest_curve(values, own, train), levels, slowest)
             if levels > 1 else ([curve.speeds], [curve.planned_run_time]))
