@@ -19,6 +19,8 @@ import numpy as np
 
 from ..targets.horizons import ProfileSettings, plan_horizon, plan_speed_limit
 from ..targets import least_energy, profiles, served, timetable
+from ..control.estimation import mass_prior_sigma
+from ..targets.replan import replan_settings
 from ..targets.profiles import (NO_RAMP, DepartureRamp, departing, departure_ramp,
                                 feasible_plan, plan_table)
 from ..targets.served import START
@@ -29,18 +31,29 @@ from .components import PROFILES
 from .schema import steps
 
 
-def ato_train(values) -> TrainParameters:
+def ato_train(values, mass: float | None = None) -> TrainParameters:
     """The train the ATO plans and controls with: the nominal one (plant.*) at the mass
-    it knows, plant.mass times train.mass_reading, but never lighter than the nominal
+    it knows, plant.mass times train.mass_reading (or `mass`), but never lighter than the nominal
     train (the nominal one itself up to a reading of 1): a lighter train could give more
     specific force (N/kN), but the command limits (controller.u_min, u_max, N/kN) are
     the nominal train's, so a plan at the light train's envelope share would ask for
     force the limiter does not let through. Its resistance as the real train's grows
     with the load (TrainParameters.loaded: plant.davis_absolute)."""
     nominal = TrainParameters.from_values(values)
-    reading = values["train.mass_reading"]
+    reading = values["train.mass_reading"] if mass is None else mass
     return nominal if reading <= 1.0 else nominal.loaded(reading,
                                                          values["plant.davis_absolute"])
+
+
+def planned_mass(values) -> float:
+    """The mass the plan is made for at departure (over the nominal): the reading, or with
+    profile.replan.enabled the reading plus profile.replan.sigmas of its uncertainty, at most
+    the crush load train.load_weighing_max (core/targets/replan.py)."""
+    reading = values["train.mass_reading"]
+    if not values["profile.replan.enabled"]:
+        return reading
+    bound = reading * (1.0 + values["profile.replan.sigmas"] * mass_prior_sigma(values))
+    return min(bound, values["train.load_weighing_max"] or math.inf)
 
 
 # The process's caches of built plans, each keyed by what its plans are built from: the
@@ -63,6 +76,10 @@ class RunContext:
         self.period = values["run.period"]
         self.steps = steps(values)
         self.train = ato_train(values)
+        # the train the plan is made for: the controllers' own, or with profile.replan the
+        # heaviest the reading admits (core/targets/replan.py)
+        self.planned_mass = planned_mass(values)
+        self.plan_train = ato_train(values, self.planned_mass)
         self.line = line_of(values) if line is None else line
 
     @functools.cached_property
@@ -132,7 +149,7 @@ class RunContext:
             plan_table((), ()) if table is None else table, self.departure,
             self.line.tables if self.line is not None else OPEN_TRACK,
             float(values["profile.approach_step"]), float(values["profile.berth"]),
-            float(self.berth_mark))
+            float(self.berth_mark), replan_settings(values, plan))
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies with the head at `position`, m/s (inf without a line):

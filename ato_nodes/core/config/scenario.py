@@ -404,8 +404,9 @@ class Derivation(NamedTuple):
 # scenario file).
 DERIVED_PARAMETERS = {
     "train.mass_reading": Derivation("train.load_weighing", "the load weighing's reading",
-                                     ("plant.mass_factor", "train.load_weighing_error",
-                                      "train.load_weighing_seed", "train.load_weighing_max")),
+                                     ("plant.mass_factor", "train.load_weighing_bias",
+                                      "train.load_weighing_error", "train.load_weighing_seed",
+                                      "train.load_weighing_max")),
     "run.last_stop_position": Derivation("run.last_stop_hold", "the timetable's last mark "
                                          "less profile.journey.berth",
                                          ("profile.journey.timetable", "profile.journey.berth")),
@@ -428,12 +429,14 @@ def derived(values: dict[str, Any], name: str, value: Any) -> dict[str, Any]:
 
 def weighed(values: dict[str, Any]) -> dict[str, Any]:
     """The values with train.mass_reading the load weighing's reading of the real train
-    (plant.mass_factor, its error drawn from train.load_weighing_seed, at most
-    train.load_weighing_max) when train.load_weighing; else as they are. ScenarioError
-    (one line) for a reading out of train.mass_reading's range."""
+    (plant.mass_factor read train.load_weighing_bias off, its error drawn from
+    train.load_weighing_seed, at most train.load_weighing_max) when train.load_weighing;
+    else as they are. ScenarioError (one line) for a reading out of train.mass_reading's
+    range."""
     if not values["train.load_weighing"]:
         return values
-    reading = load_weighing(values["plant.mass_factor"], values["train.load_weighing_error"],
+    biased = values["plant.mass_factor"] * (1.0 + values["train.load_weighing_bias"])
+    reading = load_weighing(biased, values["train.load_weighing_error"],
                             values["train.load_weighing_seed"])
     ceiling = values["train.load_weighing_max"]
     return derived(values, "train.mass_reading", min(reading, ceiling) if ceiling else reading)
@@ -485,6 +488,7 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
                             f"{values['controller.kind']} does not use the on-board estimator "
                             f"(those that do: {', '.join(estimating_kinds())})")
     try:
+        check_replan(values, CONTROLLERS.chosen(values).output_names)
         check_journey(values, line)  # before the plan: its curves then never evict the plan's
         profile = RunContext(NodeValues("profile", values), line)
         # a berth or a departure ramp where the plan has no such stop or start: refused now
@@ -498,6 +502,19 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
         raise ScenarioError(f"{where}: {exc}") from None
     plugins.note_in_use(plugins.references(values["run.plugins"]))
     return values
+
+
+def check_replan(values, output_names: tuple[str, ...]) -> None:
+    """Refuse profile.replan.enabled without the estimate it reads (one line)."""
+    if not values["profile.replan.enabled"]:
+        return
+    if not values["estimator.enabled"]:
+        raise ScenarioError("profile.replan.enabled plans from the on-board estimate: it needs "
+                            "estimator.enabled true")
+    if not {"mass_factor", "mass_sigma"} <= set(output_names):
+        raise ScenarioError(f"profile.replan.enabled reads the controller's mass estimate; "
+                            f"controller.kind {values['controller.kind']} has none (those that "
+                            f"have: {', '.join(estimating_kinds())})")
 
 
 def estimating_kinds() -> tuple[str, ...]:

@@ -19,6 +19,7 @@ from ..base.spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, Text
 from ..control.adrc import RETIRED_SWITCHES, retired_switch, switches_as_modes
 from ..control.estimation import PARAMETERS as ESTIMATOR_PARAMETERS
 from ..control.limiter import LIMITER_PARAMETERS
+from ..targets.replan import PARAMETERS as REPLAN_PARAMETERS
 from ..scoring.indices import RunningIndex
 from . import plugins
 from .components import CONTROLLERS, PROFILES, REGISTRIES
@@ -149,14 +150,18 @@ BASE: tuple[ParamSpec, ...] = (
           "then plant.mass_factor read with a relative error (false = the ATO knows the mass "
           "train.mass_reading gives, the papers' setting)", "plant"),
     param("train.load_weighing_error", 0.03, "the load weighing's relative error, 1 sigma (a "
-          "seeded normal draw; the on-board estimator's mass prior)", ("plant", "controller"),
+          "seeded normal draw; the on-board estimator's mass prior)", ("plant", *PROFILE_NODES),
           0.0, 0.5),
+    param("train.load_weighing_bias", 0.0, "the load weighing's systematic error: its reading "
+          "is the real mass times (1 + this) before its random error (load cells calibrated "
+          "wrong; unknown to the ATO), e.g. -0.1 reads 10 % light", "plant", -0.9, 1.0),
     param("train.load_weighing_seed", 0, "seed of the load weighing's error draw", "plant",
           0, 2**31 - 1),
     param("train.load_weighing_max", 0.0, "the highest reading the load weighing gives, over "
           "the nominal plant.mass: the train's crush load, the top of the range the load "
           "cells are calibrated over (as for load-compensated brakes); a heavier reading, a "
-          "heavy train read high, is clipped to it (0 = no ceiling)", "plant", 0.0, 10.0),
+          "heavy train read high, is clipped to it, and no plan is made for a heavier train "
+          "(profile.replan) (0 = no ceiling)", ("plant", *PROFILE_NODES), 0.0, 10.0),
     param("train.mass_reading", 1.0, "the mass the ATO knows, over the nominal plant.mass: the "
           "plan's envelope share and the controllers' nominal model are the nominal train's at "
           "this mass, if heavier (the command limits are the nominal's); set from the load "
@@ -194,6 +199,7 @@ BASE: tuple[ParamSpec, ...] = (
           ("profile", "controller"), 0, MAX_PREVIEW),
     *LIMITER_PARAMETERS,
     *ESTIMATOR_PARAMETERS,
+    *REPLAN_PARAMETERS,
     param("supervisor.ready_timeout", 30.0, "wall seconds to wait for every edge to match",
           "supervisor", 0.1, 3600.0),
     param("supervisor.report", "", "path of the JSON run report the supervisor writes",

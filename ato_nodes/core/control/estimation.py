@@ -65,7 +65,8 @@ How the controllers use it
   in the controller's settings, the EstimatorState in its state): the nominal train
   (`model`: the controller's nominal model, whose line tables it shares), the load
   weighing's train.mass_reading (scenario.weighed: the plant side's load cell, the one
-  place the real mass is read) as the mass prior, its error train.load_weighing_error.
+  place the real mass is read) as the mass prior, its uncertainty estimator.mass_sigma (else
+  the load weighing's error train.load_weighing_error).
   Off (estimator.enabled false), its settings and its state are None: compiled code
   prunes the estimator's branches while compiling (numba drops a branch on an argument
   that is None), so a run without it compiles without its code and carries none of its
@@ -93,7 +94,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.kernels import compiled, jitable
-from ..base.spec import param
+from ..base.spec import PROFILE_NODES, param
 from ..base.registry import Output
 from ..train.line import Line, belt_resistance, in_neutral_section
 from ..train.plant import Envelope, TrainParameters, basic_resistance, force_limits
@@ -106,6 +107,10 @@ PARAMETERS = (
           "on board, for the controllers that use it (linear_adrc, pid, gpc: the resistance in "
           "their models and feedforward, the estimated envelope in the GPC's constraints); off: "
           "the load weighing's mass and the nominal resistance", "controller"),
+    param("estimator.mass_sigma", 0.0, "prior uncertainty (1 sigma) of the mass, relative to "
+          "train.mass_reading: the range a train with no load weighing may weigh, or by which "
+          "its load cells may read wrong (0 = train.load_weighing_error, the load weighing's "
+          "error)", PROFILE_NODES, 0.0, 5.0),
     param("estimator.resistance_sigma", 0.2, "prior uncertainty (1 sigma) of the running "
           "resistance over the nominal", "controller", 0.001, 5.0),
     param("estimator.speed_noise", 0.01, "speed sensor noise and resolution together, "
@@ -167,6 +172,12 @@ def load_weighing(mass_factor: float, relative_error: float, seed: int) -> float
     return mass_factor * max(1.0 + relative_error * draw, LOWEST_FACTOR)
 
 
+def mass_prior_sigma(values) -> float:
+    """The mass prior's relative uncertainty, 1 sigma: estimator.mass_sigma, else the load
+    weighing's error (train.load_weighing_error)."""
+    return values["estimator.mass_sigma"] or values["train.load_weighing_error"]
+
+
 def estimator_settings(values, train: TrainParameters, period: float,
                        line: Line | None = None, model: NominalModel | None = None
                        ) -> EstimatorSettings:
@@ -210,11 +221,9 @@ def estimator_of(values, train: TrainParameters, period: float, mass_reading: fl
                  ) -> tuple[EstimatorSettings, EstimatorState]:
     """Settings and departure state (from `position` m at `speed` m/s) from the run's
     estimator.* `values`, the nominal `train` (`model`, as for estimator_settings) and the
-    load weighing's `mass_reading` (load_weighing), its error the run's
-    train.load_weighing_error."""
+    load weighing's `mass_reading` (load_weighing), its uncertainty mass_prior_sigma."""
     settings = estimator_settings(values, train, period, line, model)
-    return settings, estimator_start(settings, mass_reading,
-                                     values["train.load_weighing_error"],
+    return settings, estimator_start(settings, mass_reading, mass_prior_sigma(values),
                                      values["estimator.resistance_sigma"], position, speed)
 
 
@@ -455,8 +464,7 @@ def on_board_estimator(values, period: float, line: Line | None = None,
     plant.initial_position (m); off (estimator.enabled false), its settings and state None
     and the departure's estimates (the priors alone: no model built)."""
     if not values["estimator.enabled"]:
-        prior = estimator_start(None, values["train.mass_reading"],
-                                values["train.load_weighing_error"],
+        prior = estimator_start(None, values["train.mass_reading"], mass_prior_sigma(values),
                                 values["estimator.resistance_sigma"])
         return OnBoardEstimator(None, estimates(prior)), None
     settings, state = estimator_of(values, TrainParameters.from_values(values), period,

@@ -103,6 +103,8 @@ class LoopInputs(NamedTuple):
     fitness_kind: int          # the pruned running fitness: indices.ITAE, IAE, MAX_ABS_ERROR
     fitness_limit: float       # the running fitness past which the run ends (inf: never)
     columns: SeriesColumns     # where each series goes in a row
+    mass_column: int           # the controller's outputs the profile reads for its re-plans:
+    mass_sigma_column: int     # mass_factor and mass_sigma (-1: none, no re-plans)
 
 
 class LoopState(NamedTuple):
@@ -145,6 +147,8 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
         chunk = FIRST_CHUNK
         while loop.step < total and not loop.ended:
             check(loop.step)
+            if loop.profile.request == loop.profile.request:  # the last step asked for it
+                inputs, loop = _replanned(profile, inputs, loop)
             if schedule and schedule[0][0] == loop.step:
                 inputs, loop = _retuned(controller, inputs, loop, schedule.pop(0)[1])
             stop = min(total, loop.step + chunk, schedule[0][0] if schedule else total)
@@ -182,6 +186,15 @@ def _retuned(stage, inputs: LoopInputs, loop: LoopState, change: dict[str, float
             loop._replace(controller=stage.controller.state))
 
 
+def _replanned(stage, inputs: LoopInputs, loop: LoopState) -> tuple[LoopInputs, LoopState]:
+    """The inputs and state after the re-plan the profile's last step asked for:
+    ProfileStage.replan, as the profile node makes it after that step."""
+    stage.state = loop.profile
+    stage.replan()
+    return (inputs._replace(profile=inputs.profile._replace(plan=stage.settings.plan)),
+            loop._replace(profile=stage.state))
+
+
 def _inputs(profile, plant, controller, settings, running_index, limit: float,
             compiled: bool) -> LoopInputs:
     train, total = plant.train, profile.context.steps
@@ -195,7 +208,18 @@ def _inputs(profile, plant, controller, settings, running_index, limit: float,
         max_speed=float(plant.max_speed), last_stop=plant.last_stop,
         profile=profile.settings._replace(line=line),
         settings=settings, limits=controller.limiter.settings,
-        fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS)
+        fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS,
+        **estimate_columns(profile, controller))
+
+
+def estimate_columns(profile, controller) -> dict[str, int]:
+    """LoopInputs' mass_column and mass_sigma_column: where the controller's outputs hold
+    the on-board estimate the profile re-plans from (-1: no re-plans)."""
+    names = controller.output_names
+    if not profile.settings.replan.enabled:
+        return {"mass_column": -1, "mass_sigma_column": -1}
+    return {"mass_column": names.index("mass_factor"),
+            "mass_sigma_column": names.index("mass_sigma")}
 
 
 def _first_state(profile, plant, controller, controller_state, running_index) -> LoopState:
@@ -249,10 +273,15 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
                                                            loop.controller, loop.last,
                                                            loop.fitness, loop.stood)
     ended = False
-    while k < stop and not ended:
+    while k < stop and not ended and profile.request != profile.request:  # NaN: no re-plan
         measured = float(sensor_reading(plant.speed, inputs.draws[k], inputs.noise,
                                         inputs.quantum))
-        profile = profile_step(inputs.profile, journey, profile, k, plant.position, targets)
+        mass, mass_sigma = math.nan, math.nan
+        if k > 0 and inputs.mass_column >= 0:  # the estimate after step k - 1
+            mass = extras[k - 1, inputs.mass_column]
+            mass_sigma = extras[k - 1, inputs.mass_sigma_column]
+        profile = profile_step(inputs.profile, journey, profile, k, plant.position, targets,
+                               mass, mass_sigma)
         horizon = targets[k]
         target = float(horizon[0])
         if k == 0:

@@ -21,8 +21,8 @@ from .stages import SERIES, ControllerStage, PlantStage, ProfileStage
 
 def simulate(values: dict[str, Any], deadline: float | None = None,
              prune: tuple[RunningIndex, float] | None = None,
-             changes: dict[int, dict[str, float]] | None = None, compiled: bool = True
-             ) -> dict[str, np.ndarray]:
+             changes: dict[int, dict[str, float]] | None = None, compiled: bool = True,
+             replans: list | None = None) -> dict[str, np.ndarray]:
     """Run the loop in this process: one array per SERIES name, per controller output
     and `preview` (the horizons, steps x (N + 1)), one entry per step. Each stage
     gets exactly what its node declares. A diverged run (see PlantStage.diverged)
@@ -34,7 +34,9 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     `limit`. changes {step: {name: value}}: live controller parameters changed before
     that step, as a run's bag records them (bagio.Run.parameter_changes). The loop of
     core/run/fast_loop.py runs compiled when numba is installed; compiled=False runs the
-    same function as Python, to the same bits."""
+    same function as Python, to the same bits. replans: a list the run's mid-run re-plans
+    (core/targets/replan.MassReplan, profile.replan) are appended to, as the bag keeps
+    them."""
     line = line_of(values)
     profile = ProfileStage(NodeValues("profile", values), line)
     plant = PlantStage(NodeValues("plant", values), line)
@@ -42,6 +44,8 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     rows, extras, horizons = fast_loop.run(profile, plant, controller, prune,
                                            lambda step: _check_deadline(deadline, step),
                                            changes, compiled)
+    if replans is not None:
+        replans.extend(profile.replans)
     return _series(rows, extras, horizons, controller.output_names)
 
 

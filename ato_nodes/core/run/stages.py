@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -37,10 +38,11 @@ import numpy as np
 
 from ..base.errors import ScenarioError
 from ..config.components import CONTROLLERS
-from ..config.context import RunContext
+from ..config.context import RunContext, ato_train
 from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
-from ..targets.horizons import (LOOKAHEAD, PROFILE_START, profile_step)
+from ..targets.horizons import LOOKAHEAD, plan_speed_limit, profile_start, profile_step
+from ..targets.replan import MassReplan, replanned_table
 from ..train.line import Line
 from ..train.lines import line_of
 from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
@@ -69,26 +71,45 @@ class ProfileStage:
         self.period = values["run.period"]
         self.total_steps = steps(values)
         self.journey = getattr(self.context.plan, "journey", None)
-        self.state = PROFILE_START
+        self.state = profile_start(max(self.context.planned_mass, 1.0))
+        self.replans: list[MassReplan] = []  # mid-run re-plans (core/targets/replan.py)
         self.targets = (np.empty((self.total_steps, self.settings.preview + 1))
                         if self.settings.position_indexed else time_horizons(self.context).copy())
         self.received = 0
 
-    def on_position(self, position: float) -> list[list[float]]:
-        """Position s_k of step k in; the horizons to publish now out, in step order
-        (horizons.profile_step)."""
+    def on_position(self, position: float, mass: float = math.nan,
+                    mass_sigma: float = math.nan) -> list[list[float]]:
+        """Position s_k of step k in (and the on-board mass estimate after step k - 1, for
+        profile.replan); the horizons to publish now out, in step order
+        (horizons.profile_step), the plan re-made after it if the step asked."""
         k = self.received
         self.received += 1
         self.state = profile_step(self.settings, self.journey, self.state, k, position,
-                                  self.targets)
+                                  self.targets, mass, mass_sigma)
+        if self.state.request == self.state.request:
+            self.replan()
         if self.journey is not None:  # the plan's state and re-plans, for the node to say
             self.context.plan.moved(k * self.period, self.state.journey)
         first = 0 if k == 0 else k + LOOKAHEAD
         return self.targets[first:k + LOOKAHEAD + 1].tolist()
 
+    def replan(self) -> None:
+        """The re-plan the last step asked for (core/targets/replan.py): the plan's table
+        re-made from the train's state then, for the mass asked; the state keeps it."""
+        state, values = self.state, self.context.values
+        table = replanned_table(values, self.context.line, ato_train(values, state.request),
+                                self.settings.plan, state.last_position, state.request_speed,
+                                state.replanned_at)
+        self.settings = self.settings._replace(plan=table)
+        self.replans.append(MassReplan(state.replanned_at, state.last_position,
+                                       state.request_speed, state.request, state.planned_mass))
+        self.state = state._replace(planned_mass=state.request, request=math.nan,
+                                    request_speed=math.nan)
+
     def speed_limit(self, position: float) -> float:
-        """The limit that applies at step k's position, m/s (inf without a line)."""
-        return self.context.speed_limit(position)
+        """The limit that applies at step k's position, m/s (inf without a line): the
+        plan's own belt limit where it has one (the ATO curve's tail rule)."""
+        return float(plan_speed_limit(self.settings, self.journey, position))
 
 
 @functools.lru_cache(maxsize=4)

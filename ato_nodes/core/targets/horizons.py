@@ -19,6 +19,7 @@ from typing import NamedTuple
 from ..base.kernels import jitable, overload
 from ..train.line import LineTables, speed_limit
 from .profiles import DepartureRamp, PlanTable, departing, table_limit, table_speed
+from .replan import ReplanSettings, replan_request
 from .served import START, JourneyState, JourneyTable, journey_limit, journey_speed, observed
 
 LOOKAHEAD = 2  # steps the profile runs ahead of the plant
@@ -36,6 +37,7 @@ class ProfileSettings(NamedTuple):
     approach_step: float       # m/s, seed 003's stepped approach (0: off)
     berth: float               # m, profile.berth (0: off)
     berth_mark: float          # m, the stop it berths at (NaN: none)
+    replan: ReplanSettings     # mid-run re-plans from the on-board estimate (replan.py)
 
 
 class ProfileState(NamedTuple):
@@ -45,18 +47,28 @@ class ProfileState(NamedTuple):
     stair: float               # m/s, the stepped approach's stair (NaN: none)
     journey: JourneyState      # a journey's section and arrival (served.observed)
     arrived: bool              # standing in its berth once (profile.berth): for good
+    planned_mass: float        # the mass the plan was made for, over the nominal
+    replanned_at: float        # s, the last re-plan's (-inf: none)
+    request: float             # the mass a re-plan is asked for at this step (NaN: none)
+    request_speed: float       # m/s, the train's speed over the step that asked
 
 
-PROFILE_START = ProfileState(0.0, math.nan, START, False)
+def profile_start(planned_mass: float) -> ProfileState:
+    """The profile's state at the start, its plan made for `planned_mass`."""
+    return ProfileState(0.0, math.nan, START, False, planned_mass, -math.inf, math.nan,
+                        math.nan)
 
 
 @jitable
 def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state: ProfileState,
-                 k: int, position: float, targets) -> ProfileState:
+                 k: int, position: float, targets, mass: float, mass_sigma: float
+                 ) -> ProfileState:
     """Position s_k of step k in: the horizons to publish now written into `targets`
     (steps x (N + 1): rows 0 .. 2 at k = 0, row k + 2 after; a time-indexed plan's rows
     hold its horizons already), each row's first entry under the stepped approach; the
-    state after. Arrived in its berth, the horizons are zero, for good."""
+    state after. Arrived in its berth, the horizons are zero, for good. `mass`,
+    `mass_sigma`: the on-board estimate after the step before (NaN: none), from which the
+    state asks for a re-plan (replan.py; its runner makes it after this step)."""
     travel = position - state.last_position if k else 0.0  # over the last step
     speed = travel / settings.period
     stair, journey_state = state.stair, state.journey
@@ -74,7 +86,14 @@ def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state:
                              position + LOOKAHEAD * travel if k else position, targets[step])
             targets[step, 0], stair = approach(settings.approach_step, stair,
                                                targets[step, 0], speed)
-    return ProfileState(position, stair, journey_state, arrived)
+    request = replan_request(settings.replan, settings.plan, settings.line, state.planned_mass,
+                             state.replanned_at, k * settings.period, position, mass,
+                             mass_sigma)
+    if request == request:
+        return ProfileState(position, stair, journey_state, arrived, state.planned_mass,
+                            k * settings.period, request, speed)
+    return ProfileState(position, stair, journey_state, arrived, state.planned_mass,
+                        state.replanned_at, math.nan, math.nan)
 
 
 @jitable

@@ -385,7 +385,8 @@ class AtoCurve(Plan):
                  power_speed: float = math.inf, stop_jerk: float = 0.0,
                  train: TrainParameters | None = None, envelope_share: float = 0.0,
                  jerk: float = 0.0, departure: float | None = None,
-                 neutral_runout: float = 0.0, ceiling: Ceiling | None = None):
+                 neutral_runout: float = 0.0, ceiling: Ceiling | None = None,
+                 floor: float | None = None):
         self.line = line
         self.neutral_runout = neutral_runout
         stop = line.stop_position
@@ -399,7 +400,11 @@ class AtoCurve(Plan):
         if ceiling is not None:  # a run to keep under besides the limits (least_energy.py)
             squared = np.interp(self.positions, ceiling.positions, np.square(ceiling.speeds))
             caps = np.minimum(caps, np.sqrt(squared))
-        self.caps = np.maximum(caps, start_speed)
+        if floor is None:
+            self.caps = np.maximum(caps, start_speed)
+        else:  # a curve from a running train (a re-plan): the limits ahead still brake it
+            self.caps = np.maximum(caps, floor)
+            self.caps[0] = max(self.caps[0], start_speed)
         self.margin, self.jerk, self.departure = margin, jerk, departure
         self.cells: Cells | None = None  # set by _feasible
         self.feasible = (self._feasible(train, envelope_share, train_length)
@@ -701,12 +706,14 @@ def departing(ramp: DepartureRamp, since: float, target: float) -> float:
 
 def new_ato_curve(line, acceleration, deceleration, margin, start_speed, train_length,
                   power_speed, stop_jerk, train, envelope_share, jerk, departure,
-                  neutral_runout, ceiling: Ceiling | None = None) -> AtoCurve:
-    """The curve of ato_curve_arguments (and a ceiling), built anew."""
+                  neutral_runout, ceiling: Ceiling | None = None,
+                  floor: float | None = None) -> AtoCurve:
+    """The curve of ato_curve_arguments (and a ceiling; `floor`: the lowest cap, m/s, for a
+    curve that starts from a running train at start_speed; None: start_speed), built anew."""
     return AtoCurve(line, acceleration, deceleration, margin, start_speed, train_length,
                     power_speed=power_speed, stop_jerk=stop_jerk, train=train,
                     envelope_share=envelope_share, jerk=jerk, departure=departure,
-                    neutral_runout=neutral_runout, ceiling=ceiling)
+                    neutral_runout=neutral_runout, ceiling=ceiling, floor=floor)
 
 
 # One curve per distinct line and parameters (the profile and the scorer both need it; the
@@ -767,7 +774,7 @@ def _ato(values, context) -> AtoCurve:
     if line.stop_position <= 0.0:
         raise ScenarioError(f"the ato profile needs a stop beyond the departure point; "
                             f"{values['line.file']} stops at 0 m")
-    return ato_curve(values, line, context.train)
+    return ato_curve(values, line, context.plan_train)
 
 
 STRATEGY_PARAMETERS = (
@@ -810,10 +817,10 @@ def _strategy(values, context) -> StrategyProfile:
     if abs(plan.positions[-1] - context.line.stop_position) > 1.0:
         raise ScenarioError(f"strategy file {path} ends at {plan.positions[-1]:.0f} m, the "
                             f"line's stop is at {context.line.stop_position:.0f} m")
-    if values["profile.strategy.replan"] and context.train != TrainParameters.from_values(
+    if values["profile.strategy.replan"] and context.plan_train != TrainParameters.from_values(
             values):  # the weighed train, heavier than the one planned for
         try:
-            plan = _driven_again(StrategyByContents.of(plan), context.line, context.train,
+            plan = _driven_again(StrategyByContents.of(plan), context.line, context.plan_train,
                                  values["plant.efficiency"],
                                  values["profile.strategy.max_share"])
         except ValueError as exc:

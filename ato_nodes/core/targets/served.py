@@ -561,7 +561,7 @@ def _journey(values, context) -> JourneyPlan:
                             f"({first.position:g} m); plant.initial_position is "
                             f"{values['plant.initial_position']:g} m (at most {AT_ORIGIN:g} m "
                             f"from it)")
-    return JourneyPlan(*journey_table(timetable, values, context.line, context.train,
+    return JourneyPlan(*journey_table(timetable, values, context.line, context.plan_train,
                                       TrainParameters.from_values(values)),
                        tuple(stop.station for stop in timetable.stops))
 

@@ -1,0 +1,180 @@
+"""Plans re-made from the on-board estimate (profile.replan.*), ROS-free.
+
+The plan is made for the heaviest train the ATO's knowledge admits, not for one reading:
+at departure the mass's prior, train.mass_reading (1 + k sigma), sigma the estimator's
+mass_prior_sigma and k = profile.replan.sigmas (config/context.py planned_mass); then the
+on-board estimate (core/control/estimation.py, the controller's mass_factor and
+mass_sigma outputs), mass + k sigma; never above the crush load (train.load_weighing_max:
+the heaviest the train can be, where an estimate errs high). Why the bound and not the
+estimate: the mass is seen only while the train runs at its envelope (estimation.py),
+that is once a plan asks more than the train has, when the tracking already suffers; a
+plan for the bound leaves that train its reserve. A train with no load weighing
+(estimator.mass_sigma its possible range) is planned for the heavy end of the range; a
+reading the estimate contradicts is replaced as the estimate firms up.
+
+Mid-run (the ato curve, profile.kind ato): when the bound moves more than
+profile.replan.mass_change (a share) from the mass the plan was made for, the profile
+step asks for a re-plan (replan_request, written once for the node and both loops); its
+runner (core/run/stages.ProfileStage.replan, called by the profile node and by the loop
+of core/run/fast_loop.py between two chunks of steps, at the same step) re-plans the
+curve from the train's state: from its position and speed at that step, for the time
+left to the planned arrival (profile.ato.on_time), for the new mass; the curve before that
+position is kept. Never within profile.replan.stop_distance of the stop mark, never with
+the train's belt on a neutral section, and at most once per profile.replan.interval
+(each re-plan moves the target's acceleration: the curve starts from the train's speed
+with its acceleration rounded up from 0).
+
+Journeys and strategies are planned for the bound at departure (the plan's train), not
+re-planned mid-run.
+
+Units: m, s, m/s; masses over the nominal plant.mass.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ..base.kernels import jitable
+from ..base.spec import PROFILE_NODES, param
+from ..train.line import LineTables, in_neutral_section
+from .profiles import PlanTable, ato_curve_arguments, new_ato_curve, plan_table, table_speed
+from .timetable import section_line
+
+PARAMETERS = (
+    param("profile.replan.enabled", False, "plan for the heaviest train the ATO's knowledge "
+          "admits: the mass reading plus profile.replan.sigmas of its uncertainty "
+          "(estimator.mass_sigma) at departure, then the on-board estimate's; the ato curve "
+          "re-planned mid-run from the train's state when that moves (needs estimator.enabled "
+          "and a controller kind that estimates; false = the reading alone, once)",
+          PROFILE_NODES),
+    param("profile.replan.sigmas", 2.0, "the plan's mass is the estimate plus this many of "
+          "its sigmas", PROFILE_NODES, 0.0, 5.0),
+    param("profile.replan.mass_change", 0.03, "re-plan when the estimate's bound moves this "
+          "share from the mass the plan was made for", PROFILE_NODES, 0.001, 1.0),
+    param("profile.replan.interval", 10.0, "at most one re-plan in this time, s",
+          PROFILE_NODES, 0.0, 1e4),
+    param("profile.replan.stop_distance", 100.0, "no re-plan within this distance of the "
+          "stop mark, m", PROFILE_NODES, 0.0, 1e5),
+)
+
+
+class ReplanSettings(NamedTuple):
+    """What a run fixes for its mid-run re-plans."""
+
+    enabled: bool          # the plan is re-planned mid-run (the ato curve)
+    sigmas: float          # k of the bound mass + k sigma
+    mass_change: float     # share of the plan's mass the bound must move
+    interval: float        # s between two re-plans, at least
+    last_position: float   # m, the last position a re-plan may start from (the stop less
+                           # profile.replan.stop_distance)
+    train_length: float    # m: no re-plan with the belt on a neutral section
+    heaviest: float        # the crush load (train.load_weighing_max; inf: none): no plan
+                           # for a heavier train, whatever the estimate says
+
+
+BRAKING_LOOK = 1.0  # m: a plan lower this far ahead brakes
+
+NO_REPLAN = ReplanSettings(False, 0.0, math.inf, math.inf, -math.inf, 0.0, math.inf)
+
+
+def replan_settings(values, plan) -> ReplanSettings:
+    """The run's ReplanSettings: enabled for the ato curve with profile.replan.enabled."""
+    if not values["profile.replan.enabled"] or values["profile.kind"] != "ato":
+        return NO_REPLAN
+    return ReplanSettings(True, float(values["profile.replan.sigmas"]),
+                          float(values["profile.replan.mass_change"]),
+                          float(values["profile.replan.interval"]),
+                          float(plan.positions[-1] - values["profile.replan.stop_distance"]),
+                          float(values["plant.length"]),
+                          float(values["train.load_weighing_max"] or math.inf))
+
+
+@jitable
+def replan_request(settings: ReplanSettings, plan: PlanTable, line: LineTables,
+                   planned: float, replanned_at: float, t: float, position: float,
+                   mass: float, sigma: float) -> float:
+    """The mass to re-plan for at `t` (s) with the head at `position` (m), from the
+    estimate (`mass`, `sigma`; NaN: none yet) against the `planned` mass and the last
+    re-plan's time; NaN: none. Not while the `plan` brakes: a braking curve re-planned
+    half-way jumps, and the estimate is least sure there (the brakes' force steps at
+    their largest, the actuator's lag the least known)."""
+    if not settings.enabled or mass != mass:
+        return math.nan
+    # never lighter than the nominal train (context.ato_train), nor heavier than crush
+    bound = min(max(mass + settings.sigmas * sigma, 1.0), settings.heaviest)
+    if abs(bound / planned - 1.0) <= settings.mass_change or \
+            t - replanned_at < settings.interval or position > settings.last_position:
+        return math.nan
+    if table_speed(plan, position + BRAKING_LOOK) < table_speed(plan, position):
+        return math.nan
+    if in_neutral_section(line, position) or in_neutral_section(
+            line, position - settings.train_length):
+        return math.nan
+    return bound
+
+
+class MassReplan(NamedTuple):
+    """A mid-run re-plan, as the profile node says it and the bag keeps it."""
+
+    time: float          # s
+    position: float      # m, the head, where the new curve starts
+    speed: float         # m/s, its start speed
+    mass: float          # the new plan's mass over the nominal
+    planned_mass: float  # the old plan's
+
+    def text(self) -> str:
+        return (f"the ato curve at {self.time:.1f} s from {self.position:.1f} m at "
+                f"{self.speed * 3.6:.2f} km/h for a mass of {self.mass:.3f} x nominal (the "
+                f"on-board estimate; planned for {self.planned_mass:.3f})")
+
+
+_CURVE_ARGUMENTS = tuple(inspect.signature(new_ato_curve).parameters)  # in their order
+
+
+def replanned_table(values, line, train, table: PlanTable, position: float, speed: float,
+                    t: float) -> PlanTable:
+    """The ato curve's table re-planned for `train` from `position` (m) at `speed` (m/s)
+    at `t` (s): table's rows before `position`, then the curve on the rest of `line` to its
+    stop from `speed`, on time for the planned arrival (profile.ato.on_time: the line's
+    planned running time less `t`; at the limits when that is past).
+
+    The train is accelerating when a re-plan comes (the mass shows at the envelope), and
+    a jerk-rounded curve from its speed would start at zero acceleration, the train running
+    ahead of it by about a T / 2 (T = the rounding's time, a the acceleration). So the
+    curve starts as the unrounded one from `speed`, at the new plan's own rate, under the
+    rounded curve planned from a T / 2 higher (which it meets once the rounding has caught
+    up): the target keeps its speed and nearly its acceleration."""
+    stop = line.stop_position
+    rest = section_line(line, position, stop)
+    given = ato_curve_arguments(values, rest, train)
+    arguments = dict(zip(_CURVE_ARGUMENTS[:len(given)], given, strict=True))
+    arguments.update(start_speed=max(speed, 0.01), floor=values["profile.ato.start_speed"],
+                     departure=0.0 if values["profile.ato.on_time"] else None)
+    # no planned time, no bisection; as near the limits as the rounded curve may come
+    sharp = new_ato_curve(**{**arguments, "jerk": 0.0, "margin": 0.5 * arguments["margin"]})
+    if values["profile.ato.on_time"] and line.planned_run_time is not None:
+        rest = dataclasses.replace(rest, planned_run_time=max(line.planned_run_time - t, 0.0))
+        arguments["line"] = rest
+    jerk = values["profile.jerk"]
+    if jerk > 0.0:
+        rounding = max(values["profile.ato.acceleration"],
+                       values["profile.ato.deceleration"]) / jerk
+        reach = min(max(speed, 1.0) * rounding, sharp.positions[-1])  # about T s ahead
+        rising = float(np.interp(reach, sharp.positions, sharp.speeds)) - sharp.speeds[0]
+        arguments["start_speed"] = sharp.speeds[0] + 0.5 * max(rising, 0.0)
+    curve = new_ato_curve(**arguments)
+    speeds = curve.speeds
+    if jerk > 0.0:  # the unrounded start, up to where the rounded curve has caught up
+        start = sharp.curve(curve.cruise)
+        met = np.flatnonzero(start >= speeds)
+        ends = met[met > 0][0] if np.any(met > 0) else len(speeds)
+        speeds = np.concatenate((start[:ends], speeds[ends:]))
+    kept = table.grid[:, table.grid[0] < position]
+    ahead = plan_table(curve.positions + position, speeds, stops_at_end=True,
+                       limits=curve.limits).grid
+    return table._replace(grid=np.concatenate((kept, ahead), axis=1))
