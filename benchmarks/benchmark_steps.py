@@ -3,6 +3,7 @@
 figures, asserts nothing.
 
     python benchmarks/benchmark_steps.py [SCENARIO ...] [--seconds 300] [--repeats 3]
+        [--set NAME=VALUE ...]
 
 us/step: simulate() of the run, cut to --seconds of simulated time (the whole run where
 shorter), per step, with its plan already built (a warm-up run loads the compiled loop
@@ -61,11 +62,13 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=300.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--python", action="store_true", help="time the Python loop")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a parameter in every run (repeatable)")
     args = parser.parse_args()
     try:
         runs = {}
         for name in args.scenarios or scenario_names():
-            values = prepare(name)
+            values = prepare(name, args.set)
             runs[name] = apply_overrides(values, {
                 "run.duration": min(args.seconds, values["run.duration"])})
     except ScenarioError as exc:

@@ -83,8 +83,12 @@ def test_a_replan_is_asked_for_when_the_bound_moves_and_only_where_it_may_be(met
     braking = 2100.0  # the curve brakes there for the line's 60 km/h from 2150 m
     assert table_speed(plan, braking + 1.0) < table_speed(plan, braking)
     assert math.isnan(asked(position=braking))
-    assert asked(mass=0.8, sigma=0.0) == pytest.approx(1.0)  # never below the nominal
-    assert asked(mass=1.6) == pytest.approx(1.5)  # nor above the crush load
+    assert asked(mass=1.6) == pytest.approx(1.5)  # never above the crush load
+    assert math.isnan(asked(mass=0.8, sigma=0.0))  # lighter: not while accelerating
+    cruise = 1000.0
+    assert table_speed(plan, cruise + 1.0) == table_speed(plan, cruise)
+    # on the cruise, lighter, but never below the nominal train
+    assert asked(position=cruise, mass=0.8, sigma=0.0) == pytest.approx(1.0)
 
 
 def test_the_replanned_curve_starts_at_the_trains_speed_and_still_brakes_for_the_limits(metro):

@@ -56,7 +56,7 @@ PARAMETERS = (
           "its sigmas", PROFILE_NODES, 0.0, 5.0),
     param("profile.replan.mass_change", 0.03, "re-plan when the estimate's bound moves this "
           "share from the mass the plan was made for", PROFILE_NODES, 0.001, 1.0),
-    param("profile.replan.interval", 10.0, "at most one re-plan in this time, s",
+    param("profile.replan.interval", 5.0, "at most one re-plan in this time, s",
           PROFILE_NODES, 0.0, 1e4),
     param("profile.replan.stop_distance", 100.0, "no re-plan within this distance of the "
           "stop mark, m", PROFILE_NODES, 0.0, 1e5),
@@ -77,7 +77,7 @@ class ReplanSettings(NamedTuple):
                            # for a heavier train, whatever the estimate says
 
 
-BRAKING_LOOK = 1.0  # m: a plan lower this far ahead brakes
+SLOPE_LOOK = 1.0  # m: a plan lower this far ahead brakes, higher accelerates
 
 NO_REPLAN = ReplanSettings(False, 0.0, math.inf, math.inf, -math.inf, 0.0, math.inf)
 
@@ -102,7 +102,9 @@ def replan_request(settings: ReplanSettings, plan: PlanTable, line: LineTables,
     estimate (`mass`, `sigma`; NaN: none yet) against the `planned` mass and the last
     re-plan's time; NaN: none. Not while the `plan` brakes: a braking curve re-planned
     half-way jumps, and the estimate is least sure there (the brakes' force steps at
-    their largest, the actuator's lag the least known)."""
+    their largest, the actuator's lag the least known); nor for a lighter train while it
+    accelerates (the bound falls as the estimate's sigma shrinks, before the estimate has
+    risen to the heavy train it sees: a lighter plan would ask more of it then)."""
     if not settings.enabled or mass != mass:
         return math.nan
     # never lighter than the nominal train (context.ato_train), nor heavier than crush
@@ -110,8 +112,9 @@ def replan_request(settings: ReplanSettings, plan: PlanTable, line: LineTables,
     if abs(bound / planned - 1.0) <= settings.mass_change or \
             t - replanned_at < settings.interval or position > settings.last_position:
         return math.nan
-    if table_speed(plan, position + BRAKING_LOOK) < table_speed(plan, position):
-        return math.nan
+    ahead, here = table_speed(plan, position + SLOPE_LOOK), table_speed(plan, position)
+    if ahead < here or (bound < planned and ahead > here):
+        return math.nan  # braking; or lighter, which would ask more, while accelerating
     if in_neutral_section(line, position) or in_neutral_section(
             line, position - settings.train_length):
         return math.nan

@@ -1,0 +1,157 @@
+#!/usr/bin/env python3
+"""The train learned on board (profile.replan, core/targets/replan.py): seed004-metro-ato
+driven by a light, a nominal and a heavy slow-actuator train, with what the ATO knows of
+the load either nothing (no load weighing: the mass prior 1 +- estimator.mass_sigma
+0.15) or a load weighing that reads 15 % light (trusted to its stated 3 %); the on-board
+estimator on, its bound re-planning the ato curve.
+
+    python scripts/learned_on_board.py
+    python scripts/learned_on_board.py --figure /tmp/learned.png
+
+Prints a Markdown table per run: the estimates at the stop against the real train (mass
+and resistance, their sigma), their mean absolute error while moving, the re-plans made
+(time, the new plan's mass), and the run's tracking, stop and arrival; draws the mass
+estimate with its +-1 sigma band, the mass each plan was made for and the real mass, and
+the resistance scale against the real one (--figure, PNG). The actuator's lag is not
+estimated: the ATO keeps the nominal lag (the slow actuator's error is what the estimate
+cannot explain).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import _cli
+import numpy as np
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.results.journeys import score_run
+from ato_nodes.studies.runner import Variant, prepare_variants
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = "seed004-metro-ato"
+TRAINS = {  # label -> the real train's factors
+    "light (m 0.85)": {"plant.mass_factor": 0.85},
+    "nominal": {},
+    "heavy, slow (m 1.3, lag 1.3, resistance 1.2)": {
+        "plant.mass_factor": 1.3, "plant.lag_factor": 1.3, "plant.resistance_factor": 1.2},
+}
+KNOWLEDGE = {  # label -> what the ATO knows of the load, and the re-plans on
+    "no load weighing": {"train.load_weighing": False, "train.mass_reading": 1.0,
+                         "estimator.mass_sigma": 0.15},
+    "weighed 15 % light": {"train.load_weighing_bias": -0.15},
+}
+ON_BOARD = {"estimator.enabled": True, "profile.replan.enabled": True}
+
+
+def parse_args():
+    parser = _cli.argument_parser(__doc__)
+    parser.add_argument("--figure", type=Path,
+                        default=ROOT / "docs/results/estimation/learned-on-board.png")
+    args = parser.parse_args()
+    if args.figure.suffix.lower() != ".png":
+        _cli.fail(f"--figure must name a .png file, got {args.figure}")
+    return args
+
+
+def learned(values: dict) -> dict:
+    """The run's series, its re-plans and indices."""
+    replans = []
+    series = simulate(values, replans=replans)
+    return {"series": series, "replans": replans, "indices": score_run(series, values),
+            "mass": values["plant.mass_factor"],
+            "resistance": values["plant.resistance_factor"],
+            "values": values}
+
+
+def planned_masses(result: dict) -> np.ndarray:
+    """The mass the plan in force was made for, at every step."""
+    from ato_nodes.core.config.context import planned_mass
+    t = result["series"]["t"]
+    masses = np.full(len(t), max(planned_mass(result["values"]), 1.0))
+    for replan in result["replans"]:
+        masses[t > replan.time] = replan.mass
+    return masses
+
+
+def table_row(knowledge: str, train: str, result: dict) -> str:
+    series, indices = result["series"], result["indices"]
+    moving = series["speed"] > 0.0
+    cells = [knowledge, train]
+    for name, real in (("mass_factor", result["mass"]), ("resistance_scale",
+                                                         result["resistance"])):
+        sigma = name.replace("_factor", "_sigma").replace("_scale", "_sigma")
+        error = series[name] / real - 1.0
+        cells += [f"{series[name][-1]:.3f} +- {series[sigma][-1]:.3f} (real {real:g})",
+                  f"{100 * np.abs(error[moving]).mean():.1f}"]
+    made = "; ".join(f"{replan.time:.1f} s: {replan.mass:.3f}" for replan in result["replans"])
+    cells += [f"{max(planned_masses(result)[0], 1.0):.3f}", made or "none",
+              f"{indices['max_abs_error_kmh']:.3f}", f"{indices['stopping_error']:+.3f}",
+              f"{indices['running_time_error']:+.1f}"]
+    return "| " + " | ".join(cells) + " |"
+
+
+def plot(results: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figure, axes = plt.subplots(len(KNOWLEDGE), 2, figsize=(13, 7.5), sharex=True)
+    for row, knowledge in zip(axes, KNOWLEDGE, strict=True):
+        for colour, train in enumerate(TRAINS):
+            result = results[knowledge, train]
+            series, t = result["series"], result["series"]["t"]
+            mass, sigma = series["mass_factor"], series["mass_sigma"]
+            row[0].plot(t, mass, color=f"C{colour}", lw=1.2, label=train)
+            row[0].fill_between(t, mass - sigma, mass + sigma, color=f"C{colour}", alpha=0.15,
+                                lw=0)
+            row[0].plot(t, planned_masses(result), color=f"C{colour}", lw=1.0, ls="--")
+            row[0].axhline(result["mass"], color=f"C{colour}", lw=0.6, ls=":")
+            row[1].plot(t, series["resistance_scale"], color=f"C{colour}", lw=1.2)
+            row[1].axhline(result["resistance"], color=f"C{colour}", lw=0.6, ls=":")
+            for replan in result["replans"]:
+                row[0].axvline(replan.time, color=f"C{colour}", lw=0.6, alpha=0.6)
+        row[0].set(title=f"{knowledge}: mass (estimate +-1 sigma; dashed: the plan's; "
+                   "dotted: real)", ylabel="over the nominal", ylim=(0.7, 1.6))
+        row[1].set(title=f"{knowledge}: running resistance (dotted: real)",
+                   ylabel="over the nominal", ylim=(0.5, 2.0))
+        for axis in row:
+            axis.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, loc="upper left")
+    for axis in axes[-1]:
+        axis.set_xlabel("t, s")
+    figure.suptitle(f"{SCENARIO}: the train learned on board, the ato curve re-planned "
+                    "(vertical lines)")
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def main() -> None:
+    args = parse_args()
+    try:
+        runs = prepare_variants({(knowledge, train): Variant(SCENARIO, {
+            **ON_BOARD, **known, **real})
+            for knowledge, known in KNOWLEDGE.items() for train, real in TRAINS.items()})
+        args.figure.parent.mkdir(parents=True, exist_ok=True)
+    except ScenarioError as exc:
+        _cli.fail(str(exc))
+    except OSError as exc:
+        _cli.fail(f"--figure {args.figure}: {exc.strerror}")
+    results = {key: learned(values) for key, values in runs.items()}
+    print("| the ATO knows | real train | mass at the stop | mean abs error % | resistance "
+          "at the stop | mean abs error % | planned at departure | re-plans (t: mass) | "
+          "max abs(e) km/h | stop m | arrival s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for (knowledge, train), result in results.items():
+        print(table_row(knowledge, train, result))
+    try:
+        plot(results, args.figure)
+    except OSError as exc:
+        _cli.fail(f"--figure {args.figure}: {exc.strerror or exc}")
+    print(f"\nthe actuator's lag is not estimated (the nominal one assumed); figure: "
+          f"{args.figure}")
+
+
+if __name__ == "__main__":
+    _cli.interrupted_quietly(main)
