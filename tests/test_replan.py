@@ -15,6 +15,7 @@ from ato_nodes.core.config.scenario import prepare
 from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.targets.profiles import table_speed
+from ato_nodes.reports.analysis import plan_mass
 from ato_nodes.core.targets.replan import (NO_REPLAN, ReplanSettings, replan_request,
                                            replanned_table)
 from ato_nodes.results.journeys import score_run
@@ -161,3 +162,6 @@ def test_a_replanned_run_through_the_stack_is_the_in_process_run_and_its_bag_kee
     assert [replan["step"] for replan in kept] == [
         round(replan.time / values["run.period"]) for replan in replans]
     assert [replan["mass"] for replan in kept] == [replan.mass for replan in replans]
+    said = plan_mass(read_run(bag))  # the report says which mass the plan used when
+    assert said.startswith("the load weighing's reading") and "(its cells reading -0.15 off)" \
+        in said and said.count("re-planned at") == len(replans)

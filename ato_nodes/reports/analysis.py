@@ -27,6 +27,7 @@ import numpy as np
 
 from ato_nodes.core.base.registry import Output
 from ato_nodes.core.config.components import CONTROLLERS, PROFILES
+from ato_nodes.core.config.context import planned_mass
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME
@@ -550,6 +551,7 @@ def identity(run: Run) -> dict[str, str]:
                            f"{values.get('controller.u_max', math.nan):g}] N/kN, rate "
                            f"{values.get('controller.max_rate', math.nan):g} N/kN/s, preview "
                            f"{values.get('controller.preview', 0)} steps")
+    described["load"] = plan_mass(run)
     line = run_line(values)
     if line is None:
         described["line"] = "open track (no line file)"
@@ -566,6 +568,27 @@ def identity(run: Run) -> dict[str, str]:
                            f"{values['run.last_stop_hold']:g} s (run.last_stop_hold)"
                            if run.ended_at_last_stop else ""))
     return described
+
+
+def plan_mass(run: Run) -> str:
+    """Which mass the plan used when, and from where: the load weighing's reading or the
+    given one, the bound planned for (profile.replan), each re-plan from the on-board
+    estimate (the bag's re-plans that carry a mass)."""
+    values = run.parameters
+    reading = values.get("train.mass_reading", 1.0)
+    source = (f"the load weighing's reading {reading:.3f}"
+              + (f" (its cells reading {values['train.load_weighing_bias']:+g} off)"
+                 if values.get("train.load_weighing_bias") else "")
+              if values.get("train.load_weighing") else
+              f"no load weighing: train.mass_reading {reading:g} as given")
+    if not values.get("profile.replan.enabled"):
+        return f"{source}; planned for it, once"
+    planned = planned_mass({name: values.get(name, spec.default)  # an older bag: defaults
+                            for name, spec in SPEC_BY_NAME.items()})
+    replans = [replan for replan in run.replans if "mass" in replan]
+    return (f"{source}; planned for {planned:.3f} (its bound, profile.replan)" + "".join(
+        f"; re-planned at {replan['time']:.1f} s for {replan['mass']:.3f} (the on-board "
+        f"estimate)" for replan in replans))
 
 
 def judge(run: Run) -> RunReport:
