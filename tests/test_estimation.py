@@ -13,6 +13,7 @@ from ato_nodes.core.control import estimation
 from ato_nodes.core.control.estimation import (
     PARAMETERS, estimate_series, estimated_force_limits, estimated_mass_factor,
     estimated_resistance, estimator_of, estimator_step, load_weighing)
+from ato_nodes.core.control import train_model
 from ato_nodes.core.control.train_model import known_resistance, nominal_train
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
@@ -219,3 +220,22 @@ def test_the_recorded_estimates_are_the_estimators_over_the_recorded_run():
                                  series["measured_speed"])
     for name, values_offline in offline.items():
         assert np.array_equal(values_offline, series[name]), name
+
+
+def test_the_controllers_model_acts_on_the_estimated_envelope():
+    """The linear ADRC's nominal model (its delay-aware prediction and observer input)
+    clamps the force at the envelope as estimated on board: the model's mass over the
+    estimated one; 1 with the estimator off (the model's own envelope, to the bit)."""
+    values = prepare("seed004-metro-ato", ["estimator.enabled=true", "train.load_weighing=false",
+                                           "train.mass_reading=1.1"])
+    model, state = nominal_train(TrainParameters.from_values(values), values["run.period"])
+    on_board, estimated = estimation.on_board_estimator(values, values["run.period"])
+    assert estimation.on_board_envelope(on_board, None) == 1.0
+    assert estimation.on_board_envelope(on_board, estimated) == pytest.approx(1.0)  # the prior
+    heavier = estimated._replace(inverse_mass=1.0 / 1.43)
+    assert estimation.on_board_envelope(on_board, heavier) == pytest.approx(1.1 / 1.43)
+    low, high = force_limits(10.0, model.train.envelope)
+    for scale in (1.0, 0.5):
+        lag_state = high * 2.0  # the lag's output well above the envelope
+        _, mean = train_model.nominal_act(model, lag_state, 2.0 * high, 10.0, 0.0, scale)
+        assert mean == high * scale

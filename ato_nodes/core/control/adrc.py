@@ -47,7 +47,8 @@ from ..base.spec import param, settings
 from ..train.line import Line, neutral_distance
 from ..train.plant import TrainParameters
 from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
-                         on_board_estimates, on_board_estimator, on_board_scale, on_board_step)
+                         on_board_envelope, on_board_estimates, on_board_estimator,
+                         on_board_scale, on_board_step)
 from .limiter import STOPPED, CommandLimiter, LimiterSettings, limit_command, limit_under
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
 from .train_model import (NominalModel, NominalState, known_resistance, neutral_ceiling,
@@ -607,7 +608,8 @@ def law_speed_and_target(settings: LinearADRCSettings, state: LinearADRCState, z
     if not (g.delay_aware and ahead):
         return z1, target
     predicted = nominal_predict(settings.model, state.model, z1, z2, g.b0, ahead,
-                                state.u_applied, g.feedforward, scale)
+                                state.u_applied, g.feedforward, scale,
+                                on_board_envelope(settings.estimator, state.estimator))
     if g.predicted_target:
         target = target_past_preview(horizon, settings.period, predicted.travelled)
     return predicted.speed, target
@@ -659,7 +661,8 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     u = limit_under(law, ceiling, target, measured, last, limits)
     force, nominal = u, state.model
     if g.feedforward or g.delay_aware or g.neutral_cut:  # the model dead-reckons the position
-        force, nominal = nominal_advance(model, state.model, u, measured)
+        force, nominal = nominal_advance(model, state.model, u, measured,
+                                         on_board_envelope(settings.estimator, state.estimator))
     observer_input = (force if g.delay_aware else u) - resistance
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)
     return u, (z1, z2) + on_board_estimates(settings.estimator, estimator), LinearADRCState(

@@ -76,8 +76,11 @@ How the controllers use it
 * The resistance scale (on_board_scale: 1 off) enters train_model.known_resistance as its
   basic_scale (the linear ADRC's feedforward, observer input and prediction; the PID's
   feedforward; the GPC's prediction); estimated_force_limits(settings, state, speed) is
-  the envelope of the GPC's constraints. A scale of 1 multiplies exactly, so a controller
-  with the estimator off gives the bits it gave before it had one.
+  the envelope of the GPC's constraints; on_board_envelope (the controller's model's mass
+  over the estimated one) scales the envelope of the linear ADRC's nominal model (its
+  delay-aware prediction and its observer's input: train_model.nominal_act). A scale of
+  1 multiplies exactly, so a controller with the estimator off gives the bits it gave
+  before it had one.
 * on_board_estimates(estimator, state) are the controllers' recorded outputs
   ESTIMATE_OUTPUTS: estimates(state), off the departure's throughout.
 * estimate_series(settings, state, commands, measured_speeds) runs it over recorded
@@ -105,7 +108,8 @@ from .train_model import (NominalModel, NominalState, dead_time_steps, known_res
 PARAMETERS = (
     param("estimator.enabled", False, "estimate the real train's mass and running resistance "
           "on board, for the controllers that use it (linear_adrc, pid, gpc: the resistance in "
-          "their models and feedforward, the estimated envelope in the GPC's constraints); off: "
+          "their models and feedforward, the estimated envelope in the GPC's constraints and "
+          "the linear ADRC's nominal actuator); off: "
           "the load weighing's mass and the nominal resistance", "controller"),
     param("estimator.mass_sigma", 0.0, "prior uncertainty (1 sigma) of the mass, relative to "
           "train.mass_reading: the range a train with no load weighing may weigh, or by which "
@@ -406,7 +410,7 @@ def _actuator_period(settings: EstimatorSettings, actuator: NominalState, lag_by
         elif command < low * inverse_mass:
             command, input_by_mass = low * inverse_mass, low
     lag_state, demand = nominal_act(model, actuator.lag_state, command, speed,
-                                    actuator.position)
+                                    actuator.position, 1.0)
     if model.neutral and command > 0.0 and in_neutral_section(
             model.line, actuator.position - model.pantograph_offset):
         input_by_mass = 0.0  # traction cut: nominal_act took the command to 0
@@ -442,6 +446,7 @@ class OnBoardEstimator(NamedTuple):
 
     settings: EstimatorSettings | None  # None: off
     departure: tuple[float, float, float, float]  # estimates() at departure
+    model_mass: float  # the mass the controller's nominal model is at, over the nominal
 
 
 ESTIMATE_OUTPUTS = (
@@ -466,11 +471,12 @@ def on_board_estimator(values, period: float, line: Line | None = None,
     if not values["estimator.enabled"]:
         prior = estimator_start(None, values["train.mass_reading"], mass_prior_sigma(values),
                                 values["estimator.resistance_sigma"])
-        return OnBoardEstimator(None, estimates(prior)), None
+        return OnBoardEstimator(None, estimates(prior), 1.0), None
     settings, state = estimator_of(values, TrainParameters.from_values(values), period,
                                    values["train.mass_reading"], line,
                                    values["plant.initial_position"], 0.0, model)
-    return OnBoardEstimator(settings, estimates(state)), state
+    model_mass = max(values["train.mass_reading"], 1.0)  # config/context.ato_train's
+    return OnBoardEstimator(settings, estimates(state), model_mass), state
 
 
 @jitable
@@ -489,6 +495,15 @@ def on_board_scale(state: EstimatorState | None) -> float:
     if state is None:
         return 1.0
     return state.resistance_scale
+
+
+@jitable
+def on_board_envelope(estimator: OnBoardEstimator, state: EstimatorState | None) -> float:
+    """The real train's envelope over the controller's model's, as estimated on board (the
+    model's mass over the estimated one); 1 with the estimator off."""
+    if state is None:
+        return 1.0
+    return estimator.model_mass * state.inverse_mass
 
 
 @jitable

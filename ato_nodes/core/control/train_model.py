@@ -73,8 +73,9 @@ def dead_time_steps(train: TrainParameters, period: float) -> int:
 
 @jitable
 def nominal_act(model: NominalModel, lag_state: float, command: float, speed: float,
-                position: float) -> tuple[float, float]:
-    """One period with `command` reaching the lag: (next lag state, mean force N/kN)."""
+                position: float, envelope_scale: float) -> tuple[float, float]:
+    """One period with `command` reaching the lag: (next lag state, mean force N/kN); the
+    envelope the model's times `envelope_scale` (the on-board estimate's, 1: the model's)."""
     train = model.train
     powered = True
     if model.neutral and command > 0.0 and in_neutral_section(
@@ -83,6 +84,7 @@ def nominal_act(model: NominalModel, lag_state: float, command: float, speed: fl
     low, high = 0.0, 0.0
     if train.limited:
         low, high = force_limits(speed, train.envelope)
+        low, high = low * envelope_scale, high * envelope_scale
         command = clamp(command, low, high)
     mean = command + (lag_state - command) * model.spread
     if train.limited:
@@ -116,15 +118,17 @@ def neutral_ceiling(model: NominalModel, state: NominalState, speed: float,
 
 
 @jitable
-def nominal_advance(model: NominalModel, state: NominalState, command: float, speed: float
-                    ) -> tuple[float, NominalState]:
+def nominal_advance(model: NominalModel, state: NominalState, command: float, speed: float,
+                    envelope_scale: float) -> tuple[float, NominalState]:
     """The period that starts now, `command` just sent and `speed` just measured: (the
-    mean force the train will apply over it, N/kN; the model's state after it)."""
+    mean force the train will apply over it, N/kN; the model's state after it);
+    `envelope_scale` as for nominal_act."""
     pending, oldest = state.pending, state.oldest
     if len(pending):
         command, pending[oldest] = pending[oldest], command
         oldest = (oldest + 1) % len(pending)
-    lag_state, mean = nominal_act(model, state.lag_state, command, speed, state.position)
+    lag_state, mean = nominal_act(model, state.lag_state, command, speed, state.position,
+                                  envelope_scale)
     return mean, NominalState(lag_state, state.position + model.period * speed, pending, oldest)
 
 
@@ -149,18 +153,19 @@ class Prediction(NamedTuple):
 @jitable
 def nominal_predict(model: NominalModel, state: NominalState, speed: float,
                     unexplained: float, gain: float, steps: int, held: float,
-                    resisted: bool, basic_scale: float) -> Prediction:
+                    resisted: bool, basic_scale: float, envelope_scale: float) -> Prediction:
     """The speed `steps` periods from now, from `speed` now, and the distance covered
     till then: the commands inside the dead time act in turn, then `held`; acceleration
     gain (force - known resistance) + `unexplained` (m/s^2, an observer's estimate of the
     rest; without `resisted` it holds the resistance too, and the model's is left out;
-    `basic_scale` as for known_resistance)."""
+    `basic_scale` as for known_resistance, `envelope_scale` as for nominal_act)."""
     h, lag_state, position = model.period, state.lag_state, state.position
     pending = state.pending
     travelled = 0.0  # the trapezoid's, as a preview's trajectory is integrated
     for i in range(steps):
         command = pending[(state.oldest + i) % len(pending)] if i < len(pending) else held
-        lag_state, mean = nominal_act(model, lag_state, command, speed, position)
+        lag_state, mean = nominal_act(model, lag_state, command, speed, position,
+                                      envelope_scale)
         if resisted:
             mean -= known_resistance(model, speed, position, basic_scale)
         acceleration = gain * mean + unexplained
