@@ -11,11 +11,11 @@ from ato_nodes.core.run.scoring import score_series
 from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.core.targets.horizons import has_arrived
 
-# A crush-laden metro train with a fast actuator and the on-board estimator: it stops
-# 4.7 cm short of the mark at 167.1 s, on time, and creeps there for 4 s without a berth.
-CREEPING = ("plant.mass_factor=1.2693304404688879", "plant.resistance_factor=0.897558597329214",
-            "plant.lag_factor=0.7882385844599408", "plant.noise_seed=423524079",
-            "train.load_weighing_seed=1054717546", "estimator.enabled=true",
+# A metro train with a slow actuator (lag 1.22) and the on-board estimator: it stops 7.3 cm
+# short of the mark at 164.4 s, on time, and creeps on for 3.2 s (to 1.7 cm) without a berth.
+CREEPING = ("plant.mass_factor=1.023364659182611", "plant.resistance_factor=1.167200766910856",
+            "plant.lag_factor=1.2216867448341637", "plant.noise_seed=354096443",
+            "train.load_weighing_seed=340331917", "estimator.enabled=true",
             "profile.departure_jerk=0")  # the departure this train was found creeping with
 
 
@@ -52,7 +52,7 @@ def test_a_train_stopped_short_in_its_berth_stays_there_and_arrives_then():
     late, on_time = (score_series(run, values) for run in (creeping, berthed))
     first_stop = np.flatnonzero(berthed["speed"] == 0.0)
     first_stop = first_stop[first_stop > 100][0]
-    assert np.ptp(berthed["position"][first_stop:]) < 1e-4  # the commands still in the
+    assert np.ptp(berthed["position"][first_stop:]) < 1e-3  # the commands still in the
     assert np.all(berthed["target"][first_stop + 3:] == 0.0)  # pipeline move it a hair
     assert on_time["arrival_time"] < late["arrival_time"] - 2.0
     assert abs(on_time["stopping_error"]) < 0.1
