@@ -622,20 +622,19 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
 
     ESO  z1 -> speed, z2 -> total disturbance (acceleration not explained by the input
     b0 (F - w)), gains 2 omega_o and omega_o^2; with r the tracked target r_k+N (the
-    horizon's end) and
-    v the speed estimate,
+    horizon's end) and v the speed estimate,
         u = (omega_c (r - v) + a_r - z2) / b0 + w_r.
     In the papers' setting F is the command, w = w_r = a_r = 0 and v = z1. With
     `feedforward`, a_r is the plan's acceleration at r, w the known resistance now
     and w_r at r's planned position (core/control/train_model.py); with `delay_aware`, F
     is the force the nominal actuator applies and v the speed predicted N steps ahead
-    (the commands inside the dead time and lag act first), so the law's error is
-    the one its command can still change; the known basic resistance is scaled by the
-    on-board estimate (1 off); with `standstill` the ESO holds z2 while the train stands
-    under an input that would slow it (the brakes' reaction is no disturbance); with
-    `predicted_target` r is the plan where the train is predicted to be (a train ahead
-    of its plan). The ESO is integrated by backward Euler in closed form, stable for any
-    step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
+    (the commands inside the dead time and lag act first): the error its command can
+    still change; the known basic resistance and the nominal actuator's envelope are
+    scaled by the on-board estimates (1 off); with `standstill` the ESO holds z2 while
+    the train stands under an input that would slow it (the brakes' reaction is no
+    disturbance); with `predicted_target` r is the plan where the train is predicted to
+    be (a train ahead of its plan). The ESO is integrated by backward Euler in closed
+    form, stable for any step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
     g, h, model = settings.gains, settings.period, settings.model
     scale = on_board_scale(state.estimator)
     z1, z2 = linear_eso(settings, state, measured)
