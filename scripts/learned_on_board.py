@@ -25,6 +25,7 @@ import _cli
 import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.context import planned_mass
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.results.journeys import score_run
 from ato_nodes.studies.runner import Variant, prepare_variants
@@ -67,7 +68,6 @@ def learned(values: dict) -> dict:
 
 def planned_masses(result: dict) -> np.ndarray:
     """The mass the plan in force was made for, at every step."""
-    from ato_nodes.core.config.context import planned_mass
     t = result["series"]["t"]
     masses = np.full(len(t), max(planned_mass(result["values"]), 1.0))
     for replan in result["replans"]:
@@ -86,7 +86,7 @@ def table_row(knowledge: str, train: str, result: dict) -> str:
         cells += [f"{series[name][-1]:.3f} +- {series[sigma][-1]:.3f} (real {real:g})",
                   f"{100 * np.abs(error[moving]).mean():.1f}"]
     made = "; ".join(f"{replan.time:.1f} s: {replan.mass:.3f}" for replan in result["replans"])
-    cells += [f"{max(planned_masses(result)[0], 1.0):.3f}", made or "none",
+    cells += [f"{planned_masses(result)[0]:.3f}", made or "none",
               f"{indices['max_abs_error_kmh']:.3f}", f"{indices['stopping_error']:+.3f}",
               f"{indices['running_time_error']:+.1f}"]
     return "| " + " | ".join(cells) + " |"

@@ -17,7 +17,7 @@ import math
 from ..base.errors import ScenarioError
 import numpy as np
 
-from ..targets.horizons import ProfileSettings, plan_horizon, plan_speed_limit
+from ..targets.horizons import ProfileSettings, plan_horizon
 from ..targets import least_energy, profiles, served, timetable
 from ..control.estimation import mass_prior_sigma
 from ..targets.replan import replan_settings
@@ -150,12 +150,6 @@ class RunContext:
             self.line.tables if self.line is not None else OPEN_TRACK,
             float(values["profile.approach_step"]), float(values["profile.berth"]),
             float(self.berth_mark), replan_settings(values, plan))
-
-    def speed_limit(self, position: float) -> float:
-        """The limit that applies with the head at `position`, m/s (inf without a line):
-        the plan's own belt limit where it has one (the ATO curve's tail rule)."""
-        return float(plan_speed_limit(self.profile_settings, getattr(self.plan, "journey", None),
-                                      position))
 
     def horizon(self, step: int, position: float, count: int) -> list[float]:
         """The plan's targets of steps step .. step + count, from `position` at step:

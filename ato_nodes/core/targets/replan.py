@@ -41,6 +41,7 @@ import numpy as np
 
 from ..base.kernels import jitable
 from ..base.spec import PROFILE_NODES, param
+from ..base.units import MS_TO_KMH
 from ..train.line import LineTables, in_neutral_section
 from .profiles import PlanTable, ato_curve_arguments, new_ato_curve, plan_table, table_speed
 from .timetable import section_line
@@ -132,7 +133,7 @@ class MassReplan(NamedTuple):
 
     def text(self) -> str:
         return (f"the ato curve at {self.time:.1f} s from {self.position:.1f} m at "
-                f"{self.speed * 3.6:.2f} km/h for a mass of {self.mass:.3f} x nominal (the "
+                f"{self.speed * MS_TO_KMH:.2f} km/h for a mass of {self.mass:.3f} x nominal (the "
                 f"on-board estimate; planned for {self.planned_mass:.3f})")
 
 
