@@ -1,18 +1,20 @@
 #!/usr/bin/env python3
-"""Accuracy of the on-board estimator of the train's mass and running resistance
-(ato_nodes/core/control/estimation.py) on light, nominal and heavy trains and on a
-running resistance 20 % off, for seed004-metro-ato and seed003-maglev-ato.
+"""Accuracy of the on-board estimator of the train's mass, running resistance and
+actuator lag (ato_nodes/core/control/estimation.py) on light, nominal and heavy trains, on
+a running resistance 20 % off and on an actuator 30 % slow or quick, for
+seed004-metro-ato and seed003-maglev-ato.
 
     python scripts/estimator_accuracy.py
     python scripts/estimator_accuracy.py --weighing-seed 3 --figure /tmp/accuracy.png
 
 Each case runs in-process with the real train changed (plant.mass_factor,
-plant.resistance_factor; the controller keeps the nominal train), then the estimator
-runs over what the ATO had of it (the commands it sent, the measured speeds), its prior
-the load weighing of the real mass (--weighing-error, 1 sigma; --weighing-seed). Prints
+plant.resistance_factor, plant.lag_factor; the controller keeps the nominal train), then
+the estimator runs over what the ATO had of it (the commands it sent, the measured
+speeds; the lag estimated, estimator.lag_sigma 0.2), its prior the load weighing of the
+real mass (--weighing-error, 1 sigma; --weighing-seed). Prints
 a Markdown table (final errors; errors averaged over the time the train moves, absolute)
-and draws the mass factor's and the resistance scale's errors against the real train
-over time with the +-1 sigma band (--figure, PNG).
+and draws the mass factor's, the resistance scale's and the lag factor's errors against
+the real train over time with the +-1 sigma band (--figure, PNG).
 """
 
 from __future__ import annotations
@@ -36,12 +38,21 @@ from ato_nodes.studies.runner import Variant, prepare_variants
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ("seed004-metro-ato", "seed003-maglev-ato")
 WEIGHING_ERROR = SPEC_BY_NAME["train.load_weighing_error"].default
-CASES = {  # label -> (mass factor, resistance factor) of the real train
-    "light (m 0.85)": (0.85, 1.0),
-    "nominal": (1.0, 1.0),
-    "heavy (m 1.3)": (1.3, 1.0),
-    "resistance +20 %": (1.0, 1.2),
-    "resistance -20 %": (1.0, 0.8),
+LAG_SIGMA = 0.2  # the lag estimated (estimator.lag_sigma; off by default)
+CASES = {  # label -> the real train's plant.* factors
+    "light (m 0.85)": {"plant.mass_factor": 0.85},
+    "nominal": {},
+    "heavy (m 1.3)": {"plant.mass_factor": 1.3},
+    "resistance +20 %": {"plant.resistance_factor": 1.2},
+    "resistance -20 %": {"plant.resistance_factor": 0.8},
+    "slow actuator (lag 1.3)": {"plant.lag_factor": 1.3},
+    "quick actuator (lag 0.7)": {"plant.lag_factor": 0.7},
+}
+ESTIMATES = {  # name -> (the estimate, its sigma, the real train's factor, words, plot limit %)
+    "mass": ("mass_factor", "mass_sigma", "plant.mass_factor", "mass factor", 8),
+    "resistance": ("resistance_scale", "resistance_sigma", "plant.resistance_factor",
+                   "resistance scale", 25),
+    "lag": ("lag_factor", "lag_sigma", "plant.lag_factor", "lag factor", 25),
 }
 
 
@@ -69,24 +80,24 @@ def estimated(values: dict, reading: float, error: float) -> dict[str, np.ndarra
     series = simulate(values)
     estimator = {spec.name: spec.default for spec in PARAMETERS}
     estimator["train.load_weighing_error"] = error
+    estimator["estimator.lag_sigma"] = LAG_SIGMA
     line = line_of(values)
     settings, state = estimator_of(estimator, TrainParameters.from_values(values),
                                    values["run.period"], reading, line,
                                    values["plant.initial_position"])
     rows, _ = estimate_series(settings, state, series["command"], series["measured_speed"],
                               fast=True)
-    mass, resistance = values["plant.mass_factor"], values["plant.resistance_factor"]
-    return {"t": series["t"], "moving": series["speed"] > 0.0,
-            "mass_error": rows["mass_factor"] / mass - 1.0,
-            "mass_sigma": rows["mass_sigma"] / mass,
-            "resistance_error": rows["resistance_scale"] / resistance - 1.0,
-            "resistance_sigma": rows["resistance_sigma"] / resistance}
+    result = {"t": series["t"], "moving": series["speed"] > 0.0}
+    for name, (column, sigma, factor, _, _) in ESTIMATES.items():
+        result[f"{name}_error"] = rows[column] / values[factor] - 1.0
+        result[f"{name}_sigma"] = rows[sigma] / values[factor]
+    return result
 
 
 def table_row(scenario: str, label: str, result: dict) -> str:
     moving = result["moving"]
     cells = [scenario, label]
-    for name in ("mass", "resistance"):
+    for name in ESTIMATES:
         error = result[f"{name}_error"]
         cells += [f"{100 * error[-1]:+.2f}", f"{100 * result[f'{name}_sigma'][-1]:.2f}",
                   f"{100 * np.abs(error[moving]).mean():.2f}"]
@@ -97,11 +108,10 @@ def plot(results: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    figure, axes = plt.subplots(len(SCENARIOS), 2, figsize=(13, 7.5), sharex="row")
+    figure, axes = plt.subplots(len(SCENARIOS), len(ESTIMATES), figsize=(18, 7.5),
+                                sharex="row")
     for row, scenario in zip(axes, SCENARIOS, strict=True):
-        for axis, name, what, limit in zip(row, ("mass", "resistance"),
-                                           ("mass factor", "resistance scale"), (8, 25),
-                                           strict=True):
+        for axis, (name, (_, _, _, what, limit)) in zip(row, ESTIMATES.items(), strict=True):
             for colour, label in enumerate(CASES):
                 result = results[scenario, label]
                 error, sigma = 100 * result[f"{name}_error"], 100 * result[f"{name}_sigma"]
@@ -122,9 +132,8 @@ def plot(results: dict, path: Path) -> None:
 def main() -> None:
     args = parse_args()
     try:
-        runs = prepare_variants({(scenario, label): Variant(scenario, {
-            "plant.mass_factor": mass, "plant.resistance_factor": resistance})
-            for scenario in SCENARIOS for label, (mass, resistance) in CASES.items()})
+        runs = prepare_variants({(scenario, label): Variant(scenario, real)
+                                 for scenario in SCENARIOS for label, real in CASES.items()})
     except ScenarioError as exc:
         _cli.fail(str(exc))
     try:
@@ -136,9 +145,9 @@ def main() -> None:
         reading = load_weighing(values["plant.mass_factor"], args.weighing_error,
                                 args.weighing_seed)
         results[scenario, label] = estimated(values, reading, args.weighing_error)
-    print("| scenario | real train | mass error final % | sigma % | mean abs % | "
-          "resistance error final % | sigma % | mean abs % |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| scenario | real train | " + " | ".join(
+        f"{name} error final % | sigma % | mean abs %" for name in ESTIMATES) + " |")
+    print("|---|---|" + "---|---|---|" * len(ESTIMATES))
     for scenario, label in results:
         print(table_row(scenario, label, results[scenario, label]))
     try:

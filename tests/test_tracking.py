@@ -25,7 +25,8 @@ from ato_nodes.core.targets.timetable import section_line
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, train_preset
 from ato_nodes.core.config.schema import defaults
 from ato_nodes.core.run.scoring import score_series
-from ato_nodes.core.control.train_model import nominal_advance, nominal_predict, nominal_train
+from ato_nodes.core.control.train_model import (model_actuator, nominal_advance,
+                                                nominal_predict, nominal_train)
 from commands import invocation
 from test_adrc import paper_gains
 
@@ -52,9 +53,9 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
             ahead = 10
             if k + ahead < len(commands):
                 predicted = nominal_predict(model, state, speeds[-1], 0.0, train.xi, ahead, u,
-                                            True, 1.0, 1.0)
+                                            True, 1.0, model_actuator(model))
                 blind_prediction = nominal_predict(blind, blind_state, speeds[-1], 0.0, train.xi,
-                                                   ahead, u, True, 1.0, 1.0)
+                                                   ahead, u, True, 1.0, model_actuator(blind))
                 future = PointMassTrain(train, PERIOD, 4, TrainState(speed=0.0))
                 future.motion = plant.motion._replace(delayed=plant.motion.delayed.copy())
                 for _ in range(ahead):
@@ -63,8 +64,8 @@ def test_the_nominal_model_predicts_the_nominal_train_through_dead_time_and_lag(
                 worst_blind = max(worst_blind, abs(blind_prediction.speed - future.state.speed))
                 worst_travel = max(worst_travel, abs(
                     predicted.travelled - (future.state.position - plant.state.position)))
-        state = nominal_advance(model, state, u, speeds[-1], 1.0)[1]
-        blind_state = nominal_advance(blind, blind_state, u, speeds[-1], 1.0)[1]
+        state = nominal_advance(model, state, u, speeds[-1], model_actuator(model))[1]
+        blind_state = nominal_advance(blind, blind_state, u, speeds[-1], model_actuator(blind))[1]
         plant.step(u)
     assert worst < 0.01  # Euler over 1 s against RK4: millimetres per second
     assert worst_travel < 0.005  # and the distance to the millimetre

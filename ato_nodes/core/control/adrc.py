@@ -47,12 +47,12 @@ from ..base.spec import param, settings
 from ..train.line import Line, neutral_distance
 from ..train.plant import TrainParameters
 from .estimation import (ESTIMATE_OUTPUTS, EstimatorState, OnBoardEstimator,
-                         on_board_envelope, on_board_estimates, on_board_estimator,
+                         on_board_actuator, on_board_estimates, on_board_estimator,
                          on_board_scale, on_board_step)
 from .limiter import STOPPED, CommandLimiter, LimiterSettings, limit_command, limit_under
 from .stepped import STATE_PATHS, ControllerSteps, SteppedController
-from .train_model import (NominalModel, NominalState, known_resistance, neutral_ceiling,
-                          nominal_advance, nominal_predict, nominal_train)
+from .train_model import (Actuator, NominalModel, NominalState, known_resistance,
+                          neutral_ceiling, nominal_advance, nominal_predict, nominal_train)
 
 
 @jitable
@@ -598,18 +598,18 @@ def linear_adrc_start(settings: LinearADRCSettings, state: LinearADRCState, targ
 
 
 @jitable
-def law_speed_and_target(settings: LinearADRCSettings, state: LinearADRCState, z1: float,
-                         z2: float, target: float, horizon, scale: float
+def law_speed_and_target(settings: LinearADRCSettings, state: LinearADRCState,
+                         actuator: Actuator, z1: float, z2: float, horizon, scale: float
                          ) -> tuple[float, float]:
-    """The speed the law acts on and the target it tracks: the observer's speed and r_k+N,
-    with delay_aware the speed predicted N = len(horizon) - 1 steps ahead, and with
+    """The speed the law acts on and the target it tracks: the observer's speed and r_k+N
+    (the horizon's end), with delay_aware the speed predicted N = len(horizon) - 1 steps
+    ahead by the nominal model with `actuator` (as estimated on board), and with
     predicted_target the plan where the train is then predicted to be."""
-    g, ahead = settings.gains, len(horizon) - 1
+    g, ahead, target = settings.gains, len(horizon) - 1, horizon[-1]
     if not (g.delay_aware and ahead):
         return z1, target
     predicted = nominal_predict(settings.model, state.model, z1, z2, g.b0, ahead,
-                                state.u_applied, g.feedforward, scale,
-                                on_board_envelope(settings.estimator, state.estimator))
+                                state.u_applied, g.feedforward, scale, actuator)
     if g.predicted_target:
         target = target_past_preview(horizon, settings.period, predicted.travelled)
     return predicted.speed, target
@@ -635,11 +635,11 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     disturbance); with `predicted_target` r is the plan where the train is predicted to
     be (a train ahead of its plan). The ESO is integrated by backward Euler in closed
     form, stable for any step. Outputs z1, z2 and the estimates (ESTIMATE_OUTPUTS)."""
-    g, h, model = settings.gains, settings.period, settings.model
+    g, h, model, ahead = settings.gains, settings.period, settings.model, len(horizon) - 1
+    actuator = on_board_actuator(settings.estimator, state.estimator, model)
     scale = on_board_scale(state.estimator)
     z1, z2 = linear_eso(settings, state, measured)
-    ahead = len(horizon) - 1
-    speed, target = law_speed_and_target(settings, state, z1, z2, horizon[-1], horizon, scale)
+    speed, target = law_speed_and_target(settings, state, actuator, z1, z2, horizon, scale)
     law = (g.omega_c * (target - speed) - z2) / g.b0
     resistance = 0.0  # known to the observer over the coming period
     if g.feedforward:
@@ -660,8 +660,7 @@ def linear_adrc_step(settings: LinearADRCSettings, state: LinearADRCState, targe
     u = limit_under(law, ceiling, target, measured, last, limits)
     force, nominal = u, state.model
     if g.feedforward or g.delay_aware or g.neutral_cut:  # the model dead-reckons the position
-        force, nominal = nominal_advance(model, state.model, u, measured,
-                                         on_board_envelope(settings.estimator, state.estimator))
+        force, nominal = nominal_advance(model, state.model, u, measured, actuator)
     observer_input = (force if g.delay_aware else u) - resistance
     estimator = on_board_step(settings.estimator, state.estimator, u, measured)
     return u, (z1, z2) + on_board_estimates(settings.estimator, estimator), LinearADRCState(

@@ -1,4 +1,5 @@
-"""On-board estimation of the real train's mass and running resistance (ROS-free).
+"""On-board estimation of the real train's mass, running resistance and actuator lag
+(ROS-free).
 
 What it estimates, and why in this form
 ---------------------------------------
@@ -25,13 +26,25 @@ three factors, and they enter differently:
   of the nominal envelope), so its mass estimate stays the load weighing's, with the
   load weighing's sigma: that is honest, not a fault (and all a controller needs: the
   envelope it may use is not below the nominal one).
-* plant.lag_factor is not estimated (the actuator model keeps the nominal lag; its
-  error counts as unexplained acceleration).
+* plant.lag_factor lambda scales the first-order lag's time constant. The estimator's
+  actuator model runs at the estimated lag (its exact discretisation's decay and mean
+  over the period at lambda tau), and carries the lag state's derivative by lambda
+  through it: the lag shows wherever the command changes (the departure, every change
+  of stage, the stop's jerk-limited braking), a 30 % slower lag being ~0.1 m/s of speed
+  behind after a metro's change of 0.5 m/s^2, ten times the speed sensor's noise; it is
+  seen within ~1-2 % by the end of the metro's acceleration. estimator.lag_sigma 0 (the
+  default) keeps the nominal lag (a zero row and column of the covariance: exactly the
+  three-state filter's bits). Why not on by default: with it the linear ADRC tracks slow
+  actuators better, but some metro stops creep on for seconds and a light train's mass
+  estimate drifts up under the brakes (docs/results.md, "The train learned on board").
+  The dead time is not estimated: it moves by whole periods (the ring of pending
+  commands), a discrete quantity an EKF cannot follow; its error shows as lag.
 
-Filter: an extended Kalman filter on x = (v, theta, r), the speed a state (m/s),
-theta and r random walks. Against recursive least squares with exponential forgetting:
-RLS's covariance grows by 1/lambda every step whatever the data, so during a dwell,
-a cruise or a coast (no mass information for most of a run) it winds up exponentially
+Filter: an extended Kalman filter on x = (v, theta, r, lambda), the speed a state
+(m/s), theta, r and lambda random walks. Against recursive least squares with
+exponential forgetting: RLS's covariance grows by one over its forgetting factor every
+step whatever the data, so during a dwell, a cruise or a coast (no mass information for
+most of a run) it winds up exponentially
 and the next saturation makes the estimate jump; the KF's process noise adds a stated
 drift per second (linear growth), takes the load weighing as a proper prior, and
 freezing is simply skipping the update. The speed as a state, not a differentiated
@@ -40,14 +53,15 @@ are ~0.15 m/s^2 of acceleration noise against a 20 % resistance error of ~0.015 
 the filter compares the measured speed with the speed the model integrates (a
 regression on speed increments, optimally weighted), so the noise does not grow with
 the differencing and the innovations stay white. The uncertainty is the covariance
-diagonal (sigma of theta and r; mass_sigma ~ theta_sigma / theta^2).
+diagonal (sigma of theta, r and lambda; mass_sigma ~ theta_sigma / theta^2).
 
 Per control period (estimator_step): the command just sent enters the estimator's own
 copy of the ATO's actuator model (train_model.nominal_advance's dead-time ring, then
-nominal_act's lag and traction cut in neutral sections, on a model without the nominal
-envelope), the estimated envelope (nominal / m) cutting it where the plant does, at the
-lag's input, and again at the output's mean; the force's derivative by theta goes through
-the lag with it (a lag that creeps up to the envelope is informative too). The next
+nominal_act's lag at the estimated time constant and traction cut in neutral sections,
+on a model without the nominal envelope), the estimated envelope (nominal / m) cutting
+it where the plant does, at the lag's input, and again at the output's mean; the force's
+derivatives by theta and lambda go through the lag with it (a lag that creeps up to the
+envelope is informative too). The next
 step's measured speed closes the period: predict
 (v + h xi (F(theta) - r w0(v) - w_line), midpoint in v), then update. Frozen (no update,
 no drift; the speed state reset to the measurement): a period that starts or ends below
@@ -57,7 +71,7 @@ estimator.neutral_margin of a neutral section's edge (whether traction was cut i
 unsure by the dead reckoning's error).
 
 Units: speeds m/s, forces and resistances N/kN (specific, as the whole core), positions
-m, theta and r dimensionless; the covariance is over (v m/s, theta, r).
+m, theta, r and lambda dimensionless; the covariance is over (v m/s, theta, r, lambda).
 
 How the controllers use it
 -------------------------
@@ -76,11 +90,13 @@ How the controllers use it
 * The resistance scale (on_board_scale: 1 off) enters train_model.known_resistance as its
   basic_scale (the linear ADRC's feedforward, observer input and prediction; the PID's
   feedforward; the GPC's prediction); estimated_force_limits(settings, state, speed) is
-  the envelope of the GPC's constraints; on_board_envelope (the controller's model's mass
-  over the estimated one) scales the envelope of the linear ADRC's nominal model (its
-  delay-aware prediction and its observer's input: train_model.nominal_act). A scale of
-  1 multiplies exactly, so a controller with the estimator off gives the bits it gave
-  before it had one.
+  the envelope of the GPC's constraints; on_board_actuator is the actuator of the linear
+  ADRC's nominal model (its delay-aware prediction and its observer's input:
+  train_model.nominal_act): its envelope scaled by the controller's model's mass over the
+  estimated one, and the estimated lag. Off, it is the model's own (a scale of 1, which
+  multiplies exactly, and the model's lag), so a controller with the estimator off gives
+  the bits it gave before it had one. The GPC keeps the nominal lag (its prediction matrices
+  are built once per run).
 * on_board_estimates(estimator, state) are the controllers' recorded outputs
   ESTIMATE_OUTPUTS: estimates(state), off the departure's throughout.
 * estimate_series(settings, state, commands, measured_speeds) runs it over recorded
@@ -102,15 +118,17 @@ from ..base.registry import Output
 from ..train.line import Line, belt_resistance, in_neutral_section
 from ..train.plant import Envelope, TrainParameters, basic_resistance, force_limits
 from .limiter import clamp
-from .train_model import (NominalModel, NominalState, dead_time_steps, known_resistance,
-                          nominal_act, nominal_train)
+from .train_model import (Actuator, NominalModel, NominalState, dead_time_steps,
+                          known_resistance, lag_coefficients, model_actuator, nominal_act,
+                          nominal_train)
 
 PARAMETERS = (
-    param("estimator.enabled", False, "estimate the real train's mass and running resistance "
-          "on board, for the controllers that use it (linear_adrc, pid, gpc: the resistance in "
-          "their models and feedforward, the estimated envelope in the GPC's constraints and "
-          "the linear ADRC's nominal actuator); off: "
-          "the load weighing's mass and the nominal resistance", "controller"),
+    param("estimator.enabled", False, "estimate the real train's mass, running resistance "
+          "and actuator lag on board, for the controllers that use it (linear_adrc, pid, gpc: "
+          "the resistance in their models and feedforward, the estimated envelope in the "
+          "GPC's constraints and the linear ADRC's nominal actuator, the estimated lag in "
+          "the latter); off: the load weighing's mass and the nominal resistance and lag",
+          "controller"),
     param("estimator.mass_sigma", 0.0, "prior uncertainty (1 sigma) of the mass, relative to "
           "train.mass_reading: the range a train with no load weighing may weigh, or by which "
           "its load cells may read wrong (0 = train.load_weighing_error, the load weighing's "
@@ -126,6 +144,12 @@ PARAMETERS = (
           "per square-root second", "controller", 0.0, 1.0),
     param("estimator.resistance_drift", 1e-3, "random-walk drift of the resistance scale, "
           "per square-root second", "controller", 0.0, 1.0),
+    param("estimator.lag_sigma", 0.0, "prior uncertainty (1 sigma) of the actuator's lag "
+          "over the nominal (plant.actuator_lag), which the estimator then estimates and the "
+          "linear ADRC's model takes (0.2 a range that covers +-40 %); 0: not estimated, the "
+          "nominal lag kept", "controller", 0.0, 5.0),
+    param("estimator.lag_drift", 1e-3, "random-walk drift of the lag factor, per "
+          "square-root second", "controller", 0.0, 1.0),
     param("estimator.min_speed", 1.0, "below this speed (standstill, holding brake, the "
           "last metres of a stop) the estimates are frozen, m/s", "controller", 0.0, 100.0),
     param("estimator.neutral_margin", 5.0, "estimates frozen while the pantograph is this "
@@ -134,7 +158,8 @@ PARAMETERS = (
 
 # Bounds on the estimates: the schema's range of plant.mass_factor and resistance_factor.
 LOWEST_FACTOR, HIGHEST_FACTOR = 0.1, 10.0
-SPEED, INVERSE_MASS, RESISTANCE = 0, 1, 2  # the covariance's rows
+SPEED, INVERSE_MASS, RESISTANCE, LAG = 0, 1, 2, 3  # the covariance's rows
+STATES = 4
 
 
 class EstimatorSettings(NamedTuple):
@@ -147,6 +172,9 @@ class EstimatorSettings(NamedTuple):
     speed_drift: float         # (m/s)^2 per period, the unexplained acceleration's
     inverse_mass_drift: float  # per period, variance added to theta
     resistance_drift: float    # per period, variance added to r
+    lag_drift: float           # per period, variance added to the lag factor
+    nominal_lag: float         # s, the nominal actuator lag
+    lag_estimated: bool        # estimator.lag_sigma > 0 and the train has a lag
     min_speed: float           # m/s, below it frozen
     neutral_margin: float      # m, frozen this close to a neutral section's edge
     dead_time_steps: int       # periods a command waits before it acts
@@ -158,12 +186,15 @@ class EstimatorState(NamedTuple):
     speed: float               # m/s, filtered speed at the start of the open period
     inverse_mass: float        # theta = 1 / mass factor (nominal mass over the real)
     resistance_scale: float    # r = real basic resistance over the nominal
-    covariance: np.ndarray     # 3 x 3 over (speed m/s, theta, r)
+    lag_factor: float          # lambda = real actuator lag over the nominal
+    covariance: np.ndarray     # 4 x 4 over (speed m/s, theta, r, lambda)
     actuator: NominalState     # dead time, lag (N/kN), dead-reckoned position (m)
     demand: float              # N/kN, mean lagged command over the open period (no envelope
                                # at the lag's output)
     demand_by_mass: float      # N/kN, its derivative by theta (where the envelope cut the input)
     lag_by_mass: float         # N/kN, the lag state's derivative by theta
+    demand_by_lag: float       # N/kN, the demand's derivative by lambda
+    lag_by_lag: float          # N/kN, the lag state's derivative by lambda
     line_resistance: float     # N/kN, gradient + curve + tunnel at the open period's start
     informative: bool          # the open period started moving and clear of neutral edges
     updates: int               # periods that updated the estimates so far
@@ -192,31 +223,37 @@ def estimator_settings(values, train: TrainParameters, period: float,
         "max_traction_force", "max_traction_power", "max_brake_force", "max_brake_power")})
     if model is None:
         model = nominal_train(unlimited, period, 0.0, line)[0]
+    lag_estimated = values["estimator.lag_sigma"] > 0.0 and train.actuator_lag > 0.0
     return EstimatorSettings(
         model._replace(train=unlimited.constants()), train.envelope, train.limited,
         values["estimator.speed_noise"] ** 2,
         (values["estimator.acceleration_noise"] * period) ** 2,
         values["estimator.mass_drift"] ** 2 * period,
         values["estimator.resistance_drift"] ** 2 * period,
-        values["estimator.min_speed"], values["estimator.neutral_margin"],
-        dead_time_steps(train, period))
+        values["estimator.lag_drift"] ** 2 * period if lag_estimated else 0.0,
+        train.actuator_lag, lag_estimated, values["estimator.min_speed"],
+        values["estimator.neutral_margin"], dead_time_steps(train, period))
 
 
 def estimator_start(settings: EstimatorSettings | None, mass_reading: float,
-                    relative_error: float, resistance_sigma: float, position: float = 0.0,
-                    speed: float = 0.0) -> EstimatorState:
+                    relative_error: float, resistance_sigma: float, lag_sigma: float,
+                    position: float = 0.0, speed: float = 0.0) -> EstimatorState:
     """The state at departure from `position` (m) at `speed` (m/s): the mass prior from
-    the load weighing (`mass_reading`, its `relative_error` 1 sigma), the resistance prior
-    the nominal one with `resistance_sigma`; without `settings`, the priors alone (what
+    the load weighing (`mass_reading`, its `relative_error` 1 sigma), the resistance and
+    lag priors the nominal ones with `resistance_sigma` and `lag_sigma` (the lag's 0 when
+    the settings do not estimate it); without `settings`, the priors alone (what
     estimates() reads: no speed variance, no dead time)."""
     inverse_mass = 1.0 / mass_reading
-    covariance = np.zeros((3, 3))
+    covariance = np.zeros((STATES, STATES))
     covariance[SPEED, SPEED] = settings.speed_variance if settings is not None else 0.0
     covariance[INVERSE_MASS, INVERSE_MASS] = (relative_error * inverse_mass) ** 2
     covariance[RESISTANCE, RESISTANCE] = resistance_sigma ** 2
+    if settings is None or settings.lag_estimated:
+        covariance[LAG, LAG] = lag_sigma ** 2
     ring = np.zeros(settings.dead_time_steps if settings is not None else 0)
-    return EstimatorState(speed, inverse_mass, 1.0, covariance,
-                          NominalState(0.0, position, ring, 0), 0.0, 0.0, 0.0, 0.0, False, 0)
+    return EstimatorState(speed, inverse_mass, 1.0, 1.0, covariance,
+                          NominalState(0.0, position, ring, 0), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                          False, 0)
 
 
 def estimator_of(values, train: TrainParameters, period: float, mass_reading: float,
@@ -228,7 +265,8 @@ def estimator_of(values, train: TrainParameters, period: float, mass_reading: fl
     load weighing's `mass_reading` (load_weighing), its uncertainty mass_prior_sigma."""
     settings = estimator_settings(values, train, period, line, model)
     return settings, estimator_start(settings, mass_reading, mass_prior_sigma(values),
-                                     values["estimator.resistance_sigma"], position, speed)
+                                     values["estimator.resistance_sigma"],
+                                     values["estimator.lag_sigma"], position, speed)
 
 
 @jitable
@@ -237,12 +275,12 @@ def estimator_step(settings: EstimatorSettings, state: EstimatorState, command: 
     """One control period: `measured_speed` (m/s) closes the period the last command
     acted over (an update, or frozen), then `command` (N/kN, just sent) opens the next."""
     if state.informative and measured_speed >= settings.min_speed:
-        speed, inverse_mass, resistance_scale, covariance = _closed_period(
+        speed, inverse_mass, resistance_scale, lag_factor, covariance = _closed_period(
             settings, state, measured_speed)
         updates = state.updates + 1
     else:  # no information: the estimates and their covariance kept, the speed measured
-        speed, inverse_mass, resistance_scale = (measured_speed, state.inverse_mass,
-                                                 state.resistance_scale)
+        speed, inverse_mass, resistance_scale, lag_factor = (
+            measured_speed, state.inverse_mass, state.resistance_scale, state.lag_factor)
         covariance = _frozen_covariance(settings, state.covariance)
         updates = state.updates
     # dead reckoning by the trapezoid, now the period's end speed is known (the
@@ -250,10 +288,11 @@ def estimator_step(settings: EstimatorSettings, state: EstimatorState, command: 
     ended = state.actuator
     ended = NominalState(ended.lag_state, ended.position + 0.5 * settings.actuator.period * (
         speed - state.speed), ended.pending, ended.oldest)
-    actuator, lag_by_mass, demand, demand_by_mass, line_resistance, informative = (
-        _open_period(settings, ended, state.lag_by_mass, command, speed, inverse_mass))
-    return EstimatorState(speed, inverse_mass, resistance_scale, covariance, actuator, demand,
-                          demand_by_mass, lag_by_mass, line_resistance, informative, updates)
+    opened = _open_period(settings, ended, state, command, speed, inverse_mass, lag_factor)
+    return EstimatorState(speed, inverse_mass, resistance_scale, lag_factor, covariance,
+                          opened.actuator, opened.demand, opened.demand_by_mass,
+                          opened.lag_by_mass, opened.demand_by_lag, opened.lag_by_lag,
+                          opened.line_resistance, opened.informative, updates)
 
 
 @jitable
@@ -267,6 +306,12 @@ def estimated_mass_factor(state: EstimatorState) -> tuple[float, float]:
 def estimated_resistance_scale(state: EstimatorState) -> tuple[float, float]:
     """(real basic resistance over the nominal, its sigma)."""
     return state.resistance_scale, math.sqrt(state.covariance[RESISTANCE, RESISTANCE])
+
+
+@jitable
+def estimated_lag_factor(state: EstimatorState) -> tuple[float, float]:
+    """(real actuator lag over the nominal, its sigma)."""
+    return state.lag_factor, math.sqrt(state.covariance[LAG, LAG])
 
 
 @jitable
@@ -289,115 +334,148 @@ def estimated_force_limits(settings: EstimatorSettings, state: EstimatorState, s
 
 
 @jitable
-def _applied(settings: EstimatorSettings, inverse_mass: float, demand: float,
-             demand_by_mass: float, speed: float) -> tuple[float, float]:
-    """(the force the estimated envelope lets `demand` apply at `speed`, N/kN; its
-    derivative by theta: the nominal limit where the envelope binds, else the demand's)."""
+def _applied(settings: EstimatorSettings, state: EstimatorState, speed: float
+             ) -> tuple[float, float, float]:
+    """(the force the estimated envelope lets the open period's demand apply at `speed`,
+    N/kN; its derivatives by theta, the nominal limit where the envelope binds, else the
+    demand's, and by lambda, 0 where the envelope binds)."""
+    demand, inverse_mass = state.demand, state.inverse_mass
     if not settings.limited:
-        return demand, 0.0
+        return demand, 0.0, state.demand_by_lag
     low, high = force_limits(speed, settings.envelope)
     if demand > high * inverse_mass:
-        return high * inverse_mass, high
+        return high * inverse_mass, high, 0.0
     if demand < low * inverse_mass:
-        return low * inverse_mass, low
-    return demand, demand_by_mass
+        return low * inverse_mass, low, 0.0
+    return demand, state.demand_by_mass, state.demand_by_lag
 
 
 @jitable
 def _predict(settings: EstimatorSettings, state: EstimatorState
-             ) -> tuple[float, float, float, float]:
-    """The speed at the end of the open period and its derivatives by (v, theta, r) at the
-    start: the acceleration taken at the period's midpoint speed (the resistance and the
-    power limit move with the speed within it)."""
+             ) -> tuple[float, tuple[float, float, float, float]]:
+    """The speed at the end of the open period and its derivatives by (v, theta, r, lambda)
+    at the start: the acceleration taken at the period's midpoint speed (the resistance
+    and the power limit move with the speed within it)."""
     train = settings.actuator.train
     h, xi = settings.actuator.period, train.xi
-    theta, scale, speed = state.inverse_mass, state.resistance_scale, state.speed
-    force, _ = _applied(settings, theta, state.demand, state.demand_by_mass, speed)
+    scale, speed = state.resistance_scale, state.speed
+    force, _, _ = _applied(settings, state, speed)
     basic = basic_resistance(speed, train.davis_a, train.davis_b, train.davis_c)
     middle = speed + 0.5 * h * xi * (force - scale * basic - state.line_resistance)
-    force, force_by_theta = _applied(settings, theta, state.demand, state.demand_by_mass,
-                                      middle)
+    force, force_by_theta, force_by_lag = _applied(settings, state, middle)
     basic = basic_resistance(middle, train.davis_a, train.davis_b, train.davis_c)
     slope = train.davis_b + 2.0 * train.davis_c * abs(middle)  # d w0 / dv
     predicted = speed + h * xi * (force - scale * basic - state.line_resistance)
-    return predicted, 1.0 - h * xi * scale * slope, h * xi * force_by_theta, -h * xi * basic
+    # the transition's first row, by (v, theta, r, lambda)
+    return predicted, (1.0 - h * xi * scale * slope, h * xi * force_by_theta,
+                       -h * xi * basic, h * xi * force_by_lag)
 
 
 @jitable
 def _closed_period(settings: EstimatorSettings, state: EstimatorState, measured: float
-                   ) -> tuple[float, float, float, np.ndarray]:
+                   ) -> tuple[float, float, float, float, np.ndarray]:
     """The Kalman filter's prediction over the period and its update by the `measured`
-    speed: (speed, theta, r, covariance). Written out for the 3 x 3 (the transition only
-    has a first row to fill), so Python and compiled code do the same operations."""
-    predicted, by_speed, by_mass, by_resistance = _predict(settings, state)
+    speed: (speed, theta, r, lambda, covariance). Written out (the transition only has a
+    first row to fill), so Python and compiled code do the same operations, on tuples and
+    one new array (a small array's allocation costs the compiled step more than its
+    arithmetic); a lag not estimated has a zero row and column, which add exact zeros."""
+    predicted, by = _predict(settings, state)
     p = state.covariance
-    row = np.empty(3)  # first row of A P
-    for j in range(3):
-        row[j] = by_speed * p[SPEED, j] + by_mass * p[INVERSE_MASS, j] + by_resistance * p[
-            RESISTANCE, j]
-    prior = p.copy()
-    prior[SPEED, SPEED] = (row[SPEED] * by_speed + row[INVERSE_MASS] * by_mass
-                           + row[RESISTANCE] * by_resistance + settings.speed_drift)
-    for i in (INVERSE_MASS, RESISTANCE):
-        prior[SPEED, i] = row[i]
-        prior[i, SPEED] = row[i]
-    prior[INVERSE_MASS, INVERSE_MASS] += settings.inverse_mass_drift
-    prior[RESISTANCE, RESISTANCE] += settings.resistance_drift
-    innovation_variance = prior[SPEED, SPEED] + settings.speed_variance
-    gain = np.empty(3)
-    for i in range(3):
-        gain[i] = prior[i, SPEED] / innovation_variance
-    posterior = np.empty((3, 3))
-    for i in range(3):
-        for j in range(i, 3):  # the upper triangle, mirrored: symmetric to the bit
-            posterior[i, j] = prior[i, j] - gain[i] * prior[SPEED, j]
-            posterior[j, i] = posterior[i, j]
+    row = (_row_entry(by, p, SPEED), _row_entry(by, p, INVERSE_MASS),  # first row of A P
+           _row_entry(by, p, RESISTANCE), _row_entry(by, p, LAG))
+    covariance = p.copy()  # the prior, then the posterior in place
+    covariance[SPEED, SPEED] = (row[SPEED] * by[SPEED] + row[INVERSE_MASS] * by[INVERSE_MASS]
+                                + row[RESISTANCE] * by[RESISTANCE] + row[LAG] * by[LAG]
+                                + settings.speed_drift)
+    for i in range(1, STATES):
+        covariance[SPEED, i] = row[i]
+        covariance[i, SPEED] = row[i]
+    covariance[INVERSE_MASS, INVERSE_MASS] += settings.inverse_mass_drift
+    covariance[RESISTANCE, RESISTANCE] += settings.resistance_drift
+    covariance[LAG, LAG] += settings.lag_drift
+    first = (covariance[SPEED, SPEED], covariance[SPEED, INVERSE_MASS],  # the prior's
+             covariance[SPEED, RESISTANCE], covariance[SPEED, LAG])    # first row
+    innovation_variance = first[SPEED] + settings.speed_variance
+    gain = (first[SPEED] / innovation_variance, first[INVERSE_MASS] / innovation_variance,
+            first[RESISTANCE] / innovation_variance, first[LAG] / innovation_variance)
+    for i in range(STATES):
+        for j in range(i, STATES):  # the upper triangle, mirrored: symmetric to the bit
+            covariance[i, j] = covariance[i, j] - gain[i] * first[j]
+            covariance[j, i] = covariance[i, j]
     innovation = measured - predicted
     inverse_mass = clamp(state.inverse_mass + gain[INVERSE_MASS] * innovation,
                          1.0 / HIGHEST_FACTOR, 1.0 / LOWEST_FACTOR)
     resistance_scale = clamp(state.resistance_scale + gain[RESISTANCE] * innovation,
                              LOWEST_FACTOR, HIGHEST_FACTOR)
-    return predicted + gain[SPEED] * innovation, inverse_mass, resistance_scale, posterior
+    lag_factor = clamp(state.lag_factor + gain[LAG] * innovation, LOWEST_FACTOR,
+                       HIGHEST_FACTOR)
+    return (predicted + gain[SPEED] * innovation, inverse_mass, resistance_scale, lag_factor,
+            covariance)
+
+
+@jitable
+def _row_entry(by: tuple[float, float, float, float], p: np.ndarray, j: int) -> float:
+    """Entry `j` of the transition's first row (`by`) times the covariance `p`."""
+    return (by[SPEED] * p[SPEED, j] + by[INVERSE_MASS] * p[INVERSE_MASS, j]
+            + by[RESISTANCE] * p[RESISTANCE, j] + by[LAG] * p[LAG, j])
 
 
 @jitable
 def _frozen_covariance(settings: EstimatorSettings, covariance: np.ndarray) -> np.ndarray:
     """The parameters' covariance kept, the speed's that of a reading and unrelated."""
     frozen = covariance.copy()
-    for i in range(3):
+    for i in range(STATES):
         frozen[SPEED, i] = 0.0
         frozen[i, SPEED] = 0.0
     frozen[SPEED, SPEED] = settings.speed_variance
     return frozen
 
 
+class OpenedPeriod(NamedTuple):
+    """What a command sent opens: the actuator model over the coming period."""
+
+    actuator: NominalState     # stepped over the period
+    demand: float              # N/kN, its mean force before the output's envelope
+    demand_by_mass: float      # its derivatives by theta and lambda
+    lag_by_mass: float         # the lag state's, after the period
+    demand_by_lag: float
+    lag_by_lag: float
+    line_resistance: float     # N/kN, at the period's start
+    informative: bool          # whether the period may inform
+
+
 @jitable
-def _open_period(settings: EstimatorSettings, actuator: NominalState, lag_by_mass: float,
-                 command: float, speed: float, inverse_mass: float
-                 ) -> tuple[NominalState, float, float, float, float, bool]:
-    """`command` sent at `speed` opens the next period: (the actuator model stepped over
-    it, its lag's derivative by theta, its mean force before the output's envelope N/kN,
-    that one's derivative, the line resistance at its start N/kN, whether it may inform)."""
+def _open_period(settings: EstimatorSettings, actuator: NominalState, state: EstimatorState,
+                 command: float, speed: float, inverse_mass: float, lag_factor: float
+                 ) -> OpenedPeriod:
+    """`command` sent at `speed` opens the next period, the actuator model (`actuator`,
+    the derivatives `state` carries) at the estimated envelope (`inverse_mass`) and lag
+    (`lag_factor`)."""
     model = settings.actuator
     position = actuator.position
-    actuator, lag_by_mass, demand, demand_by_mass = _actuator_period(
-        settings, actuator, lag_by_mass, command, speed, inverse_mass)
+    after, demand, demand_by_mass, lag_by_mass, demand_by_lag, lag_by_lag = (
+        _actuator_period(settings, actuator, state, command, speed, inverse_mass, lag_factor))
     line_resistance = 0.0
     if model.on_line:
         line_resistance = belt_resistance(model.line, position, model.train.length)
     informative = speed >= settings.min_speed and not _near_neutral_edge(
         settings, position, speed)
-    return actuator, lag_by_mass, demand, demand_by_mass, line_resistance, informative
+    return OpenedPeriod(after, demand, demand_by_mass, lag_by_mass, demand_by_lag, lag_by_lag,
+                        line_resistance, informative)
 
 
 @jitable
-def _actuator_period(settings: EstimatorSettings, actuator: NominalState, lag_by_mass: float,
-                     command: float, speed: float, inverse_mass: float
-                     ) -> tuple[NominalState, float, float, float]:
+def _actuator_period(settings: EstimatorSettings, actuator: NominalState,
+                     state: EstimatorState, command: float, speed: float, inverse_mass: float,
+                     lag_factor: float
+                     ) -> tuple[NominalState, float, float, float, float, float]:
     """train_model.nominal_advance with the estimated envelope at the lag's input (where
-    the plant cuts the command): (the actuator after the period, its lag's derivative by
-    theta, the mean force before the envelope at the output N/kN, its derivative)."""
+    the plant cuts the command) and the estimated lag: (the actuator after the period,
+    its mean force before the envelope at the output N/kN, its derivative by theta, the
+    lag state's, the mean force's by lambda, the lag state's), the derivatives carried
+    through the lag's exact discretisation (decay and spread 0 without a lag)."""
     model = settings.actuator
+    decay, spread, decay_by_lag, spread_by_lag = _lag_at(settings, lag_factor)
     pending, oldest = actuator.pending.copy(), actuator.oldest  # the state's is not changed
     if len(pending):
         command, pending[oldest] = pending[oldest], command
@@ -410,17 +488,34 @@ def _actuator_period(settings: EstimatorSettings, actuator: NominalState, lag_by
         elif command < low * inverse_mass:
             command, input_by_mass = low * inverse_mass, low
     lag_state, demand = nominal_act(model, actuator.lag_state, command, speed,
-                                    actuator.position, 1.0)
+                                    actuator.position, Actuator(1.0, decay, spread))
     if model.neutral and command > 0.0 and in_neutral_section(
             model.line, actuator.position - model.pantograph_offset):
-        input_by_mass = 0.0  # traction cut: nominal_act took the command to 0
-    # the lag's exact discretisation, derived by theta (decay and spread 0 without a lag)
-    demand_by_mass = input_by_mass + (lag_by_mass - input_by_mass) * model.spread
+        command, input_by_mass = 0.0, 0.0  # traction cut: nominal_act took the command to 0
+    change = actuator.lag_state - command
+    demand_by_mass = input_by_mass + (state.lag_by_mass - input_by_mass) * spread
+    demand_by_lag = state.lag_by_lag * spread + change * spread_by_lag
     if demand == 0.0:  # cut in a neutral section: no force, nothing to derive
-        demand_by_mass = 0.0
-    lag_by_mass = input_by_mass + (lag_by_mass - input_by_mass) * model.decay
+        demand_by_mass, demand_by_lag = 0.0, 0.0
+    lag_by_mass = input_by_mass + (state.lag_by_mass - input_by_mass) * decay
+    lag_by_lag = state.lag_by_lag * decay + change * decay_by_lag
     after = NominalState(lag_state, actuator.position + model.period * speed, pending, oldest)
-    return after, lag_by_mass, demand, demand_by_mass
+    return after, demand, demand_by_mass, lag_by_mass, demand_by_lag, lag_by_lag
+
+
+@jitable
+def _lag_at(settings: EstimatorSettings, lag_factor: float
+            ) -> tuple[float, float, float, float]:
+    """The lag's decay and spread at `lag_factor` times the nominal, and their derivatives
+    by the factor; the nominal's and zeros when the lag is not estimated."""
+    model = settings.actuator
+    if not settings.lag_estimated:
+        return model.decay, model.spread, 0.0, 0.0
+    lag = settings.nominal_lag * lag_factor
+    decay, spread = lag_coefficients(model.period, lag)
+    # decay = exp(-h / (lambda tau)), spread = lambda tau (1 - decay) / h
+    return (decay, spread, decay * model.period / (lag_factor * lag),
+            (spread - decay) / lag_factor)
 
 
 @jitable
@@ -445,7 +540,7 @@ class OnBoardEstimator(NamedTuple):
     reports the departure's estimates throughout."""
 
     settings: EstimatorSettings | None  # None: off
-    departure: tuple[float, float, float, float]  # estimates() at departure
+    departure: tuple[float, float, float, float, float, float]  # estimates() at departure
     model_mass: float  # the mass the controller's nominal model is at, over the nominal
 
 
@@ -456,6 +551,9 @@ ESTIMATE_OUTPUTS = (
     Output("resistance_scale", "1", "the real basic running resistance over the nominal, as "
            "estimated on board"),
     Output("resistance_sigma", "1", "its uncertainty, 1 sigma"),
+    Output("lag_factor", "1", "the real actuator lag over the nominal, as estimated on board "
+           "(the nominal with estimator.lag_sigma 0)"),
+    Output("lag_sigma", "1", "its uncertainty, 1 sigma"),
 )
 ESTIMATE_COLUMNS = tuple(output.name for output in ESTIMATE_OUTPUTS)
 
@@ -470,7 +568,8 @@ def on_board_estimator(values, period: float, line: Line | None = None,
     and the departure's estimates (the priors alone: no model built)."""
     if not values["estimator.enabled"]:
         prior = estimator_start(None, values["train.mass_reading"], mass_prior_sigma(values),
-                                values["estimator.resistance_sigma"])
+                                values["estimator.resistance_sigma"],
+                                values["estimator.lag_sigma"])
         return OnBoardEstimator(None, estimates(prior), 1.0), None
     settings, state = estimator_of(values, TrainParameters.from_values(values), period,
                                    values["train.mass_reading"], line,
@@ -498,17 +597,24 @@ def on_board_scale(state: EstimatorState | None) -> float:
 
 
 @jitable
-def on_board_envelope(estimator: OnBoardEstimator, state: EstimatorState | None) -> float:
-    """The real train's envelope over the controller's model's, as estimated on board (the
-    model's mass over the estimated one); 1 with the estimator off."""
+def on_board_actuator(estimator: OnBoardEstimator, state: EstimatorState | None,
+                      model: NominalModel) -> Actuator:
+    """The actuator of the controller's nominal `model` as estimated on board: its
+    envelope over the model's (the model's mass over the estimated one) and, when the lag
+    is estimated, its lag; the model's own (model_actuator) with the estimator off."""
     if state is None:
-        return 1.0
-    return estimator.model_mass * state.inverse_mass
+        return model_actuator(model)
+    envelope_scale = estimator.model_mass * state.inverse_mass
+    if not estimator.settings.lag_estimated:
+        return Actuator(envelope_scale, model.decay, model.spread)
+    decay, spread = lag_coefficients(model.period,
+                                     estimator.settings.nominal_lag * state.lag_factor)
+    return Actuator(envelope_scale, decay, spread)
 
 
 @jitable
 def on_board_estimates(estimator: OnBoardEstimator, state: EstimatorState | None
-                       ) -> tuple[float, float, float, float]:
+                       ) -> tuple[float, float, float, float, float, float]:
     """ESTIMATE_OUTPUTS' values: estimates(state), the departure's with the estimator off."""
     if state is None:
         return estimator.departure
@@ -516,11 +622,12 @@ def on_board_estimates(estimator: OnBoardEstimator, state: EstimatorState | None
 
 
 @jitable
-def estimates(state: EstimatorState) -> tuple[float, float, float, float]:
+def estimates(state: EstimatorState) -> tuple[float, float, float, float, float, float]:
     """ESTIMATE_OUTPUTS' values."""
     mass, mass_sigma = estimated_mass_factor(state)
     scale, scale_sigma = estimated_resistance_scale(state)
-    return mass, mass_sigma, scale, scale_sigma
+    lag, lag_sigma = estimated_lag_factor(state)
+    return mass, mass_sigma, scale, scale_sigma, lag, lag_sigma
 
 
 @jitable
@@ -530,7 +637,9 @@ def estimate_rows(settings: EstimatorSettings, state: EstimatorState, commands: 
     rows[k] the estimates after step k, ESTIMATE_COLUMNS; returns the last state."""
     for k in range(len(commands)):
         state = estimator_step(settings, state, commands[k], measured_speeds[k])
-        rows[k, 0], rows[k, 1], rows[k, 2], rows[k, 3] = estimates(state)
+        estimated = estimates(state)
+        for column in range(len(estimated)):
+            rows[k, column] = estimated[column]
     return state
 
 

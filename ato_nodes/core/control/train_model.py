@@ -57,13 +57,37 @@ class NominalState(NamedTuple):
 def nominal_train(train: TrainParameters, period: float, position: float = 0.0,
                   line: Line | None = None) -> tuple[NominalModel, NominalState]:
     """The model of `train` on `line` and its state at the start, at `position`."""
-    lag = train.actuator_lag
-    decay = math.exp(-period / lag) if lag > 0.0 else 0.0
-    spread = lag * (1.0 - decay) / period if lag > 0.0 else 0.0  # the step's mean
+    decay, spread = lag_coefficients(period, train.actuator_lag)
     model = NominalModel(train.constants(), train.pantograph_offset, period, decay, spread,
                          line_arrays(line), line is not None,
                          line is not None and bool(line.neutral_sections))
     return model, NominalState(0.0, position, np.zeros(dead_time_steps(train, period)), 0)
+
+
+@jitable
+def lag_coefficients(period: float, lag: float) -> tuple[float, float]:
+    """A first-order `lag` (s; 0: none) over a `period` (s) with its input held: (its decay,
+    its mean over the period as a share of the change), the lag's exact discretisation."""
+    if lag <= 0.0:
+        return 0.0, 0.0
+    decay = math.exp(-period / lag)
+    return decay, lag * (1.0 - decay) / period
+
+
+class Actuator(NamedTuple):
+    """The actuator a model acts with, as known on board: its envelope over the model's
+    (1: the model's) and its lag's coefficients (lag_coefficients; the model's own:
+    model_actuator). Scalars: a step passes them without the model's arrays."""
+
+    envelope_scale: float
+    decay: float
+    spread: float
+
+
+@jitable
+def model_actuator(model: NominalModel) -> Actuator:
+    """The model's own actuator: its envelope, its lag."""
+    return Actuator(1.0, model.decay, model.spread)
 
 
 def dead_time_steps(train: TrainParameters, period: float) -> int:
@@ -73,9 +97,10 @@ def dead_time_steps(train: TrainParameters, period: float) -> int:
 
 @jitable
 def nominal_act(model: NominalModel, lag_state: float, command: float, speed: float,
-                position: float, envelope_scale: float) -> tuple[float, float]:
+                position: float, actuator: Actuator) -> tuple[float, float]:
     """One period with `command` reaching the lag: (next lag state, mean force N/kN); the
-    envelope the model's times `envelope_scale` (the on-board estimate's, 1: the model's)."""
+    envelope the model's times `actuator`'s scale, the lag `actuator`'s (the on-board
+    estimates; model_actuator: the model's)."""
     train = model.train
     powered = True
     if model.neutral and command > 0.0 and in_neutral_section(
@@ -84,14 +109,14 @@ def nominal_act(model: NominalModel, lag_state: float, command: float, speed: fl
     low, high = 0.0, 0.0
     if train.limited:
         low, high = force_limits(speed, train.envelope)
-        low, high = low * envelope_scale, high * envelope_scale
+        low, high = low * actuator.envelope_scale, high * actuator.envelope_scale
         command = clamp(command, low, high)
-    mean = command + (lag_state - command) * model.spread
+    mean = command + (lag_state - command) * actuator.spread
     if train.limited:
         mean = clamp(mean, low, high)
     if not powered and mean > 0.0:
         mean = 0.0
-    return command + (lag_state - command) * model.decay, mean
+    return command + (lag_state - command) * actuator.decay, mean
 
 
 @jitable
@@ -119,16 +144,16 @@ def neutral_ceiling(model: NominalModel, state: NominalState, speed: float,
 
 @jitable
 def nominal_advance(model: NominalModel, state: NominalState, command: float, speed: float,
-                    envelope_scale: float) -> tuple[float, NominalState]:
+                    actuator: Actuator) -> tuple[float, NominalState]:
     """The period that starts now, `command` just sent and `speed` just measured: (the
     mean force the train will apply over it, N/kN; the model's state after it);
-    `envelope_scale` as for nominal_act."""
+    `actuator` as for nominal_act."""
     pending, oldest = state.pending, state.oldest
     if len(pending):
         command, pending[oldest] = pending[oldest], command
         oldest = (oldest + 1) % len(pending)
     lag_state, mean = nominal_act(model, state.lag_state, command, speed, state.position,
-                                  envelope_scale)
+                                  actuator)
     return mean, NominalState(lag_state, state.position + model.period * speed, pending, oldest)
 
 
@@ -153,19 +178,19 @@ class Prediction(NamedTuple):
 @jitable
 def nominal_predict(model: NominalModel, state: NominalState, speed: float,
                     unexplained: float, gain: float, steps: int, held: float,
-                    resisted: bool, basic_scale: float, envelope_scale: float) -> Prediction:
+                    resisted: bool, basic_scale: float, actuator: Actuator) -> Prediction:
     """The speed `steps` periods from now, from `speed` now, and the distance covered
     till then: the commands inside the dead time act in turn, then `held`; acceleration
     gain (force - known resistance) + `unexplained` (m/s^2, an observer's estimate of the
     rest; without `resisted` it holds the resistance too, and the model's is left out;
-    `basic_scale` as for known_resistance, `envelope_scale` as for nominal_act)."""
+    `basic_scale` as for known_resistance, `actuator` as for nominal_act)."""
     h, lag_state, position = model.period, state.lag_state, state.position
     pending = state.pending
     travelled = 0.0  # the trapezoid's, as a preview's trajectory is integrated
     for i in range(steps):
         command = pending[(state.oldest + i) % len(pending)] if i < len(pending) else held
         lag_state, mean = nominal_act(model, lag_state, command, speed, position,
-                                      envelope_scale)
+                                      actuator)
         if resisted:
             mean -= known_resistance(model, speed, position, basic_scale)
         acceleration = gain * mean + unexplained
