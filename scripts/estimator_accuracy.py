@@ -27,8 +27,8 @@ import _cli
 import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.core.control.estimation import (PARAMETERS, estimate_series, estimator_of,
-                                               load_weighing)
+from ato_nodes.core.control.estimation import (ESTIMATED_FACTORS, PARAMETERS, estimate_series,
+                                               estimator_of, load_weighing)
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.train.lines import line_of
@@ -48,11 +48,10 @@ CASES = {  # label -> the real train's plant.* factors
     "slow actuator (lag 1.3)": {"plant.lag_factor": 1.3},
     "quick actuator (lag 0.7)": {"plant.lag_factor": 0.7},
 }
-ESTIMATES = {  # name -> (the estimate, its sigma, the real train's factor, words, plot limit %)
-    "mass": ("mass_factor", "mass_sigma", "plant.mass_factor", "mass factor", 8),
-    "resistance": ("resistance_scale", "resistance_sigma", "plant.resistance_factor",
-                   "resistance scale", 25),
-    "lag": ("lag_factor", "lag_sigma", "plant.lag_factor", "lag factor", 25),
+ESTIMATES = {  # name -> (the estimate (estimation.ESTIMATED_FACTORS), words, plot limit %)
+    "mass": ("mass_factor", "mass factor", 8),
+    "resistance": ("resistance_scale", "resistance scale", 25),
+    "lag": ("lag_factor", "lag factor", 25),
 }
 
 
@@ -88,7 +87,8 @@ def estimated(values: dict, reading: float, error: float) -> dict[str, np.ndarra
     rows, _ = estimate_series(settings, state, series["command"], series["measured_speed"],
                               fast=True)
     result = {"t": series["t"], "moving": series["speed"] > 0.0}
-    for name, (column, sigma, factor, _, _) in ESTIMATES.items():
+    for name, (column, _, _) in ESTIMATES.items():
+        sigma, factor = ESTIMATED_FACTORS[column]
         result[f"{name}_error"] = rows[column] / values[factor] - 1.0
         result[f"{name}_sigma"] = rows[sigma] / values[factor]
     return result
@@ -111,7 +111,7 @@ def plot(results: dict, path: Path) -> None:
     figure, axes = plt.subplots(len(SCENARIOS), len(ESTIMATES), figsize=(18, 7.5),
                                 sharex="row")
     for row, scenario in zip(axes, SCENARIOS, strict=True):
-        for axis, (name, (_, _, _, what, limit)) in zip(row, ESTIMATES.items(), strict=True):
+        for axis, (name, (_, what, limit)) in zip(row, ESTIMATES.items(), strict=True):
             for colour, label in enumerate(CASES):
                 result = results[scenario, label]
                 error, sigma = 100 * result[f"{name}_error"], 100 * result[f"{name}_sigma"]

@@ -27,6 +27,7 @@ import numpy as np
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import planned_mass
+from ato_nodes.core.control.estimation import ESTIMATED_FACTORS
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.results.journeys import score_run
 from ato_nodes.studies.runner import Variant, prepare_variants
@@ -46,10 +47,6 @@ KNOWLEDGE = {  # label -> what the ATO knows of the load, and the re-plans on
 }
 ON_BOARD = {"estimator.enabled": True, "profile.replan.enabled": True,
             "estimator.lag_sigma": 0.2}
-ESTIMATED = {"mass_factor": "mass_factor", "resistance_scale": "resistance_factor",
-             "lag_factor": "lag_factor"}  # the estimate -> the real train's plant.* factor
-ESTIMATED_SIGMA = {"mass_factor": "mass_sigma", "resistance_scale": "resistance_sigma",
-                   "lag_factor": "lag_sigma"}
 
 
 def parse_args():
@@ -67,8 +64,8 @@ def learned(values: dict) -> dict:
     replans = []
     series = simulate(values, replans=replans)
     return {"series": series, "replans": replans, "indices": score_run(series, values),
-            "values": values, "real": {name: values[f"plant.{factor}"] for name, factor in
-                                       ESTIMATED.items()}}
+            "values": values, "real": {name: values[factor] for name, (_, factor) in
+                                       ESTIMATED_FACTORS.items()}}
 
 
 def planned_masses(result: dict) -> np.ndarray:
@@ -85,7 +82,7 @@ def table_row(knowledge: str, train: str, result: dict) -> str:
     moving = series["speed"] > 0.0
     cells = [knowledge, train]
     for name, real in result["real"].items():
-        sigma = ESTIMATED_SIGMA[name]
+        sigma = ESTIMATED_FACTORS[name][0]
         error = series[name] / real - 1.0
         cells += [f"{series[name][-1]:.3f} +- {series[sigma][-1]:.3f} (real {real:g})",
                   f"{100 * np.abs(error[moving]).mean():.1f}"]

@@ -556,6 +556,11 @@ ESTIMATE_OUTPUTS = (
     Output("lag_sigma", "1", "its uncertainty, 1 sigma"),
 )
 ESTIMATE_COLUMNS = tuple(output.name for output in ESTIMATE_OUTPUTS)
+ESTIMATED_FACTORS = {  # an estimate -> (its sigma, the real train's factor it estimates)
+    "mass_factor": ("mass_sigma", "plant.mass_factor"),
+    "resistance_scale": ("resistance_sigma", "plant.resistance_factor"),
+    "lag_factor": ("lag_sigma", "plant.lag_factor"),
+}
 
 
 def on_board_estimator(values, period: float, line: Line | None = None,

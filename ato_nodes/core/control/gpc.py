@@ -54,8 +54,6 @@ same code: deterministic, so a node and simulate() stay bit-identical.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..base.errors import ScenarioError
@@ -68,6 +66,7 @@ from .gpc_steps import (GPC_STEPS, LEARNED, MECHANISTIC, MULTIMODEL, GPCSettings
 from .limiter import CommandLimiter
 from .lssvm import Layout, empty_dictionary, load_model
 from .stepped import SteppedController
+from .train_model import lag_coefficients
 
 PREDICTIONS = ("lssvm", "mechanistic", "multimodel")
 
@@ -149,9 +148,7 @@ def _bias_gain(bias_filter: float, period: float) -> float:
 
 def _nominal(train, period: float) -> Nominal:
     """The nominal train's constants for the mechanistic model (module docstring)."""
-    tau = train.actuator_lag
-    lag = math.exp(-period / tau) if tau > 0 else 0.0
-    c1 = tau * (1.0 - lag) / period if tau > 0 else 0.0
+    lag, c1 = lag_coefficients(period, train.actuator_lag)
     return Nominal(train.xi, train.davis_a, train.davis_b, train.davis_c, lag, c1)
 
 
