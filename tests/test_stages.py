@@ -8,6 +8,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.context import RunContext
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.config.schema import NodeValues, steps
+from ato_nodes.core.run.located import ODOMETRY_SERIES
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.stages import SERIES, ControllerStage, PlantStage, ProfileStage
 
@@ -18,10 +19,10 @@ def staged_run(values, changes=None):
     profile = ProfileStage(NodeValues("profile", values))
     plant = PlantStage(NodeValues("plant", values))
     controller = ControllerStage(NodeValues("controller", values))
-    rows, extras, horizons = [], [], []
+    rows, extras, horizons, located = [], [], [], []
     for k in range(steps(values)):
         out = plant.outputs()  # published: measured speed, position, state
-        controller.horizons.extend(profile.on_position(out.position))
+        controller.horizons.extend(profile.on_position(out.located_position))
         horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
         if changes and k in changes:  # `ros2 param set` between two steps
@@ -30,8 +31,9 @@ def staged_run(values, changes=None):
         plant.apply(command.u)
         rows.append((k * values["run.period"], horizon[0], out.position, out.measured_speed,
                      out.speed, out.acceleration, out.disturbance, out.force, out.resistance,
-                     out.line_resistance, profile.speed_limit(out.position), command.u))
+                     out.line_resistance, profile.speed_limit(out.located_position), command.u))
         extras.append(command.extras)
+        located.append(out.odometry)
         horizons.append(horizon)
         if plant.diverged or plant.arrived:
             break
@@ -41,6 +43,8 @@ def staged_run(values, changes=None):
     series.update(zip(names, np.array(extras, dtype=float).reshape(-1, len(names)).T,
                       strict=True))
     series["preview"] = np.array(horizons, dtype=float)
+    if values["odometry.enabled"]:
+        series.update(zip(ODOMETRY_SERIES, np.array(located, dtype=float).T, strict=True))
     return series
 
 
@@ -56,6 +60,13 @@ RUNS = [
                                                  250: {"ladrc.omega_o": 9.0}}),
     ("seed000", ["run.duration=60", "profile.approach_step=0.5"], None),  # time-indexed, stairs
     ("seed000", ["run.duration=300", "adrc.b0=0.001"], None),  # diverges
+    # the ATO on its sensors' located position, on wet rail (slides)
+    ("seed004-metro-ato", ["run.duration=200", "odometry.enabled=true", "plant.adhesion=wet",
+                           "odometry.accelerometer=true", "odometry.radar=true",
+                           "odometry.balise_spacing=500", "odometry.beacon_distances=20,5",
+                           "plant.motored_share=0.667"], None),
+    ("seed004-metro-line", ["run.duration=150", "odometry.enabled=true",  # a journey's stops
+                            "odometry.balise_spacing=400", "odometry.beacon_distances=5"], None),
 ]
 
 

@@ -35,6 +35,10 @@ class PlantNode(AtoNode):
         self.clock_pub = self.publisher("clock")
         self.position_pub = self.publisher("position")
         self.speed_pub = self.publisher("measured_speed")
+        # with odometry, the profile takes the located position (core/run/located.py)
+        self.located_pub = (self.publisher("located_position")
+                            if self.values["odometry.enabled"] else None)
+        self.located_msg = Float64()
         self.state_pub = self.publisher("state")
         self.speed_msg, self.position_msg = Float64(), Float64()
         self.clock_msg, self.state_msg = Clock(), Twist()
@@ -57,6 +61,9 @@ class PlantNode(AtoNode):
         out = self.stage.outputs()
         self.speed_msg.data = out.measured_speed
         self.speed_pub.publish(self.speed_msg)
+        if self.located_pub is not None:
+            self.located_msg.data = out.located_position
+            self.located_pub.publish(self.located_msg)
         self.position_msg.data = out.position
         self.position_pub.publish(self.position_msg)
         nanoseconds = round(self.step_index * self.period * 1e9)

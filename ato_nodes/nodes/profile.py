@@ -39,7 +39,12 @@ class ProfileNode(AtoNode):
         self.positions: deque[float] = deque()
         self.estimates: deque[tuple[float, float]] = deque()
         self.estimate_columns: tuple[int, int] | None = None  # from the outputs' names
-        self.subscription("position", self.on_position)
+        if self.values["odometry.enabled"]:  # it drives on the located position; the true
+            # one's edge is matched (the topic map's) and its messages left unread
+            self.subscription("located_position", self.on_position)
+            self.subscription("position", lambda msg: None)
+        else:
+            self.subscription("position", self.on_position)
         if self.stage.settings.replan.enabled:
             self.subscription("controller_state", self.on_estimate,
                               wakes=lambda: bool(self.positions) and not self.estimates)

@@ -19,6 +19,9 @@ from ..base.spec import MAX_PREVIEW, PLANT_NODES, PROFILE_NODES, ParamSpec, Text
 from ..control.adrc import RETIRED_SWITCHES, retired_switch, switches_as_modes
 from ..control.estimation import PARAMETERS as ESTIMATOR_PARAMETERS
 from ..control.limiter import LIMITER_PARAMETERS
+from ..control.localisation import LOCALISATION_PARAMETERS
+from ..train.adhesion import PARAMETERS as ADHESION_PARAMETERS
+from ..train.odometry import PARAMETERS as ODOMETRY_PARAMETERS
 from ..targets.replan import PARAMETERS as REPLAN_PARAMETERS
 from ..scoring.indices import RunningIndex
 from . import plugins
@@ -199,6 +202,9 @@ BASE: tuple[ParamSpec, ...] = (
           ("profile", "controller"), 0, MAX_PREVIEW),
     *LIMITER_PARAMETERS,
     *ESTIMATOR_PARAMETERS,
+    *ADHESION_PARAMETERS,
+    *ODOMETRY_PARAMETERS,
+    *LOCALISATION_PARAMETERS,
     *REPLAN_PARAMETERS,
     param("supervisor.ready_timeout", 30.0, "wall seconds to wait for every edge to match",
           "supervisor", 0.1, 3600.0),

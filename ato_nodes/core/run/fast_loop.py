@@ -57,6 +57,7 @@ from ..train.line import line_arrays
 from ..train.plant import TrainMotion, TrainSettings, diverged, sensor_reading, train_outputs, \
     train_step
 from .last_stop import LastStop, held, standing
+from .located import ODOMETRY_SERIES, located, odometer_moved
 from .python_steps import PYTHON_STEPS, RUNNING, PythonController, running
 from .stages import COLUMNS, SeriesColumns
 
@@ -105,6 +106,7 @@ class LoopInputs(NamedTuple):
     columns: SeriesColumns     # where each series goes in a row
     mass_column: int           # the controller's outputs the profile reads for its re-plans:
     mass_sigma_column: int     # mass_factor and mass_sigma (-1: none, no re-plans)
+    odometry: Any              # the train's sensors and the on-board localisation (None: off)
 
 
 class LoopState(NamedTuple):
@@ -118,6 +120,7 @@ class LoopState(NamedTuple):
     last: float                # the limiter's last command
     fitness: RunningState
     stood: int                 # samples the train has stood at its last stop (PlantStage's)
+    odometry: Any              # OdometryState (None: off)
     ended: bool                # diverged, pruned or arrived: no step follows
 
 
@@ -141,6 +144,7 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
     running_index, limit = prune if prune is not None else (RunningIndex("itae"), math.inf)
     rows = np.empty((total, len(COLUMNS)))
     extras = np.empty((total, len(controller.output_names)))
+    located_rows = np.empty((total, len(ODOMETRY_SERIES) if plant.odometry is not None else 0))
     with _controller_seam(controller) as (settings, controller_state):
         inputs = _inputs(profile, plant, controller, settings, running_index, limit, compiled)
         loop = _first_state(profile, plant, controller, controller_state, running_index)
@@ -153,11 +157,13 @@ def run(profile, plant, controller, prune: tuple[RunningIndex, float] | None,
                 inputs, loop = _retuned(controller, inputs, loop, schedule.pop(0)[1])
             stop = min(total, loop.step + chunk, schedule[0][0] if schedule else total)
             started = time.perf_counter()
-            loop = steps(inputs, profile.journey, loop, stop, targets, rows, extras)
+            loop = steps(inputs, profile.journey, loop, stop, targets, rows, extras,
+                         located_rows)
             elapsed = time.perf_counter() - started
             chunk = max(1, min(4 * chunk, int(chunk * CHUNK_SECONDS / max(elapsed, 1e-9))))
     running_index.state = RunningState(*map(float, loop.fitness))
-    return rows[:loop.step], extras[:loop.step], targets[:loop.step]
+    return (rows[:loop.step], extras[:loop.step], targets[:loop.step],
+            located_rows[:loop.step])
 
 
 @contextmanager
@@ -209,7 +215,7 @@ def _inputs(profile, plant, controller, settings, running_index, limit: float,
         profile=profile.settings._replace(line=line),
         settings=settings, limits=controller.limiter.settings,
         fitness_kind=int(running_index.kind), fitness_limit=float(limit), columns=COLUMNS,
-        **estimate_columns(profile, controller))
+        **estimate_columns(profile, controller), odometry=plant.odometry)
 
 
 def estimate_columns(profile, controller) -> dict[str, int]:
@@ -226,7 +232,7 @@ def _first_state(profile, plant, controller, controller_state, running_index) ->
     return LoopState(
         step=0, plant=plant.train.motion, profile=profile.state, controller=controller_state,
         last=float(controller.limiter.last), fitness=running_index.state,
-        stood=int(plant.stood), ended=False)
+        stood=int(plant.stood), odometry=plant.odometry_state, ended=False)
 
 
 def controller_start(settings, state, target: float, measured: float, horizon):
@@ -265,22 +271,28 @@ if AVAILABLE:  # in compiled code the kind's function is chosen while compiling
 
 
 def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopState,
-                  stop: int, targets, rows, extras) -> LoopState:
+                  stop: int, targets, rows, extras, located_rows) -> LoopState:
     """The loop from step loop.step up to `stop` (or the step the run ends at); the state
     after. `targets` holds every step's horizon: given (time-indexed plans) or filled in
     LOOKAHEAD steps ahead by the profile's step."""
-    k, plant, profile, controller, last, fitness, stood = (loop.step, loop.plant, loop.profile,
-                                                           loop.controller, loop.last,
-                                                           loop.fitness, loop.stood)
+    k, plant, profile, controller, last, fitness, stood, odometry = (
+        loop.step, loop.plant, loop.profile, loop.controller, loop.last, loop.fitness,
+        loop.stood, loop.odometry)
     ended = False
     while k < stop and not ended and profile.request != profile.request:  # NaN: no re-plan
         measured = float(sensor_reading(plant.speed, inputs.draws[k], inputs.noise,
                                         inputs.quantum))
+        odometry, position, speed = located(inputs.odometry, odometry, k, inputs.train, plant,
+                                            located_rows[k])
+        if position == position:  # located (PlantStage.outputs)
+            measured = speed
+        else:
+            position = plant.position
         mass, mass_sigma = math.nan, math.nan
         if k > 0 and inputs.mass_column >= 0:  # the estimate after step k - 1
             mass = extras[k - 1, inputs.mass_column]
             mass_sigma = extras[k - 1, inputs.mass_sigma_column]
-        profile = profile_step(inputs.profile, journey, profile, k, plant.position, targets,
+        profile = profile_step(inputs.profile, journey, profile, k, position, targets,
                                mass, mass_sigma)
         horizon = targets[k]
         target = float(horizon[0])
@@ -290,12 +302,13 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
         u, outputs, controller = controller_step(inputs.settings, controller, target,
                                                  measured, as_read(horizon), last, inputs.limits)
         last = u
-        _record(inputs, journey, rows[k], k, plant, target, measured, u)
+        _record(inputs, journey, rows[k], k, plant, position, target, measured, u)
         for i in range(len(outputs)):
             extras[k, i] = outputs[i]
         speed = plant.speed
         stood = standing(inputs.last_stop, stood, plant.position, speed)  # PlantStage.apply
-        plant = train_step(inputs.train, plant, u)
+        before, plant = plant, train_step(inputs.train, plant, u)
+        odometry = odometer_moved(inputs.odometry, odometry, inputs.train, before, plant)
         if diverged(plant.speed, inputs.max_speed):
             ended = True
         else:
@@ -303,13 +316,14 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
                                    horizon[0] - speed)
             ended = fitness.value > inputs.fitness_limit or held(inputs.last_stop, stood)
         k += 1
-    return LoopState(k, plant, profile, controller, last, fitness, stood, ended)
+    return LoopState(k, plant, profile, controller, last, fitness, stood, odometry, ended)
 
 
 @jitable(inline=True)
 def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant: TrainMotion,
-            target: float, measured: float, command: float) -> None:
-    """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command)."""
+            position: float, target: float, measured: float, command: float) -> None:
+    """Step k's row of the SERIES (PlantStage.outputs at t_k, the target and command; the
+    speed limit where the profile has the train, at `position`)."""
     column = inputs.columns
     acceleration, disturbance, resistance, line_resistance = train_outputs(inputs.train, plant)
     row[column.t], row[column.target], row[column.position] = (k * inputs.period, target,
@@ -318,7 +332,7 @@ def _record(inputs: LoopInputs, journey: JourneyTable | None, row, k: int, plant
     row[column.acceleration], row[column.disturbance] = acceleration, disturbance
     row[column.force], row[column.resistance] = plant.force, resistance
     row[column.line_resistance] = line_resistance
-    row[column.speed_limit] = plan_speed_limit(inputs.profile, journey, plant.position)
+    row[column.speed_limit] = plan_speed_limit(inputs.profile, journey, position)
     row[column.command] = command
 
 

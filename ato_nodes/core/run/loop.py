@@ -17,6 +17,7 @@ from ..config.schema import SPEC_BY_NAME, NodeValues
 from ..scoring.indices import RunningIndex
 from ..train.lines import line_of
 from . import fast_loop
+from .located import ODOMETRY_SERIES
 from .stages import SERIES, ControllerStage, PlantStage, ProfileStage
 
 def simulate(values: dict[str, Any], deadline: float | None = None,
@@ -41,12 +42,15 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     profile = ProfileStage(NodeValues("profile", values), line)
     plant = PlantStage(NodeValues("plant", values), line)
     controller = ControllerStage(NodeValues("controller", values), line)
-    rows, extras, horizons = fast_loop.run(profile, plant, controller, prune,
-                                           lambda step: _check_deadline(deadline, step),
-                                           changes, compiled)
+    rows, extras, horizons, located_rows = fast_loop.run(
+        profile, plant, controller, prune, lambda step: _check_deadline(deadline, step),
+        changes, compiled)
     if replans is not None:
         replans.extend(profile.replans)
-    return _series(rows, extras, horizons, controller.output_names)
+    series = _series(rows, extras, horizons, controller.output_names)
+    if plant.odometry is not None:
+        series.update({name: located_rows[:, i] for i, name in enumerate(ODOMETRY_SERIES)})
+    return series
 
 
 def _check_deadline(deadline: float | None, step: int) -> None:

@@ -47,7 +47,9 @@ from ..train.line import Line
 from ..train.lines import line_of
 from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
                            sensor_reading, train_outputs)
+from ..train.adhesion import adhesion_of
 from .last_stop import held, last_stop, standing
+from .located import ODOMETRY_SERIES, located, odometer_moved, odometry_of
 
 # The series of a run, one value per step, in the order of simulate()'s rows.
 SERIES = ("t", "target", "position", "measured_speed", "speed", "acceleration", "disturbance",
@@ -142,6 +144,8 @@ class PlantOutputs:
     force: float         # N/kN applied
     resistance: float    # N/kN basic resistance w0
     line_resistance: float  # N/kN gradient + curve + tunnel resistance of the belt
+    located_position: float  # m, where the ATO has the train (the true position without
+    odometry: list[float]    # odometry); ODOMETRY_SERIES' values (empty without)
 
 
 class PlantStage:
@@ -153,7 +157,8 @@ class PlantStage:
         loaded = nominal.loaded(values["plant.mass_factor"], values["plant.davis_absolute"])
         factor = values["plant.resistance_factor"]
         self.params = dataclasses.replace(
-            loaded, actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
+            loaded, adhesion=adhesion_of(values),
+            actuator_lag=values["plant.lag_factor"] * nominal.actuator_lag,
             **{name: factor * getattr(loaded, name) for name in ("davis_a", "davis_b",
                                                                   "davis_c")})
         if line is None:
@@ -166,6 +171,8 @@ class PlantStage:
         self.noise = values["plant.speed_noise"]
         self.quantum = values["plant.speed_quantum"]
         self.rng = np.random.default_rng(values["plant.noise_seed"])
+        self.odometry, self.odometry_state = odometry_of(values, line, steps(values))
+        self.step_index = 0
         self.last_stop = last_stop(values)
         self.stood = 0  # samples the train has stood at its last stop, to the last applied
 
@@ -186,17 +193,30 @@ class PlantStage:
         return sensor_reading(speed, draw, self.noise, self.quantum)
 
     def outputs(self) -> PlantOutputs:
+        """Step k's (called once a step, before apply): the sensors read, the located
+        position and speed with odometry (core/run/located.py)."""
         motion = self.train.motion
         acceleration, disturbance, resistance, line_resistance = train_outputs(
             self.train.settings, motion)
-        return PlantOutputs(motion.position, self.measure(motion.speed), motion.speed,
-                            acceleration, disturbance, motion.force, resistance,
-                            line_resistance)
+        measured, position, row = self.measure(motion.speed), motion.position, []
+        if self.odometry is not None:
+            values = np.empty(len(ODOMETRY_SERIES))
+            self.odometry_state, position, measured = located(
+                self.odometry, self.odometry_state, self.step_index, self.train.settings,
+                motion, values)
+            row = values.tolist()
+        return PlantOutputs(motion.position, measured, motion.speed, acceleration,
+                            disturbance, motion.force, resistance, line_resistance, position,
+                            row)
 
     def apply(self, command: float) -> None:
         state = self.train.state  # step k's, as its outputs gave it
         self.stood = standing(self.last_stop, self.stood, state.position, state.speed)
+        before = self.train.motion
         self.train.step(command)
+        self.odometry_state = odometer_moved(self.odometry, self.odometry_state,
+                                             self.train.settings, before, self.train.motion)
+        self.step_index += 1
 
 
 class ControllerStage:

@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.kernels import jitable
+from .adhesion import UNLIMITED, Adhesion, adhered
 from .line import Line, LineTables, belt_resistance, in_neutral_section, line_tables
 
 OPEN_TRACK = line_tables(None, tuple)  # no gradients, curves, tunnels, limits or neutral sections
@@ -66,6 +67,7 @@ class TrainConstants(NamedTuple):
     hold_at_standstill: bool
     envelope: Envelope
     length: float                 # m, the mass belt's (line resistance)
+    adhesion: Adhesion = UNLIMITED  # what the rail gives (core/train/adhesion.py)
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,7 @@ class TrainParameters:
     length: float                 # m, train (mass belt) length
     pantograph_offset: float      # m behind the head
     hold_at_standstill: bool
+    adhesion: Adhesion = UNLIMITED  # the real train's rail (PlantStage's); the ATO's: none
 
     @classmethod
     def from_values(cls, values) -> TrainParameters:
@@ -164,7 +167,8 @@ class TrainParameters:
         return TrainConstants(
             self.xi, self.davis_a, self.davis_b, self.davis_c, self.disturbance_amplitude,
             self.disturbance_frequency, self.disturbance_phase, self.limited,
-            self.actuator_lag, self.hold_at_standstill, self.envelope, self.length)
+            self.actuator_lag, self.hold_at_standstill, self.envelope, self.length,
+            self.adhesion)
 
 
 @jitable
@@ -215,6 +219,7 @@ def rates(t: float, v: float, force: float, command: float, powered: bool,
         force, dforce = achievable(command, v, c.limited, c.envelope), 0.0
     if not powered and force > 0.0:
         force = 0.0
+    force = adhered(force, v, c.adhesion)
     acceleration = c.xi * (force - resistance) + disturbance(
         t, c.disturbance_amplitude, c.disturbance_frequency, c.disturbance_phase)
     if c.hold_at_standstill and v <= 0.0 and acceleration < 0.0:  # held by the brakes
@@ -314,12 +319,23 @@ def train_step(settings: TrainSettings, motion: TrainMotion, command: float) -> 
     # then: a train that has just entered a section has lost its traction already
     powered = not in_neutral_section(line, x - settings.pantograph_offset)
     steps = motion.steps + 1
-    force = achievable(lag if settings.lagged else command, v, constants.limited,
+    force = adhered(demanded_force(settings, v, lag, command, powered), v, constants.adhesion)
+    return TrainMotion(steps, steps * settings.period, x, v, force, lag, command, powered,
+                       delayed, oldest)
+
+
+@jitable(inline=True)
+def demanded_force(settings: TrainSettings, v: float, lag: float, acting: float,
+                   powered: bool) -> float:
+    """The force the train's drive and brakes ask of the rail at v (N/kN): the lag's
+    output (or the acting command) within the envelope, no traction unpowered; the rail
+    gives it, or less (core/train/adhesion.py)."""
+    constants = settings.constants
+    force = achievable(lag if settings.lagged else acting, v, constants.limited,
                        constants.envelope)
     if not powered and force > 0.0:
         force = 0.0
-    return TrainMotion(steps, steps * settings.period, x, v, force, lag, command, powered,
-                       delayed, oldest)
+    return force
 
 
 @jitable(inline=True)

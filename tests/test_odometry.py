@@ -1,0 +1,77 @@
+"""The rail's adhesion, the train's position sensors and the on-board localisation
+(core/train/adhesion.py, core/train/odometry.py, core/control/localisation.py,
+core/run/located.py): off, the ATO reads the truth; on, it drives on its estimate."""
+
+import numpy as np
+import pytest
+
+from ato_nodes.core.base.errors import ScenarioError
+from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
+from ato_nodes.core.run.located import ODOMETRY_SERIES
+from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.train.adhesion import (ADHESION_FACTORS, adhered, adhesion_limits,
+                                           adhesion_of, wheel_creep)
+from ato_nodes.core.train.odometry import odometry_settings
+
+SENSED = ["odometry.enabled=true", "odometry.balise_spacing=500",
+          "odometry.beacon_distances=20,5", "odometry.accelerometer=true"]
+
+
+def metro(*overrides):
+    return apply_overrides(load_scenario("seed004-metro-ato"), list(overrides))
+
+
+def test_without_odometry_the_run_records_no_located_series_and_reads_the_truth():
+    series = simulate(metro("run.duration=20"), compiled=False)
+    assert not set(ODOMETRY_SERIES) & set(series)
+
+
+def test_the_rails_condition_limits_the_force_and_a_slide_gives_its_share():
+    wet = adhesion_of(metro("plant.adhesion=wet", "plant.motored_share=0.5"))
+    dry = adhesion_of(metro("plant.adhesion=dry", "plant.motored_share=0.5"))
+    low, high = adhesion_limits(10.0, wet)
+    dry_low, dry_high = adhesion_limits(10.0, dry)
+    assert low == pytest.approx(dry_low * ADHESION_FACTORS["wet"])
+    assert high == pytest.approx(-0.5 * low)  # half the weight on motored axles
+    assert adhesion_limits(0.0, dry)[1] > adhesion_limits(30.0, dry)[1]  # falls with speed
+    assert adhered(0.9 * low, 10.0, wet) == 0.9 * low  # within: given as asked
+    assert adhered(2.0 * low, 10.0, wet) == pytest.approx(low * wet.efficiency)
+    assert wheel_creep(2.0 * low, 10.0, wet) == -wet.creep  # sliding
+    assert wheel_creep(2.0 * high, 10.0, wet) == wet.creep  # slipping
+    unlimited = adhesion_of(metro())
+    assert adhered(-1e6, 10.0, unlimited) == -1e6
+
+
+def test_each_sensor_draws_from_its_own_stream():
+    plain = prepare("seed004-metro-ato", SENSED)
+    more = prepare("seed004-metro-ato", [*SENSED, "odometry.radar=true"])
+    first, second = (odometry_settings(values, 0.1, 100, None, 0.0) for values in (plain, more))
+    assert first.wheel_scale == second.wheel_scale
+    assert first.accelerometer_bias == second.accelerometer_bias
+    assert np.array_equal(first.draws[:, 1], second.draws[:, 1])
+    assert not first.draws[:, 0].any() and second.draws[:, 0].any()  # the radar its own
+
+
+@pytest.mark.slow
+def test_the_ato_stops_on_its_located_position_within_a_decimetre_with_beacons():
+    series = simulate(metro(*SENSED), compiled=False)
+    located, true = series["located_position"], series["position"]
+    assert abs(true[-1] - 2600.0) < 0.1  # scored on the truth
+    assert abs(located[-1] - true[-1]) < 3.0 * series["position_sigma"][-1]
+    assert np.abs(located - true).max() > 0.1  # it did not read the truth
+    assert not np.array_equal(series["measured_speed"], series["speed"])
+    assert np.isfinite(series["mark_reading"]).sum() >= 6  # five balises, two beacons
+
+
+@pytest.mark.slow
+def test_on_contaminated_rail_the_wheels_slide_and_the_localisation_sees_it():
+    series = simulate(metro(*SENSED, "plant.adhesion=contaminated"), compiled=False)
+    sliding = series["wheel_creep"] < 0.0
+    assert sliding.any()
+    detected = series["slide_detected"] < 0.0
+    assert (detected & np.roll(sliding, 1)).any()  # a slide seen the step after it began
+
+
+def test_a_bad_beacon_list_is_one_line():
+    with pytest.raises(ScenarioError, match="odometry.beacon_distances"):
+        prepare("seed004-metro-ato", ["odometry.beacon_distances=5;20"])
