@@ -5,7 +5,10 @@
 
 Each sample draws, uniformly in the given ranges, the real train's mass (its load,
 as a share of the nominal plant.mass), running resistance and actuator lag (shares of
-the nominal ones), a speed-sensor noise seed and a load-weighing seed; the controller
+the nominal ones), a speed-sensor noise seed and a load-weighing seed (with
+odometry.enabled, a seed of its sensors' errors: the wheel's diameter, the radar's and
+accelerometer's, the balises' and beacons'; with plant.adhesion set, the adhesion within
+its condition, --adhesion); the controller
 and the profile keep the nominal train (plant.mass_factor, plant.resistance_factor,
 plant.lag_factor are the plant node's alone), at the weighed mass when the scenario
 weighs its load (train.load_weighing). Runs in-process in --workers processes or on a
@@ -36,8 +39,9 @@ import _cli
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.studies.backend import Backend, ClusterLost, Progress, check_cluster
-from ato_nodes.studies.robustness import (FACTORS, INDICES, RANGES, run_sample,
-                                          run_sample_in_stack, study_columns, summarise)
+from ato_nodes.studies.robustness import (FACTORS, INDICES, RAIL, RAIL_RANGE, RANGES,
+                                          run_sample, run_sample_in_stack, study_columns,
+                                          summarise)
 from ato_nodes.studies.runner import Variant, check_counts, prepare_variants
 from ato_nodes.studies.samples import SampleFailed, SampleStudy, write_json_with_rows
 
@@ -63,6 +67,9 @@ def parse_args() -> argparse.Namespace:
                         help="resistance range (default %(default)s)")
     parser.add_argument("--lag", default=default["lag"], help="actuator lag range (default "
                         "%(default)s)")
+    parser.add_argument("--adhesion", default="{:g}:{:g}".format(*RAIL_RANGE),
+                        help="the rail's adhesion, a share of its condition's curve, on a "
+                        "run with plant.adhesion set (default %(default)s)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=2)
@@ -106,11 +113,20 @@ def checked(args: argparse.Namespace) -> tuple[dict, dict]:
             for end, bound in zip(("LOW", "HIGH"), bounds, strict=True)}}, args.set)
     except ScenarioError as exc:
         _cli.fail(str(exc))
+    base = prepared[""]
+    if base["plant.adhesion"] != "unlimited":  # the rail's draw, its ends checked too
+        ranges[RAIL] = span(args.adhesion, "adhesion")
+        try:
+            prepare_variants({f"--adhesion {args.adhesion}, {end}": Variant(
+                args.scenario, {RAIL: bound}) for end, bound in zip(
+                    ("LOW", "HIGH"), ranges[RAIL], strict=True)}, args.set)
+        except ScenarioError as exc:
+            _cli.fail(str(exc))
     if not args.resume or not args.out.exists():
         _cli.new_directory(args.out)
     elif not (args.out / SampleStudy.SETTINGS).exists() and any(args.out.iterdir()):
         _cli.fail(f"{args.out} holds no study to resume; use a new --out")
-    return prepared[""], ranges
+    return base, ranges
 
 
 def main() -> None:

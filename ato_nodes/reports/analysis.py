@@ -71,6 +71,7 @@ INDEX_COLUMNS = [  # (key, heading, format)
     ("max_overspeed_kmh", "max overspeed km/h", "{:.3f}"),
     ("stopping_error", "stopping error m", "{:+.3f}"),
     ("abs_stopping_error", "abs(stopping error) m", "{:.3f}"),
+    ("overrun", "overrun (past 0.3 m)", "{:.0f}"),
     ("arrival_time", "arrival s", "{:.2f}"),
     ("running_time_error", "run-time error s", "{:+.2f}"),
     ("neutral_traction_command_time", "neutral traction commanded s", "{:.1f}"),

@@ -27,6 +27,12 @@ RANGES = {  # the real trains' default spread: each factor's range of shares, lo
     "plant.mass_factor": (0.85, 1.3), "plant.resistance_factor": (0.8, 1.2),
     "plant.lag_factor": (0.7, 1.3)}
 SEEDS = ("plant.noise_seed", "train.load_weighing_seed")
+# A train on its sensors (odometry.enabled) draws their errors' seed, and on a rail of
+# limited adhesion how wet or dirty within its condition; each from a stream of its own,
+# so the trains are those of the same seed before them
+SENSOR_SEED = "odometry.seed"
+RAIL = "plant.adhesion_scale"
+RAIL_RANGE = (0.8, 1.2)  # the adhesion's share of its condition's curve
 INDICES = (  # key, heading; worst is the largest
     ("max_abs_error_kmh", "max abs(e) km/h"),
     ("p95_abs_error_kmh", "p95 abs(e) km/h"),
@@ -41,7 +47,10 @@ WITHIN = (  # key, bound, what the count says
     ("max_abs_error_kmh", 1.0, "within 1 km/h"),
     ("abs_stopping_error", 0.1, "stops within 0.1 m"),
     ("abs_running_time_error", 5.0, "arrivals within 5 s"),
+    ("abs_stopping_error", 0.3, "stops within 0.3 m"),
+    ("overrun", 0.0, "no overrun (past 0.3 m)"),
     (WORST_STOP, 0.1, "every stop of the journey within 0.1 m"),
+    (WORST_STOP, 0.3, "every stop of the journey within 0.3 m"),
     (WORST_ARRIVAL, 5.0, "every arrival of the journey within 5 s"),
     (TIMING_MISSED, 0.0, "every timing point of the journey kept"),
 )
@@ -56,21 +65,36 @@ def study_columns(base: Mapping[str, Any]) -> dict[str, type]:
     """The samples' columns of a study on `base`: COLUMNS, and the timing points missed
     when its journey has timing points (a TTOBench journey's): a column only those
     studies have, so that a study recorded without it still resumes."""
+    columns = dict(COLUMNS)
     if base["profile.kind"] == "journey" and \
             load_timetable(base["profile.journey.timetable"]).journey:
-        return {**COLUMNS, TIMING_MISSED: float}
-    return COLUMNS
+        columns[TIMING_MISSED] = float
+    if base["odometry.enabled"]:
+        columns[SENSOR_SEED] = int
+    if base["plant.adhesion"] != "unlimited":
+        columns[RAIL] = float
+    if base["odometry.enabled"] or base["plant.adhesion"] != "unlimited":
+        columns["overrun"] = float
+    return columns
 
 
-def draw_train(ranges: Mapping[str, tuple[float, float]], seed: int, number: int) -> dict:
+def draw_train(ranges: Mapping[str, tuple[float, float]], seed: int, number: int,
+               sensed: bool = False) -> dict:
     """Sample `number`'s real train: a share of each nominal value, uniform in its range,
     a speed-sensor noise seed and a load-weighing seed (from a stream of its own, so
-    the trains are those of the same seed before the load weighing)."""
+    the trains are those of the same seed before the load weighing); `sensed`, its
+    sensors' seed, and with a range for RAIL its rail's adhesion (each its own stream)."""
     rng = np.random.default_rng([seed, number, 0])
     weighing = np.random.default_rng([seed, number, 1])
-    return {**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()},
+    draw = {**{name: float(rng.uniform(low, high)) for name, (low, high) in ranges.items()
+               if name != RAIL},
             "plant.noise_seed": int(rng.integers(0, SEED_BOUND)),
             "train.load_weighing_seed": int(weighing.integers(0, SEED_BOUND))}
+    if sensed:
+        draw[SENSOR_SEED] = int(np.random.default_rng([seed, number, 2]).integers(0, SEED_BOUND))
+    if RAIL in ranges:
+        draw[RAIL] = float(np.random.default_rng([seed, number, 3]).uniform(*ranges[RAIL]))
+    return draw
 
 
 def run_sample(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]], seed: int,
@@ -78,7 +102,7 @@ def run_sample(base: dict[str, Any], ranges: Mapping[str, tuple[float, float]], 
     """Sample `number` of the study on `base` (the scenario's checked values with the
     study's --set): drawn, prepared and run here (a worker), its row of COLUMNS and of
     the indices named in `extra` that the run has."""
-    draw = draw_train(ranges, seed, number)
+    draw = draw_train(ranges, seed, number, base["odometry.enabled"])
     try:
         values = apply_overrides(base, draw)
     except ScenarioError as exc:
@@ -97,7 +121,7 @@ def run_sample_in_stack(base: dict[str, Any], ranges: Mapping[str, tuple[float, 
     directory, scored, then deleted."""
     from ato_nodes.bags.bagio import read_series
     from ato_nodes.launcher.launch import Stack
-    draw = draw_train(ranges, seed, number)
+    draw = draw_train(ranges, seed, number, base["odometry.enabled"])
     try:
         values = apply_overrides(base, draw)
     except ScenarioError as exc:
@@ -119,6 +143,7 @@ def sample_result(draw: dict, indices: dict) -> dict:
     result = {**draw, **{key: float(indices[key]) for key, _ in INDICES if key in indices}}
     if "stopping_error" in indices:
         result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
+        result["overrun"] = float(indices["overrun"])
     if "running_time_error" in indices:
         result["running_time_error"] = float(indices["running_time_error"])
         result["abs_running_time_error"] = abs(result["running_time_error"])

@@ -17,8 +17,9 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.kernels import jitable
-from ..control.localisation import (LocaliserSettings, LocaliserState, localiser_settings,
-                                    localiser_start, localiser_step, position_sigma)
+from ..control.localisation import (LocaliserSettings, LocaliserState, located_estimate,
+                                    localiser_settings,
+                                    localiser_start, localiser_step)
 from ..train.adhesion import wheel_creep
 from ..train.line import Line
 from ..train.odometry import (OdometerState, OdometrySettings, accelerometer_reading,
@@ -76,8 +77,8 @@ def located(odometry: Odometry | None, state: OdometryState | None, k: int,
         localiser = localiser_step(odometry.localiser, localiser, odometer.tacho_speed, radar,
                                    measured_acceleration, odometer.mark_reading,
                                    odometer.mark_sigma)
-    position, speed, _, scale_error = localiser.estimate
-    row[0], row[1], row[2] = position, position_sigma(localiser), scale_error
+    position, speed, sigma, scale_error = located_estimate(localiser)
+    row[0], row[1], row[2] = position, sigma, scale_error
     row[3], row[4], row[5] = odometer.tacho_speed, radar, measured_acceleration
     row[6], row[7], row[8] = odometer.mark_reading, localiser.slide, state.creep
     return OdometryState(odometer, localiser, state.creep), position, speed

@@ -22,7 +22,7 @@ INDEX_NAMES = (
     "eso_speed_max_dev", "eso_acceleration_max_dev", "eso_disturbance_max_dev",
     "overshoot_percent", "traction_energy_kwh", "regenerated_energy_kwh", "net_energy_kwh",
     "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time",
-    "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "arrival_time",
+    "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "overrun", "arrival_time",
     "running_time_error", "neutral_traction_command_time", "neutral_traction_force_time",
     "max_abs_error_outside_steps_kmh", "stepped_time")
 # Those that only grow along a run (integrals of non-negative terms, maxima, counts):
@@ -33,7 +33,8 @@ GROWING_INDICES = (
     "switch_count", "overspeed_time", "max_overspeed_kmh", "neutral_traction_command_time",
     "neutral_traction_force_time", "max_abs_error_outside_steps_kmh", "stepped_time")
 # Those that judge the run's stop: they say nothing of a run that ended short of it.
-STOP_INDICES = ("stopping_error", "abs_stopping_error", "arrival_time", "running_time_error")
+STOP_INDICES = ("stopping_error", "abs_stopping_error", "overrun", "arrival_time",
+                "running_time_error")
 # A tuning's fitness (tune.py --fitness) -> the index it minimises.
 FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
            "p95_abs_error_kmh": "p95_abs_error_kmh"}

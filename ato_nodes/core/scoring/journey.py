@@ -36,7 +36,7 @@ import numpy as np
 
 from ..base.errors import ScenarioError
 from ..base.units import MS_TO_KMH
-from .operation import STANDSTILL, neutral_traction_time, traction_energy_kwh
+from .operation import BERTHING_TOLERANCE, STANDSTILL, neutral_traction_time, traction_energy_kwh
 
 
 # What is read of a timetable (core/targets/timetable.py's Stop, JourneySection and
@@ -459,7 +459,8 @@ def last_stop_indices(indices: JourneyIndices, planned_run_time: float | None
     interstation run's are its one stop's; NaN when the train did not stop there."""
     last = indices.stations[-1]  # NaN stop error and arrival without a stop
     stop = {"stopping_error": last.stop_error, "abs_stopping_error": abs(last.stop_error),
-            "arrival_time": last.arrival}
+            "overrun": float(last.stop_error > BERTHING_TOLERANCE)
+            if math.isfinite(last.stop_error) else math.nan, "arrival_time": last.arrival}
     if planned_run_time is not None:
         stop["running_time_error"] = last.arrival - planned_run_time
     return stop

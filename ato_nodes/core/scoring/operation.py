@@ -24,7 +24,9 @@ kN is force * mass * gravity / 1000 with the mass in t.
 - overspeed_time (s), max_overspeed_kmh (km/h): time above and largest excess over
   the speed limit, only when speed_limit is given.
 - stopping_error (m, + overshoot), abs_stopping_error (m): final position against
-  stop_position, only when it is given.
+  stop_position, only when it is given; overrun: 1 when the train stopped more than
+  BERTHING_TOLERANCE past its mark (its doors miss the platform's: an outcome an
+  operator names and acts on), else 0.
 - arrival_time (s): t of the first sample of the final standstill (speed <= 0.01
   m/s); NaN if the train is still moving at the end or never moved.
 - running_time_error (s, + late): arrival_time - planned_run_time, when planned.
@@ -49,6 +51,8 @@ from .indices import _integral
 STANDSTILL = 0.01  # m/s
 JERK_WINDOW = 1.0  # s
 KJ_PER_KWH = 3600.0
+# m past the mark a metro's platform tolerates (platform screen doors; docs/localisation.md)
+BERTHING_TOLERANCE = 0.3
 
 
 SWITCH_THRESHOLD = 0.5  # N/kN: a force this small or smaller is coasting
@@ -176,6 +180,7 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
     if stop_position is not None:
         result["stopping_error"] = float(position[-1] - stop_position)
         result["abs_stopping_error"] = abs(result["stopping_error"])
+        result["overrun"] = float(result["stopping_error"] > BERTHING_TOLERANCE)
     if planned_run_time is not None:
         result["running_time_error"] = arrival - planned_run_time
     if neutral is not None:
