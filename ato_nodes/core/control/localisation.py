@@ -2,10 +2,12 @@
 (core/train/odometry.py), ROS-free.
 
 Two Kalman filters, each linear:
-- the motion in the odometer's own frame, x = (d, w, a): the distance the odometer has
-  counted (m), its speed (m/s) and acceleration (m/s^2). Each period h it predicts
-  d += w h + a h^2 / 2, w += a h, a a random walk (localisation.acceleration_sigma per
-  sqrt(s): the train's jerk), and takes the accelerometer's reading (its noise and bias),
+- the motion in the odometer's own frame, x = (d, w, a, c): the distance the odometer has
+  counted (m), its speed (m/s) and acceleration (m/s^2), and the accelerometer's bias c
+  (m/s^2). Each period h it predicts d += w h + a h^2 / 2, w += a h, a a random walk
+  (localisation.acceleration_sigma per sqrt(s): the train's jerk), and takes the
+  accelerometer's reading (a + c, its stated noise; c's prior its stated bias: the
+  tachometer finds it while the wheels roll, so the filter coasts true through a slide),
   the radar's speed (its stated noise) and the tachometer's: the pulses of the period
   over it, the mean speed over the period, w - a h / 2 (its quantisation's variance);
   the radar's and accelerometer's readings turned into the odometer's frame by the
@@ -21,10 +23,12 @@ Two Kalman filters, each linear:
 Each update is by one scalar reading, written out (no LAPACK): Python and compiled code
 give the same bits. A tachometer reading more than localisation.gate sigmas off the
 prediction is a slip (above) or a slide (below): it is set aside, the filter coasting on
-the other sensors until the readings agree again (with the tachometer alone, for at most
-localisation.slide_hold periods in a row: then taken again, not to coast for ever). The
+the other sensors for at most localisation.slide_hold periods in a row (then taken
+again: a filter that set aside a true reading must not coast for ever). The
 position's sigma is recorded (position_sigma); the over- and under-reading amounts ETCS
-states (L_DOUBTOVER, L_DOUBTUNDER) are, here, a multiple of it, the same both ways.
+states (L_DOUBTOVER, L_DOUBTUNDER) are, here, a multiple of it, the same both ways. A
+mark's correction reaches the located position at localisation.correction_rate at most
+(a position-indexed target would jump with it), what is still to come added to its sigma.
 """
 
 from __future__ import annotations
@@ -45,8 +49,11 @@ LOCALISATION_PARAMETERS = (
           "per sqrt(s)", "plant", 0.0, 1.0),
     param("localisation.gate", 4.0, "a tachometer reading this many sigmas off the "
           "prediction is a slip or a slide, set aside", "plant", 1.0, 100.0),
+    param("localisation.correction_rate", 1.0, "the fastest the located position takes a "
+          "mark's correction, m/s: a jump in position is a jump in a position-indexed target",
+          "plant", 0.01, 1e3),
     param("localisation.slide_hold", 3.0, "the longest a slipping or sliding tachometer is "
-          "set aside when it is the only sensor, s (then taken again)", "plant", 0.0, 60.0),
+          "set aside, s (then taken again)", "plant", 0.0, 60.0),
 )
 
 
@@ -56,19 +63,24 @@ class LocaliserSettings(NamedTuple):
     scale_drift: float          # variance added to e per period
     tacho_variance: float       # (m/s)^2, the tachometer's quantisation
     radar_noise: float          # relative, 1 sigma
-    accelerometer_variance: float  # (m/s^2)^2, its noise and bias
+    accelerometer_noise: float  # (m/s^2)^2, its variance per reading
     gate: float                 # sigmas
-    slide_hold: int             # periods (the tachometer alone: a radar or accelerometer
-                                # carries the filter through a slide of any length)
+    slide_hold: int             # periods
+    correction_step: float      # m: the most of a correction the output takes a period
 
 
 class LocaliserState(NamedTuple):
-    motion: tuple               # (d, w, a): m, m/s, m/s^2 as the odometer counts them
-    motion_covariance: np.ndarray  # 3 x 3
+    motion: tuple               # (d, w, a, c): m, m/s, m/s^2 as the odometer counts them,
+                                # and the accelerometer's bias c, m/s^2
+    motion_covariance: np.ndarray  # 4 x 4
     map: tuple                  # (b, e): the position is b + d (1 - e)
     map_covariance: tuple       # (bb, be, ee)
     set_aside: int              # tachometer readings set aside in a row
     slide: float                # -1 sliding, +1 slipping, 0 rolling, as detected
+    pending: float              # m of the marks' corrections the output has yet to take
+
+
+MOTION = 4  # the motion filter's states
 
 
 def localiser_settings(values, period: float, pulse_length: float) -> LocaliserSettings:
@@ -78,63 +90,68 @@ def localiser_settings(values, period: float, pulse_length: float) -> LocaliserS
     return LocaliserSettings(
         float(period), jerk * jerk * period, values["localisation.scale_drift"] ** 2 * period,
         (pulse_length / period) ** 2 / 6.0,  # a difference of two whole counts
-        float(values["odometry.radar_noise"]),
-        values["odometry.accelerometer_noise"] ** 2 + values["odometry.accelerometer_bias"] ** 2,
-        float(values["localisation.gate"]),
-        round(values["localisation.slide_hold"] / period)
-        if not (values["odometry.radar"] or values["odometry.accelerometer"]) else 2**62)
+        float(values["odometry.radar_noise"]), values["odometry.accelerometer_noise"] ** 2,
+        float(values["localisation.gate"]), round(values["localisation.slide_hold"] / period),
+        values["localisation.correction_rate"] * period)
 
 
 def localiser_start(values, position: float, speed: float) -> LocaliserState:
     """A train departing at `position` and `speed`, known to a beacon's accuracy (it
-    stands at a stop), its odometer to the wheel's stated diameter error."""
-    return LocaliserState((0.0, float(speed), 0.0), np.diag([0.0, 1e-4, 1e-2]),
+    stands at a stop), its odometer to the wheel's stated diameter error, its
+    accelerometer's bias to the stated one."""
+    return LocaliserState((0.0, float(speed), 0.0, 0.0),
+                          np.diag([0.0, 1e-4, 1e-2, values["odometry.accelerometer_bias"] ** 2]),
                           (float(position), 0.0),
                           (values["odometry.beacon_accuracy"] ** 2, 0.0,
-                           values["odometry.wheel_diameter_error"] ** 2), 0, 0.0)
+                           values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0)
 
 
 @jitable
 def _predicted(settings: LocaliserSettings, state: LocaliserState
                ) -> tuple[tuple, np.ndarray]:
-    """The motion and its covariance a period on: F = [[1, h, h^2/2], [0, 1, h],
-    [0, 0, 1]], written out."""
+    """The motion and its covariance a period on: F = [[1, h, h^2/2, 0], [0, 1, h, 0],
+    [0, 0, 1, 0], [0, 0, 0, 1]], written out."""
     h = settings.period
-    d, w, a = state.motion
+    d, w, a, c = state.motion
     p = state.motion_covariance
-    f = ((1.0, h, 0.5 * h * h), (0.0, 1.0, h), (0.0, 0.0, 1.0))
-    fp = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            fp[i, j] = f[i][0] * p[0, j] + f[i][1] * p[1, j] + f[i][2] * p[2, j]
-    covariance = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            covariance[i, j] = fp[i, 0] * f[j][0] + fp[i, 1] * f[j][1] + fp[i, 2] * f[j][2]
+    f = ((1.0, h, 0.5 * h * h, 0.0), (0.0, 1.0, h, 0.0), (0.0, 0.0, 1.0, 0.0),
+         (0.0, 0.0, 0.0, 1.0))
+    fp = np.zeros((MOTION, MOTION))
+    for i in range(MOTION):
+        for j in range(MOTION):
+            fp[i, j] = (f[i][0] * p[0, j] + f[i][1] * p[1, j] + f[i][2] * p[2, j]
+                        + f[i][3] * p[3, j])
+    covariance = np.zeros((MOTION, MOTION))
+    for i in range(MOTION):
+        for j in range(i, MOTION):
+            covariance[i, j] = (fp[i, 0] * f[j][0] + fp[i, 1] * f[j][1] + fp[i, 2] * f[j][2]
+                                + fp[i, 3] * f[j][3])
             covariance[j, i] = covariance[i, j]
     covariance[2, 2] += settings.acceleration_drift
-    return (d + h * w + 0.5 * h * h * a, w + h * a, a), covariance
+    return (d + h * w + 0.5 * h * h * a, w + h * a, a, c), covariance
 
 
 @jitable
 def _updated(x: tuple, p: np.ndarray, h: tuple, reading: float, variance: float,
              gate: float) -> tuple[tuple, bool]:
-    """The motion's update by one scalar reading with measurement row `h` (by d, w, a),
-    `p` updated in place; (motion, taken): a reading past `gate` sigmas (gate > 0) is not
-    taken."""
-    ph = (p[0, 0] * h[0] + p[0, 1] * h[1] + p[0, 2] * h[2],
-          p[1, 0] * h[0] + p[1, 1] * h[1] + p[1, 2] * h[2],
-          p[2, 0] * h[0] + p[2, 1] * h[1] + p[2, 2] * h[2])  # P h'
-    innovation_variance = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + variance
-    innovation = reading - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2])
+    """The motion's update by one scalar reading with measurement row `h` (by d, w, a,
+    c), `p` updated in place; (motion, taken): a reading past `gate` sigmas (gate > 0) is
+    not taken."""
+    ph = (p[0, 0] * h[0] + p[0, 1] * h[1] + p[0, 2] * h[2] + p[0, 3] * h[3],
+          p[1, 0] * h[0] + p[1, 1] * h[1] + p[1, 2] * h[2] + p[1, 3] * h[3],
+          p[2, 0] * h[0] + p[2, 1] * h[1] + p[2, 2] * h[2] + p[2, 3] * h[3],
+          p[3, 0] * h[0] + p[3, 1] * h[1] + p[3, 2] * h[2] + p[3, 3] * h[3])  # P h'
+    innovation_variance = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + h[3] * ph[3] + variance
+    innovation = reading - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3])
     if gate > 0.0 and innovation * innovation > gate * gate * innovation_variance:
         return x, False
-    for i in range(3):
-        for j in range(i, 3):  # the upper triangle, mirrored: symmetric to the bit
+    for i in range(MOTION):
+        for j in range(i, MOTION):  # the upper triangle, mirrored: symmetric to the bit
             p[i, j] = p[i, j] - ph[i] * ph[j] / innovation_variance
             p[j, i] = p[i, j]
     step = innovation / innovation_variance
-    return (x[0] + ph[0] * step, x[1] + ph[1] * step, x[2] + ph[2] * step), True
+    return (x[0] + ph[0] * step, x[1] + ph[1] * step, x[2] + ph[2] * step,
+            x[3] + ph[3] * step), True
 
 
 @jitable
@@ -166,14 +183,14 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, tacho_spe
     """One period: the prediction, then the readings of its end (NaN: none)."""
     x, p = _predicted(settings, state)
     frame = 1.0 / (1.0 - state.map[1])  # a true speed in the odometer's frame
-    if acceleration == acceleration:
-        x, _ = _updated(x, p, (0.0, 0.0, 1.0), acceleration * frame,
-                        settings.accelerometer_variance, 0.0)
+    if acceleration == acceleration:  # it reads the acceleration plus its bias
+        x, _ = _updated(x, p, (0.0, 0.0, 1.0, 1.0), acceleration * frame,
+                        settings.accelerometer_noise, 0.0)
     if radar_speed == radar_speed:
         noise = settings.radar_noise * radar_speed
-        x, _ = _updated(x, p, (0.0, 1.0, 0.0), radar_speed * frame, noise * noise, 0.0)
+        x, _ = _updated(x, p, (0.0, 1.0, 0.0, 0.0), radar_speed * frame, noise * noise, 0.0)
     gate = settings.gate if state.set_aside < settings.slide_hold else 0.0
-    row = (0.0, 1.0, -0.5 * settings.period)  # the mean speed over the period
+    row = (0.0, 1.0, -0.5 * settings.period, 0.0)  # the mean speed over the period
     predicted = x[1] + row[2] * x[2]
     x, taken = _updated(x, p, row, tacho_speed, settings.tacho_variance, gate)
     set_aside, slide = 0, 0.0
@@ -182,17 +199,24 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, tacho_spe
     mapped, map_covariance = _marked(settings, state, x[0], p[0, 0], mark_reading,
                                      mark_sigma * mark_sigma)
     if mark_reading == mark_reading:  # the counted distance's error is the map's now
-        for i in range(3):
+        for i in range(MOTION):
             p[0, i], p[i, 0] = 0.0, 0.0
-    return LocaliserState(x, p, mapped, map_covariance, set_aside, slide)
+    # the estimate's move beyond the distance counted: taken by the output at a bounded rate
+    before = state.map[0] + state.motion[0] * (1.0 - state.map[1])
+    moved = (x[0] - state.motion[0]) * (1.0 - mapped[1])
+    pending = state.pending + mapped[0] + x[0] * (1.0 - mapped[1]) - before - moved
+    pending -= min(max(pending, -settings.correction_step), settings.correction_step)
+    return LocaliserState(x, p, mapped, map_covariance, set_aside, slide, pending)
 
 
 @jitable
 def located_estimate(state: LocaliserState) -> tuple[float, float, float, float]:
-    """(position m, speed m/s, the position's sigma m, the odometer's scale error e)."""
-    d, w, _ = state.motion
+    """(position m, speed m/s, the position's sigma m, the odometer's scale error e): the
+    position with the corrections it has yet to take, their size added to its sigma."""
+    d, w, _, _ = state.motion
     b, e = state.map
     bb, be, ee = state.map_covariance
     variance = (bb - 2.0 * d * be + d * d * ee
                 + (1.0 - e) ** 2 * state.motion_covariance[0, 0])
-    return b + d * (1.0 - e), w * (1.0 - e), math.sqrt(max(variance, 0.0)), e
+    return (b + d * (1.0 - e) - state.pending, w * (1.0 - e),
+            math.sqrt(max(variance, 0.0)) + abs(state.pending), e)
