@@ -16,6 +16,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.paths import config_dir
 from ato_nodes.core.config.scenario import train_preset
 from ato_nodes.core.targets.timetable import journey_file, load_timetable
+from ato_nodes.core.train.adhesion import UNLIMITED
 from ato_nodes.core.train.lines import load_line_file
 from ato_nodes.core.train.line import CURVE_CONSTANT, TUNNEL_CONSTANT
 from ato_nodes.core.train.plant import TrainParameters
@@ -189,7 +190,8 @@ def test_the_brake_envelope_of_each_kind_of_train():
         max_traction_power=values["plant.max_traction_power"],
         max_brake_force=values["plant.max_brake_force"],
         max_brake_power=values["plant.max_brake_power"], actuator_lag=0.0, dead_time=0.0,
-        length=values["plant.length"], pantograph_offset=0.0, hold_at_standstill=True)
+        length=values["plant.length"], pantograph_offset=0.0, hold_at_standstill=True,
+        adhesion=UNLIMITED)
     assert plant.force_limits(10.0)[0] == pytest.approx(-260.0 / (278 * 9.8) * 1000)
     virm = load_train(DATA / "trains" / "NL_Intercity_VIRM6.json")
     force, power = virm.brake_envelope()

@@ -92,7 +92,7 @@ class TrainParameters:
     length: float                 # m, train (mass belt) length
     pantograph_offset: float      # m behind the head
     hold_at_standstill: bool
-    adhesion: Adhesion = UNLIMITED  # the real train's rail (PlantStage's); the ATO's: none
+    adhesion: Adhesion            # what the rail gives it (PlantStage's); the ATO's: UNLIMITED
 
     @classmethod
     def from_values(cls, values) -> TrainParameters:
@@ -110,7 +110,8 @@ class TrainParameters:
                 "max_brake_power")},
             actuator_lag=values["plant.actuator_lag"], dead_time=values["plant.dead_time"],
             length=values["plant.length"], pantograph_offset=values["plant.pantograph_offset"],
-            hold_at_standstill=values["plant.hold_at_standstill"])
+            hold_at_standstill=values["plant.hold_at_standstill"],
+            adhesion=UNLIMITED)  # the ATO's train knows no rail: PlantStage sets the real one's
 
     @property
     def xi(self) -> float:
