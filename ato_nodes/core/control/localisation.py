@@ -8,23 +8,24 @@ Two Kalman filters, each linear:
   (localisation.acceleration_sigma per sqrt(s): the train's jerk), and takes the
   accelerometer's reading (a + c, its stated noise; c's prior its stated bias: the
   tachometer finds it while the wheels roll, so the filter coasts true through a slide),
-  the radar's speed (its stated noise) and the tachometer's: the pulses of the period
-  over it, the mean speed over the period, w - a h / 2 (its quantisation's variance);
-  the radar's and accelerometer's readings turned into the odometer's frame by the
-  scale estimate;
+  and the tachometer's count: its pulses since departure times the nominal pulse length
+  is d (its quantisation's variance: a count's error does not add up along the run); the
+  accelerometer's reading turned into the odometer's frame by the scale estimate;
 - the map, m = (b, e): where the train is, s = b + d (1 - e), e the odometer's scale
   error (the tachometer reads 1 + e times the true speed: a wheel off its nominal
-  diameter), a random walk (localisation.scale_drift); a mark read (a balise, a beacon)
-  updates it, h = (1, -d), its variance the mark's stated accuracy's plus the counted
+  diameter), a random walk (localisation.scale_drift); the radar's speed (the true speed,
+  its stated noise) updates it, h = (0, -w), and a mark read (a balise, a beacon),
+  h = (1, -d), its variance the mark's stated accuracy's plus the counted
   distance's (whose error the map then holds: the distance's variance starts again from
-  0). With no mark e keeps its prior mean: the odometer alone cannot tell its
-  scale (a filter of speed and scale together lets e drift with every reading).
+  0). With neither radar nor marks e keeps its prior mean: the odometer alone cannot tell
+  its scale (a filter of speed and scale together lets e drift with every reading).
 
 Each update is by one scalar reading, written out (no LAPACK): Python and compiled code
-give the same bits. A tachometer reading more than localisation.gate sigmas off the
-prediction is a slip (above) or a slide (below): it is set aside, the filter coasting on
-the other sensors for at most localisation.slide_hold periods in a row (then taken
-again: a filter that set aside a true reading must not coast for ever). The
+give the same bits. A count more than localisation.gate sigmas off the prediction is a
+slip (above) or a slide (below): it is set aside, the filter coasting on
+the other sensors for at most localisation.slide_hold periods in a row; then the count
+starts again from the filter's distance (the distance a slide lost is not counted
+again), and is taken. The
 position's sigma is recorded (position_sigma); the over- and under-reading amounts ETCS
 states (L_DOUBTOVER, L_DOUBTUNDER) are, here, a multiple of it, the same both ways. A
 mark's correction reaches the located position at localisation.correction_rate at most
@@ -61,7 +62,7 @@ class LocaliserSettings(NamedTuple):
     period: float               # s
     acceleration_drift: float   # variance added to a per period, (m/s^2)^2
     scale_drift: float          # variance added to e per period
-    tacho_variance: float       # (m/s)^2, the tachometer's quantisation
+    count_variance: float       # m^2, the tachometer's count's quantisation
     radar_noise: float          # relative, 1 sigma
     accelerometer_noise: float  # (m/s^2)^2, its variance per reading
     gate: float                 # sigmas
@@ -78,6 +79,7 @@ class LocaliserState(NamedTuple):
     set_aside: int              # tachometer readings set aside in a row
     slide: float                # -1 sliding, +1 slipping, 0 rolling, as detected
     pending: float              # m of the marks' corrections the output has yet to take
+    count_offset: float         # m the count has lost (or gained) to slides (slips)
 
 
 MOTION = 4  # the motion filter's states
@@ -89,7 +91,7 @@ def localiser_settings(values, period: float, pulse_length: float) -> LocaliserS
     jerk = values["localisation.acceleration_sigma"]
     return LocaliserSettings(
         float(period), jerk * jerk * period, values["localisation.scale_drift"] ** 2 * period,
-        (pulse_length / period) ** 2 / 6.0,  # a difference of two whole counts
+        pulse_length ** 2 / 12.0,  # a whole count of a distance run
         float(values["odometry.radar_noise"]), values["odometry.accelerometer_noise"] ** 2,
         float(values["localisation.gate"]), round(values["localisation.slide_hold"] / period),
         values["localisation.correction_rate"] * period)
@@ -103,7 +105,7 @@ def localiser_start(values, position: float, speed: float) -> LocaliserState:
                           np.diag([0.0, 1e-4, 1e-2, values["odometry.accelerometer_bias"] ** 2]),
                           (float(position), 0.0),
                           (values["odometry.beacon_accuracy"] ** 2, 0.0,
-                           values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0)
+                           values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0, 0.0)
 
 
 @jitable
@@ -155,48 +157,64 @@ def _updated(x: tuple, p: np.ndarray, h: tuple, reading: float, variance: float,
 
 
 @jitable
-def _marked(settings: LocaliserSettings, state: LocaliserState, distance: float,
-            distance_variance: float, reading: float, variance: float
-            ) -> tuple[tuple, tuple]:
-    """The map a period on (e's drift), updated by a mark's `reading` (NaN: none) at the
-    counted `distance`: (map, its covariance)."""
-    b, e = state.map
-    bb, be, ee = state.map_covariance
-    # e's drift changes the distance still to come, not the one counted: b moves with it
-    q = settings.scale_drift
-    bb, be, ee = bb + distance * distance * q, be + distance * q, ee + q
-    if reading != reading:
-        return (b, e), (bb, be, ee)
-    # h = (1, -d) on (b, e)
-    pb, pe = bb - distance * be, be - distance * ee
-    innovation_variance = pb - distance * pe + variance + (1.0 - e) ** 2 * distance_variance
-    step = (reading - (b + distance * (1.0 - e))) / innovation_variance
-    return ((b + pb * step, e + pe * step),
+def _map_updated(mapped: tuple, covariance: tuple, h: tuple, innovation: float,
+                 variance: float) -> tuple[tuple, tuple]:
+    """The map's update by one scalar reading with measurement row `h` (by b, e)."""
+    bb, be, ee = covariance
+    pb, pe = bb * h[0] + be * h[1], be * h[0] + ee * h[1]  # P h'
+    innovation_variance = h[0] * pb + h[1] * pe + variance
+    step = innovation / innovation_variance
+    return ((mapped[0] + pb * step, mapped[1] + pe * step),
             (bb - pb * pb / innovation_variance, be - pb * pe / innovation_variance,
              ee - pe * pe / innovation_variance))
 
 
 @jitable
-def localiser_step(settings: LocaliserSettings, state: LocaliserState, tacho_speed: float,
+def _mapped(settings: LocaliserSettings, state: LocaliserState, x: tuple, p: np.ndarray,
+            radar_speed: float, mark_reading: float, mark_variance: float
+            ) -> tuple[tuple, tuple]:
+    """The map a period on (e's drift), then the radar's speed (the true speed, against
+    the odometer's w (1 - e): it finds e) and a mark's position (against b + d (1 - e)),
+    NaN: none."""
+    d, w = x[0], x[1]
+    b, e = state.map
+    bb, be, ee = state.map_covariance
+    # e's drift changes the distance still to come, not the one counted: b moves with it
+    q = settings.scale_drift
+    mapped, covariance = (b, e), (bb + d * d * q, be + d * q, ee + q)
+    if radar_speed == radar_speed:
+        noise = settings.radar_noise * radar_speed
+        mapped, covariance = _map_updated(
+            mapped, covariance, (0.0, -w), radar_speed - w * (1.0 - mapped[1]),
+            noise * noise + (1.0 - mapped[1]) ** 2 * p[1, 1])
+    if mark_reading == mark_reading:
+        mapped, covariance = _map_updated(
+            mapped, covariance, (1.0, -d), mark_reading - (mapped[0] + d * (1.0 - mapped[1])),
+            mark_variance + (1.0 - mapped[1]) ** 2 * p[0, 0])
+    return mapped, covariance
+
+
+@jitable
+def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: float,
                    radar_speed: float, acceleration: float, mark_reading: float,
                    mark_sigma: float) -> LocaliserState:
-    """One period: the prediction, then the readings of its end (NaN: none)."""
+    """One period: the prediction, then the readings of its end (NaN: none); `counted`
+    the tachometer's pulses since departure times the nominal pulse length, m."""
     x, p = _predicted(settings, state)
     frame = 1.0 / (1.0 - state.map[1])  # a true speed in the odometer's frame
     if acceleration == acceleration:  # it reads the acceleration plus its bias
         x, _ = _updated(x, p, (0.0, 0.0, 1.0, 1.0), acceleration * frame,
                         settings.accelerometer_noise, 0.0)
-    if radar_speed == radar_speed:
-        noise = settings.radar_noise * radar_speed
-        x, _ = _updated(x, p, (0.0, 1.0, 0.0, 0.0), radar_speed * frame, noise * noise, 0.0)
-    gate = settings.gate if state.set_aside < settings.slide_hold else 0.0
-    row = (0.0, 1.0, -0.5 * settings.period, 0.0)  # the mean speed over the period
-    predicted = x[1] + row[2] * x[2]
-    x, taken = _updated(x, p, row, tacho_speed, settings.tacho_variance, gate)
-    set_aside, slide = 0, 0.0
-    if not taken:
-        set_aside, slide = state.set_aside + 1, 1.0 if tacho_speed > predicted else -1.0
-    mapped, map_covariance = _marked(settings, state, x[0], p[0, 0], mark_reading,
+    set_aside, slide, count_offset = 0, 0.0, state.count_offset
+    reading = counted - count_offset
+    if state.set_aside >= settings.slide_hold:  # the count starts again from the filter's
+        count_offset = counted - x[0]
+    else:
+        x, taken = _updated(x, p, (1.0, 0.0, 0.0, 0.0), reading, settings.count_variance,
+                            settings.gate)
+        if not taken:
+            set_aside, slide = state.set_aside + 1, 1.0 if reading > x[0] else -1.0
+    mapped, map_covariance = _mapped(settings, state, x, p, radar_speed, mark_reading,
                                      mark_sigma * mark_sigma)
     if mark_reading == mark_reading:  # the counted distance's error is the map's now
         for i in range(MOTION):
@@ -206,7 +224,8 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, tacho_spe
     moved = (x[0] - state.motion[0]) * (1.0 - mapped[1])
     pending = state.pending + mapped[0] + x[0] * (1.0 - mapped[1]) - before - moved
     pending -= min(max(pending, -settings.correction_step), settings.correction_step)
-    return LocaliserState(x, p, mapped, map_covariance, set_aside, slide, pending)
+    return LocaliserState(x, p, mapped, map_covariance, set_aside, slide, pending,
+                          count_offset)
 
 
 @jitable

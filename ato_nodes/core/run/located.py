@@ -74,7 +74,8 @@ def located(odometry: Odometry | None, state: OdometryState | None, k: int,
                                                   train_outputs(train, motion)[0])
     localiser = state.localiser
     if k > 0:  # at k = 0 it stands where it departs
-        localiser = localiser_step(odometry.localiser, localiser, odometer.tacho_speed, radar,
+        localiser = localiser_step(odometry.localiser, localiser,
+                                   odometer.pulses * sensors.pulse_length, radar,
                                    measured_acceleration, odometer.mark_reading,
                                    odometer.mark_sigma)
     position, speed, sigma, scale_error = located_estimate(localiser)
