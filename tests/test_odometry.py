@@ -14,7 +14,8 @@ from ato_nodes.core.train.adhesion import (ADHESION_FACTORS, adhered, adhesion_l
 from ato_nodes.core.train.odometry import odometry_settings
 
 SENSED = ["odometry.enabled=true", "odometry.balise_spacing=500",
-          "odometry.beacon_distances=20,5", "odometry.accelerometer=true"]
+          "odometry.beacon_distances=150,50,20,5", "odometry.beacon_accuracy=0.02",
+          "odometry.accelerometer=true"]
 
 
 def metro(*overrides):
@@ -60,7 +61,7 @@ def test_the_ato_stops_on_its_located_position_within_a_decimetre_with_beacons()
     assert abs(located[-1] - true[-1]) < 3.0 * series["position_sigma"][-1]
     assert np.abs(located - true).max() > 0.1  # it did not read the truth
     assert not np.array_equal(series["measured_speed"], series["speed"])
-    assert np.isfinite(series["mark_reading"]).sum() >= 6  # five balises, two beacons
+    assert np.isfinite(series["mark_reading"]).sum() >= 9  # five balises, four beacons
 
 
 @pytest.mark.slow
@@ -75,3 +76,23 @@ def test_on_contaminated_rail_the_wheels_slide_and_the_localisation_sees_it():
 def test_a_bad_beacon_list_is_one_line():
     with pytest.raises(ScenarioError, match="odometry.beacon_distances"):
         prepare("seed004-metro-ato", ["odometry.beacon_distances=5;20"])
+
+
+@pytest.mark.slow
+def test_the_tachometer_alone_keeps_its_scale_and_errs_by_the_wheels_diameter():
+    values = metro("odometry.enabled=true", "odometry.wheel_diameter_error=0.01")
+    series = simulate(values, compiled=False)
+    wheel = odometry_settings(values, 0.1, 10, None, 0.0).wheel_scale
+    assert not series["scale_error"].any()  # no mark, no radar: e stays at its prior
+    travelled = series["position"][-1] - series["position"][0]
+    located = series["located_position"][-1] - series["located_position"][0]
+    assert located == pytest.approx(travelled / wheel, abs=0.05)  # the count, no drift
+
+
+@pytest.mark.slow
+def test_the_radar_finds_the_odometers_scale_without_marks():
+    values = metro("odometry.enabled=true", "odometry.radar=true",
+                   "odometry.wheel_diameter_error=0.01")
+    series = simulate(values, compiled=False)
+    wheel = odometry_settings(values, 0.1, 10, None, 0.0).wheel_scale
+    assert series["scale_error"][-1] == pytest.approx(1.0 / wheel - 1.0, abs=0.002)
