@@ -219,7 +219,7 @@ def test_a_partial_run_fails_only_what_it_cannot_mend_and_says_where_it_stopped(
 
 
 def test_every_index_heading_names_its_unit():
-    unitless = {"steps", "j_seed004", "switch_count"}  # counts; J adds unlike terms
+    unitless = {"steps", "j_seed004", "switch_count", "overrun"}  # counts; J adds unlike terms
     for key, title, _ in INDEX_COLUMNS:
         if key not in unitless:
             assert re.search(r"(km/h|m/s\^3|m/s\^2|m/s|kWh|\bs\b|\bm\b|%|s\^2|m\^2/s)$",

@@ -60,7 +60,9 @@ ROLES: dict[str, tuple[str, object]] = {
     "controller_state": ("std_msgs/msg/Float64MultiArray", LABELLED),
     "target_preview": ("std_msgs/msg/Float64MultiArray", (MATRIX, "preview")),
     "position": ("std_msgs/msg/Float64", [("position", "data")]),
+    "odometry": ("std_msgs/msg/Float64MultiArray", LABELLED),
 }
+OPTIONAL_ROLES = ("odometry",)  # a run has them with an option on: none missing without
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 
@@ -277,7 +279,8 @@ def run_status(path: Path) -> str | None:
 
 
 def _assemble(path, found, stamps, raws, types) -> Run:
-    missing = [role for role in ROLES if role not in found or not raws[role]]
+    missing = [role for role in ROLES if (role not in found or not raws[role])
+               and role not in OPTIONAL_ROLES]
     usable = _usable_roles(path, found, raws, types)
     notes = []
     clock_role = "state" if "state" in usable else "measured_speed"

@@ -461,7 +461,7 @@ class Stack:
         the plant waits for it, run.record_lag)."""
         from ato_nodes.bags.bagio import BagError, message_counts
         from ato_nodes.core.base.topics import step_topics
-        publishers = {topic.name: topic.publishers[0] for topic in step_topics()}
+        publishers = {topic.name: topic.publishers[0] for topic in step_topics(self.values)}
         try:  # per-step topics only (live parameter changes are few, or none)
             counts = {name: count for name, count in message_counts(self.bag).items()
                       if name in publishers}
@@ -574,7 +574,6 @@ def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0,
     whose law only it runs). A failed run raises RuntimeError with the launcher's
     one-line message."""
     from ato_nodes.bags.bagio import read_run
-    from ato_nodes.core.run.located import ODOMETRY_SERIES
     from ato_nodes.core.run.loop import simulate
     from ato_nodes.core.run.scoring import score_series
     outcome = Stack(values, bag, quiet=True, timeout=timeout, external=external).run()
@@ -583,7 +582,6 @@ def run_checked(values: dict[str, Any], bag: Path, timeout: float = 900.0,
     run = read_run(bag)
     if external:
         return score_series(run.series, run.parameters), None
-    identical = all(np.array_equal(run.series[name], series)  # odometry's not recorded yet
-                    for name, series in simulate(values).items()
-                    if name != "t" and name not in ODOMETRY_SERIES)
+    identical = all(np.array_equal(run.series[name], series, equal_nan=True)
+                    for name, series in simulate(values).items() if name != "t")
     return score_series(run.series, run.parameters), identical

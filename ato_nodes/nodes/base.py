@@ -23,6 +23,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor, TimeoutException
 from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -674,3 +675,12 @@ def _tear_down(node: AtoNode | None, status: int) -> int:
         status = status or node.exit_status
     rclpy.try_shutdown()
     return status
+
+
+def labelled(names) -> Float64MultiArray:
+    """A Float64MultiArray whose layout names its entries (`names`, comma-separated in
+    dim[0].label): its values travel with their names, and a bag says what it holds."""
+    message = Float64MultiArray()
+    message.layout.dim = [MultiArrayDimension(label=",".join(names), size=len(names),
+                                              stride=len(names))]
+    return message

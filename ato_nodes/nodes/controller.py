@@ -12,13 +12,13 @@ from __future__ import annotations
 import json
 
 from rcl_interfaces.msg import SetParametersResult
-from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, String
+from std_msgs.msg import Float64, Float64MultiArray, String
 
 from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.stages import ControllerStage
 from ato_nodes.core.config.schema import SPEC_BY_NAME
-from ato_nodes.nodes.base import AtoNode, run_node
+from ato_nodes.nodes.base import AtoNode, labelled, run_node
 
 
 class ControllerNode(AtoNode):
@@ -29,11 +29,8 @@ class ControllerNode(AtoNode):
         self.stage = ControllerStage(self.values)
         self.command_pub = self.publisher("command")
         self.outputs_pub = self.publisher("controller_state")
-        self.command_msg, self.outputs_msg = Float64(), Float64MultiArray()
-        names = self.stage.output_names
-        # The outputs' names travel with every message: a bag says what it holds.
-        self.outputs_msg.layout.dim = [MultiArrayDimension(
-            label=",".join(names), size=len(names), stride=len(names))]
+        self.command_msg = Float64()
+        self.outputs_msg = labelled(self.stage.output_names)
         self.changes_pub = self.publisher("parameter_changes")
         self.live = self.stage.component.live_parameters
         self.add_on_set_parameters_callback(self.on_set_parameters)

@@ -18,7 +18,8 @@ from std_msgs.msg import Float64
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
 from ato_nodes.core.run.stages import PlantStage
 from ato_nodes.core.config.schema import recording_steps, steps
-from ato_nodes.nodes.base import AtoNode, run_node
+from ato_nodes.core.run.located import ODOMETRY_SERIES
+from ato_nodes.nodes.base import AtoNode, labelled, run_node
 
 
 class PlantNode(AtoNode):
@@ -39,6 +40,9 @@ class PlantNode(AtoNode):
         self.located_pub = (self.publisher("located_position")
                             if self.values["odometry.enabled"] else None)
         self.located_msg = Float64()
+        self.odometry_pub = (self.publisher("odometry")
+                             if self.values["odometry.enabled"] else None)
+        self.odometry_msg = labelled(ODOMETRY_SERIES)
         self.state_pub = self.publisher("state")
         self.speed_msg, self.position_msg = Float64(), Float64()
         self.clock_msg, self.state_msg = Clock(), Twist()
@@ -75,6 +79,9 @@ class PlantNode(AtoNode):
         state.angular.x, state.angular.y, state.angular.z = (out.force, out.resistance,
                                                              out.line_resistance)
         self.state_pub.publish(state)
+        if self.odometry_pub is not None:
+            self.odometry_msg.data = out.odometry
+            self.odometry_pub.publish(self.odometry_msg)
 
     def on_command(self, msg: Float64) -> None:
         self.inject_fault(self.step_index)

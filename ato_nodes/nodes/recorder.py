@@ -88,7 +88,7 @@ class RecorderNode(AtoNode):
         self.run_parameters: dict[str, dict] = {}  # node -> the values it announced
         typestore = get_typestore(Stores.ROS2_JAZZY)
         self.counts: dict[str, int] = {}
-        for topic in step_topics():
+        for topic in step_topics(self.values):
             connection = self.writer.add_connection(topic.name, topic.type, typestore=typestore,
                                                     offered_qos_profiles=offered_qos(topic))
             self.counts[topic.name] = 0

@@ -32,6 +32,7 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import AT_LAST_STOP
+from ato_nodes.core.run.located import ODOMETRY_SERIES
 from ato_nodes.core.scoring.catalogue import (FITNESS, GROWING_INDICES, STOP_INDICES, Requirement,
                                               journey_last_stop)
 from ato_nodes.core.run.scoring import observer_b0, run_line, stop_not_reached, total_disturbance
@@ -300,7 +301,8 @@ def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
             with_command, time, lambda s: s["command"],
             ("time (s)", "u (N/kN)", "Control force (specific)"), out / "command.png")))
     for index, (run, colour) in enumerate(zip(runs, itertools.cycle(RUN_COLOURS))):
-        for plot, name in ((plot_observer, "observer"), (plot_outputs, "outputs")):
+        for plot, name in ((plot_observer, "observer"), (plot_outputs, "outputs"),
+                           (plot_localisation, "localisation")):
             figure = plot(run, out / f"{name}_{index + 1}.png", colour)
             if figure:
                 figures.append(figure)
@@ -351,7 +353,7 @@ def external_outputs(run: Run) -> list[Output]:
     its /ato/controller_state gave, named by the messages; their units are the law's."""
     from ato_nodes.bags.bagio import ROLES
     recorded = {name for _, fields in ROLES.values() if isinstance(fields, list)
-                for name, _ in fields} | {"t", "preview"}
+                for name, _ in fields} | {"t", "preview", *ODOMETRY_SERIES}
     return [Output(name, "as the law gives it", f"{name}, from the external node")
             for name in run.series if name not in recorded]
 
@@ -380,6 +382,36 @@ def plot_observer(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure 
         axis.legend(loc="upper right")
     axes[0].set_title(f"Extended state observer: {label(run)}")
     return Figure(f"Observer: {label(run)}", _save(figure, path))
+
+
+def plot_localisation(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:
+    """Where the ATO had its train against where it was (odometry.enabled): the located
+    position's error with its +-3 sigma band and the marks read, the located speed's
+    error, the slides and slips the wheels made and those the localisation saw."""
+    s = run.series
+    if not {"located_position", "position", "position_sigma", "speed"} <= s.keys():
+        return None
+    plt = _pyplot()
+    figure, axes = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
+    error, band = s["located_position"] - s["position"], 3.0 * s["position_sigma"]
+    axes[0].fill_between(s["t"], -band, band, color="0.85", label="+-3 sigma")
+    axes[0].plot(s["t"], error, color=colour, lw=0.8, label="located - true")
+    marks = np.isfinite(s["mark_reading"])
+    axes[0].plot(s["t"][marks], error[marks], "k|", ms=8, label="a balise or beacon read")
+    limit = max(float(np.abs(error).max()) * 1.3, 0.05)
+    axes[0].set(ylabel="position error (m)", ylim=(-limit, limit))
+    axes[1].plot(s["t"], (s["measured_speed"] - s["speed"]) * MS_TO_KMH, color=colour, lw=0.8,
+                 label="located - true")
+    axes[1].set_ylabel("speed error (km/h)")
+    axes[2].plot(s["t"], s["wheel_creep"], "k", lw=0.8, label="the wheels' creep (true)")
+    axes[2].plot(s["t"], 0.1 * s["slide_detected"], color=colour, lw=0.8,
+                 label="slide (-) or slip (+) seen, x 0.1")
+    axes[2].set(xlabel="time (s)", ylabel="creep")
+    for axis in axes:
+        axis.grid(alpha=0.3)
+        axis.legend(loc="upper right", fontsize=8)
+    axes[0].set_title(f"On-board localisation: {label(run)}")
+    return Figure(f"Localisation: {label(run)}", _save(figure, path))
 
 
 def convergence_axis(tunings: list[Tuning]) -> str:

@@ -45,7 +45,7 @@ PARAMETERS = (
     param("odometry.enabled", False, "the ATO knows its position and speed only from its "
           "sensors (tachometer, radar, accelerometer, balises, beacons) through the on-board "
           "localisation (false: it reads the true position and the speed sensor, the papers' "
-          "setting)", ("plant", "profile")),
+          "setting)", ("plant", "profile", "recorder")),
     param("odometry.seed", 0, "seed of the sensors' errors (each sensor its own stream)",
           "plant", 0, 2**31 - 1),
     param("odometry.wheel_diameter", 0.84, "the measured wheel's nominal diameter, m", "plant",
