@@ -14,7 +14,10 @@ Two Kalman filters, each linear:
 - the map, m = (b, e): where the train is, s = b + d (1 - e), e the odometer's scale
   error (the tachometer reads 1 + e times the true speed: a wheel off its nominal
   diameter), a random walk (localisation.scale_drift); the radar's speed (the true speed,
-  its stated noise) updates it, h = (0, -w), and a mark read (a balise, a beacon),
+  its stated noise) updates it, h = (0, -w) (while the count is set aside for a slip or
+  a slide, the radar's speed is the motion's speed reading instead: the count then says
+  nothing of the scale, and the filter coasts on the radar, not on a slipping wheel), and
+  a mark read (a balise, a beacon),
   h = (1, -d), its variance the mark's stated accuracy's plus the counted
   distance's (whose error the map then holds: the distance's variance starts again from
   0). With neither radar nor marks e keeps its prior mean: the odometer alone cannot tell
@@ -214,6 +217,11 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
                             settings.gate)
         if not taken:
             set_aside, slide = state.set_aside + 1, 1.0 if reading > x[0] else -1.0
+    if (set_aside > 0 or state.set_aside > 0) and radar_speed == radar_speed:
+        # a slip or slide: the radar's speed is the train's, not a word on the scale
+        noise = settings.radar_noise * radar_speed
+        x, _ = _updated(x, p, (0.0, 1.0, 0.0, 0.0), radar_speed * frame, noise * noise, 0.0)
+        radar_speed = math.nan
     mapped, map_covariance = _mapped(settings, state, x, p, radar_speed, mark_reading,
                                      mark_sigma * mark_sigma)
     if mark_reading == mark_reading:  # the counted distance's error is the map's now
