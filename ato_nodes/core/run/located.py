@@ -17,9 +17,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.kernels import jitable
-from ..control.localisation import (LocaliserSettings, LocaliserState, located_estimate,
-                                    localiser_settings,
-                                    localiser_start, localiser_step)
+from ..control.localisation import (LocaliserSettings, LocaliserState, localiser_settings,
+                                    localiser_start, localiser_step, located_estimate)
 from ..train.adhesion import wheel_creep
 from ..train.line import Line
 from ..train.odometry import (OdometerState, OdometrySettings, accelerometer_reading,
