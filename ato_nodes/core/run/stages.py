@@ -172,7 +172,6 @@ class PlantStage:
         self.quantum = values["plant.speed_quantum"]
         self.rng = np.random.default_rng(values["plant.noise_seed"])
         self.odometry, self.odometry_state = odometry_of(values, line, steps(values))
-        self.step_index = 0
         self.last_stop = last_stop(values)
         self.stood = 0  # samples the train has stood at its last stop, to the last applied
 
@@ -202,7 +201,7 @@ class PlantStage:
         if self.odometry is not None:
             values = np.empty(len(ODOMETRY_SERIES))
             self.odometry_state, position, measured = located(
-                self.odometry, self.odometry_state, self.step_index, self.train.settings,
+                self.odometry, self.odometry_state, motion.steps, self.train.settings,
                 motion, values)
             row = values.tolist()
         return PlantOutputs(motion.position, measured, motion.speed, acceleration,
@@ -216,7 +215,6 @@ class PlantStage:
         self.train.step(command)
         self.odometry_state = odometer_moved(self.odometry, self.odometry_state,
                                              self.train.settings, before, self.train.motion)
-        self.step_index += 1
 
 
 class ControllerStage:

@@ -107,16 +107,14 @@ def odometry_settings(values, period: float, steps: int, line: Line | None,
                       start: float) -> OdometrySettings:
     """The run's sensors from its odometry.* values, their errors drawn, for `steps` steps
     of a train departing from `start` (m) on `line`."""
-    def stream(name: str) -> np.random.Generator:
-        return np.random.default_rng([values["odometry.seed"], SENSOR_STREAMS[name]])
-
-    wheel_scale = 1.0 + values["odometry.wheel_diameter_error"] * stream("wheel").standard_normal()
+    wheel = sensor_stream(values, "wheel").standard_normal()
+    wheel_scale = 1.0 + values["odometry.wheel_diameter_error"] * wheel
     draws = np.zeros((steps, 2))
     if values["odometry.radar"]:
-        draws[:, 0] = stream("radar").standard_normal(steps)
+        draws[:, 0] = sensor_stream(values, "radar").standard_normal(steps)
     bias = 0.0
     if values["odometry.accelerometer"]:
-        accelerometer = stream("accelerometer")
+        accelerometer = sensor_stream(values, "accelerometer")
         bias = values["odometry.accelerometer_bias"] * accelerometer.standard_normal()
         draws[:, 1] = accelerometer.standard_normal(steps)
     marks = _marks(values, line, start)
@@ -126,6 +124,11 @@ def odometry_settings(values, period: float, steps: int, line: Line | None,
         bool(values["odometry.radar"]), float(values["odometry.radar_noise"]),
         bool(values["odometry.accelerometer"]), float(bias),
         float(values["odometry.accelerometer_noise"]), draws, *marks)
+
+
+def sensor_stream(values, name: str) -> np.random.Generator:
+    """Sensor `name`'s own stream of odometry.seed (SENSOR_STREAMS)."""
+    return np.random.default_rng([values["odometry.seed"], SENSOR_STREAMS[name]])
 
 
 def _marks(values, line: Line | None, start: float
@@ -139,10 +142,10 @@ def _marks(values, line: Line | None, start: float
     distances = beacon_distances(values["odometry.beacon_distances"])
     beacons = np.array(sorted({stop - distance for stop in stops for distance in distances
                                if stop - distance > start}))
-    balise_errors = values["odometry.balise_accuracy"] * np.random.default_rng(
-        [values["odometry.seed"], SENSOR_STREAMS["balises"]]).standard_normal(len(balises))
-    beacon_errors = values["odometry.beacon_accuracy"] * np.random.default_rng(
-        [values["odometry.seed"], SENSOR_STREAMS["beacons"]]).standard_normal(len(beacons))
+    balise_errors = values["odometry.balise_accuracy"] * sensor_stream(
+        values, "balises").standard_normal(len(balises))
+    beacon_errors = values["odometry.beacon_accuracy"] * sensor_stream(
+        values, "beacons").standard_normal(len(beacons))
     positions = np.concatenate([balises, beacons])
     order = np.argsort(positions, kind="stable")
     sigmas = np.concatenate([np.full(len(balises), values["odometry.balise_accuracy"]),
