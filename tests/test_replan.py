@@ -16,7 +16,9 @@ from ato_nodes.core.config.schema import NodeValues
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.targets.profiles import table_speed
 from ato_nodes.reports.analysis import plan_mass
-from ato_nodes.core.targets.replan import (NO_REPLAN, ReplanSettings, replan_request,
+from ato_nodes.core.train.adhesion import adhesion_coefficient
+from ato_nodes.core.targets.replan import (LOWEST_ADHESION, NO_REPLAN, ReplanSettings,
+                                           degraded_plan, replan_request,
                                            replanned_table)
 from ato_nodes.results.journeys import score_run
 from commands import invocation
@@ -72,8 +74,10 @@ def test_a_replan_is_asked_for_when_the_bound_moves_and_only_where_it_may_be(met
 
     def asked(position=450.0, mass=1.36, sigma=0.01, t=40.0, replanned_at=-math.inf,
               settings=SETTINGS):
-        return replan_request(settings, plan, line, 1.3, replanned_at, t, position, mass,
-                              sigma)
+        wanted, adhesion = replan_request(settings, plan, line, 1.3, math.inf, replanned_at,
+                                          t, position, mass, sigma, math.nan)
+        assert adhesion == math.inf or math.isnan(wanted) and math.isnan(adhesion)
+        return wanted
 
     assert asked() == pytest.approx(1.38)  # accelerating, the bound 1.38 against 1.3
     assert math.isnan(asked(mass=1.3, sigma=0.005))  # moved less than 3 %
@@ -90,6 +94,58 @@ def test_a_replan_is_asked_for_when_the_bound_moves_and_only_where_it_may_be(met
     assert table_speed(plan, cruise + 1.0) == table_speed(plan, cruise)
     # on the cruise, lighter, but never below the nominal train
     assert asked(position=cruise, mass=0.8, sigma=0.0) == pytest.approx(1.0)
+
+
+DEGRADED = SETTINGS._replace(enabled=False, degraded=True, adhesion_change=0.1)
+
+
+def test_degraded_adhesion_asks_for_a_replan_within_the_rail_seen(metro):
+    values, context = metro
+    plan, line = context.profile_settings.plan, context.line.tables
+
+    def asked(adhesion, planned_adhesion=math.inf, position=450.0, settings=DEGRADED):
+        return replan_request(settings, plan, line, 1.3, planned_adhesion, -math.inf, 40.0,
+                              position, 1.36, 0.01, adhesion)
+
+    assert asked(0.2) == (1.3, 0.2)  # the mass kept: only the rail moved
+    assert all(map(math.isnan, asked(0.19, planned_adhesion=0.2)))  # less than 10 % lower
+    assert asked(0.15, planned_adhesion=0.2) == (1.3, 0.15)
+    assert all(map(math.isnan, asked(math.nan)))  # none seen
+    assert all(map(math.isnan, asked(0.2, position=2100.0)))  # the plan brakes there
+    # degraded mode off: the mass alone asks, the plan's rail kept
+    assert asked(0.2, settings=SETTINGS) == (pytest.approx(1.38), math.inf)
+    assert all(map(math.isnan, asked(0.2, settings=NO_REPLAN)))
+    both = asked(0.2, settings=DEGRADED._replace(enabled=True))
+    assert both == (pytest.approx(1.38), 0.2)
+
+
+def test_a_degraded_plan_asks_the_rail_for_no_more_than_it_gives_at_the_top_speed(metro):
+    values, context = metro
+    plan, train = context.profile_settings.plan, ato_train(values)
+    top = float(np.max(plan.grid[1]))
+    rail = values["profile.degraded.margin"] * adhesion_coefficient(top, 0.2) * 1e3  # N/kN
+    degraded = degraded_plan(values, train, 0.2, plan)
+    assert degraded.traction == pytest.approx(rail * values["plant.motored_share"])
+    assert degraded.braking == pytest.approx(rail * values["plant.braked_share"])
+    # the curve at the envelope's share: its envelope capped there, at every speed
+    for v in (1.0, top / 2, top):
+        low, high = degraded.train.force_limits(v)
+        assert high <= degraded.traction * (1 + 1e-12)
+        assert -low <= degraded.braking * (1 + 1e-12)
+    assert degraded.values["profile.ato.acceleration"] == values["profile.ato.acceleration"]
+    # a curve without the envelope share: its rates capped instead, on the level
+    unshared = {**values, "profile.envelope_share": 0.0}
+    rates = degraded_plan(unshared, train, 0.2, plan).values
+    assert rates["profile.ato.acceleration"] == pytest.approx(
+        (degraded.traction - train.resistance(top)) * train.xi)
+    assert rates["profile.ato.deceleration"] == pytest.approx(degraded.braking * train.xi)
+    # dry rail gives more than the scenario asks: its rates and envelope kept
+    dry = degraded_plan(unshared, train, 1.0, plan)
+    assert (dry.values["profile.ato.acceleration"], dry.values["profile.ato.deceleration"]) == (
+        values["profile.ato.acceleration"], values["profile.ato.deceleration"])
+    # a reading below any rail's is planned for the lowest
+    assert degraded_plan(values, train, 1e-4, plan).traction == degraded_plan(
+        values, train, LOWEST_ADHESION, plan).traction
 
 
 def test_the_replanned_curve_starts_at_the_trains_speed_and_still_brakes_for_the_limits(metro):

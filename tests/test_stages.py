@@ -22,7 +22,8 @@ def staged_run(values, changes=None):
     rows, extras, horizons, located = [], [], [], []
     for k in range(steps(values)):
         out = plant.outputs()  # published: measured speed, position, state
-        controller.horizons.extend(profile.on_position(out.located_position))
+        seen = out.odometry[SEEN] if out.odometry else np.nan  # the adhesion, its topic's
+        controller.horizons.extend(profile.on_position(out.located_position, adhesion=seen))
         horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
         if changes and k in changes:  # `ros2 param set` between two steps
@@ -48,6 +49,8 @@ def staged_run(values, changes=None):
     return series
 
 
+SEEN = ODOMETRY_SERIES.index("adhesion_seen")
+
 RUNS = [
     ("seed000", ["run.duration=60"], None),  # time-indexed, Han's ADRC
     ("seed000-realistic", ["run.duration=60"], None),  # lag, envelope, noisy quantised sensor
@@ -60,8 +63,9 @@ RUNS = [
                                                  250: {"ladrc.omega_o": 9.0}}),
     ("seed000", ["run.duration=60", "profile.approach_step=0.5"], None),  # time-indexed, stairs
     ("seed000", ["run.duration=300", "adrc.b0=0.001"], None),  # diverges
-    # the ATO on its sensors' located position, on wet rail (slides)
+    # the ATO on its sensors' located position, on wet rail (slides; re-planned for them)
     ("seed004-metro-ato", ["run.duration=200", "odometry.enabled=true", "plant.adhesion=wet",
+                           "profile.degraded.enabled=true",
                            "odometry.accelerometer=true", "odometry.radar=true",
                            "odometry.balise_spacing=500", "odometry.beacon_distances=20,5",
                            "plant.motored_share=0.667"], None),

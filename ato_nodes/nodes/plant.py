@@ -36,10 +36,7 @@ class PlantNode(AtoNode):
         self.clock_pub = self.publisher("clock")
         self.position_pub = self.publisher("position")
         self.speed_pub = self.publisher("measured_speed")
-        # with odometry, the profile takes the located position (core/run/located.py)
-        self.located_pub = (self.publisher("located_position")
-                            if self.values["odometry.enabled"] else None)
-        self.located_msg = Float64()
+        # with odometry, the profile takes the located position from it (core/run/located.py)
         self.odometry_pub = (self.publisher("odometry")
                              if self.values["odometry.enabled"] else None)
         self.odometry_msg = labelled(ODOMETRY_SERIES)
@@ -65,9 +62,9 @@ class PlantNode(AtoNode):
         out = self.stage.outputs()
         self.speed_msg.data = out.measured_speed
         self.speed_pub.publish(self.speed_msg)
-        if self.located_pub is not None:
-            self.located_msg.data = out.located_position
-            self.located_pub.publish(self.located_msg)
+        if self.odometry_pub is not None:
+            self.odometry_msg.data = out.odometry
+            self.odometry_pub.publish(self.odometry_msg)
         self.position_msg.data = out.position
         self.position_pub.publish(self.position_msg)
         nanoseconds = round(self.step_index * self.period * 1e9)
@@ -79,9 +76,6 @@ class PlantNode(AtoNode):
         state.angular.x, state.angular.y, state.angular.z = (out.force, out.resistance,
                                                              out.line_resistance)
         self.state_pub.publish(state)
-        if self.odometry_pub is not None:
-            self.odometry_msg.data = out.odometry
-            self.odometry_pub.publish(self.odometry_msg)
 
     def on_command(self, msg: Float64) -> None:
         self.inject_fault(self.step_index)

@@ -14,6 +14,7 @@ from collections import deque
 
 from std_msgs.msg import Float64, Float64MultiArray, String
 
+from ato_nodes.core.run.located import ODOMETRY_SERIES
 from ato_nodes.core.run.stages import ProfileStage
 from ato_nodes.nodes.base import AtoNode, run_node
 
@@ -36,12 +37,15 @@ class ProfileNode(AtoNode):
         self.count_said = False
         # Step k's position waits, with profile.replan, for the controller's outputs of
         # step k - 1 (its on-board mass estimate): both queued, paired in step order.
-        self.positions: deque[float] = deque()
+        self.positions: deque[tuple[float, float]] = deque()  # and the adhesion seen
         self.estimates: deque[tuple[float, float]] = deque()
         self.estimate_columns: tuple[int, int] | None = None  # from the outputs' names
-        if self.values["odometry.enabled"]:  # it drives on the located position; the true
-            # one's edge is matched (the topic map's) and its messages left unread
-            self.subscription("located_position", self.on_position)
+        if self.values["odometry.enabled"]:  # it drives on the located position (and the
+            # adhesion seen); the true one's edge is matched (the topic map's), left unread
+            located = ODOMETRY_SERIES.index("located_position")
+            seen = ODOMETRY_SERIES.index("adhesion_seen")
+            self.subscription("odometry", lambda msg: self.on_located(msg.data[located],
+                                                                      msg.data[seen]))
             self.subscription("position", lambda msg: None)
         else:
             self.subscription("position", self.on_position)
@@ -51,7 +55,10 @@ class ProfileNode(AtoNode):
         self.ready_when_matched()
 
     def on_position(self, msg: Float64) -> None:
-        self.positions.append(msg.data)
+        self.on_located(msg.data, math.nan)
+
+    def on_located(self, position: float, adhesion: float) -> None:
+        self.positions.append((position, adhesion))
         self.run_ready_steps()
 
     def on_estimate(self, msg: Float64MultiArray) -> None:
@@ -68,11 +75,11 @@ class ProfileNode(AtoNode):
                                   or self.estimates):
             estimate = self.estimates.popleft() if replanning and self.stage.received else (
                 math.nan, math.nan)
-            self.step(self.positions.popleft(), *estimate)
+            self.step(*self.positions.popleft(), *estimate)
 
-    def step(self, position: float, mass: float, mass_sigma: float) -> None:
+    def step(self, position: float, adhesion: float, mass: float, mass_sigma: float) -> None:
         self.inject_fault(self.stage.received)
-        horizons = self.stage.on_position(position, mass, mass_sigma)
+        horizons = self.stage.on_position(position, mass, mass_sigma, adhesion)
         self.say_replans()
         for horizon in horizons:
             self.horizon_msg.data = horizon
@@ -87,7 +94,8 @@ class ProfileNode(AtoNode):
         """The plan's new re-plans (a journey's late departures, the ato curve's mid-run
         re-plans from the estimate): on the events topic (an INFO record on /rosout) and,
         stamped with their step, for the recorder."""
-        made = (self.stage.replans if self.stage.settings.replan.enabled
+        replan = self.stage.settings.replan
+        made = (self.stage.replans if replan.enabled or replan.degraded
                 else getattr(self.stage.context.plan, "replans", ()))
         for replan in made[self.replans_said:]:
             self.announce(f"replanned {replan.text()}")

@@ -505,7 +505,14 @@ def validate(values: dict[str, Any], where: str) -> dict[str, Any]:
 
 
 def check_replan(values, output_names: tuple[str, ...]) -> None:
-    """Refuse profile.replan.enabled without the estimate it reads (one line)."""
+    """Refuse profile.replan.enabled without the estimate it reads, profile.degraded.enabled
+    without the localisation that sees the adhesion (one line)."""
+    if values["profile.degraded.enabled"] and not (
+            values["odometry.enabled"]
+            and (values["odometry.accelerometer"] or values["odometry.radar"])):
+        raise ScenarioError("profile.degraded.enabled reads the adhesion from the slips and "
+                            "slides the localisation sees: it needs odometry.enabled true and "
+                            "odometry.accelerometer or odometry.radar true")
     if not values["profile.replan.enabled"]:
         return
     if not values["estimator.enabled"]:

@@ -33,6 +33,20 @@ position's sigma is recorded (position_sigma); the over- and under-reading amoun
 states (L_DOUBTOVER, L_DOUBTUNDER) are, here, a multiple of it, the same both ways. A
 mark's correction reaches the located position at localisation.correction_rate at most
 (a position-indexed target would jump with it), what is still to come added to its sigma.
+
+What the rail gives: a count set aside for ADHESION_READ s in a row is a slip or a slide
+the protection is holding, the train then moving at what the rail gives times the
+protection's efficiency. The force that takes (the filter's acceleration over xi, plus
+the running resistance), over the train's figures (settings.slip_force, slide_force: N/kN
+per unit of mu at its motored or braked share), is the adhesion coefficient the rail
+has, and over Curtius-Kniffler's curve at the speed (core/train/adhesion.py) the
+condition's factor. It is read while the count runs away from the filter's distance by
+SLIP_CREEP of the distance run at least and the force asked (the drive's and the brakes'
+own, which the train knows) exceeds the rail's by SLIP_EXCESS and SLIP_EXCESS_FORCE; the
+largest over a slip or slide is what the rail gave (the count stays set aside a while
+after the wheels roll again, the train then asking less); adhesion_seen keeps the lowest
+over the slips and slides (NaN: none). It needs the accelerometer or the radar (the
+slipping count says nothing of the train's acceleration).
 """
 
 from __future__ import annotations
@@ -44,6 +58,7 @@ import numpy as np
 
 from ..base.kernels import jitable
 from ..base.spec import param
+from ..train.adhesion import adhesion_coefficient
 
 LOCALISATION_PARAMETERS = (
     param("localisation.acceleration_sigma", 0.5, "how fast the train's acceleration may "
@@ -61,6 +76,13 @@ LOCALISATION_PARAMETERS = (
 )
 
 
+ADHESION_READ = 0.3  # s a count is set aside before the train's acceleration says the adhesion
+SLIP_CREEP = 0.02  # the least creep of the wheels (over the distance run) that does: a count
+                   # set aside at a sharp change of acceleration drifts back, not away
+SLIP_EXCESS = 0.1  # and the least share by which the force asked exceeds the rail's: a
+SLIP_EXCESS_FORCE = 3.0  # and N/kN: a slipping or sliding wheel gives less than it is asked
+
+
 class LocaliserSettings(NamedTuple):
     period: float               # s
     acceleration_drift: float   # variance added to a per period, (m/s^2)^2
@@ -71,6 +93,11 @@ class LocaliserSettings(NamedTuple):
     gate: float                 # sigmas
     slide_hold: int             # periods
     correction_step: float      # m: the most of a correction the output takes a period
+    xi: float                   # m/s^2 per N/kN
+    slip_force: float           # N/kN per unit of mu while the wheels slip (traction)
+    slide_force: float          # N/kN per unit of mu while they slide (braking)
+    adhesion_read: int          # periods set aside before the acceleration says the adhesion
+    slip_creep: float           # the least creep over a slip or slide that says the adhesion
 
 
 class LocaliserState(NamedTuple):
@@ -83,21 +110,30 @@ class LocaliserState(NamedTuple):
     slide: float                # -1 sliding, +1 slipping, 0 rolling, as detected
     pending: float              # m of the marks' corrections the output has yet to take
     count_offset: float         # m the count has lost (or gained) to slides (slips)
+    adhesion_seen: float        # the lowest adhesion factor slips and slides showed (NaN: none)
+    slip_peak: float            # the largest factor the slip or slide under way showed (0: none)
+    slip_start: tuple           # (the count's lead over the filter's distance, that
+                                # distance) at its start, m
 
 
 MOTION = 4  # the motion filter's states
 
 
-def localiser_settings(values, period: float, pulse_length: float) -> LocaliserSettings:
-    """The filter from the run's values: the sensors' stated magnitudes (odometry.*) and
-    its own (localisation.*)."""
+def localiser_settings(values, period: float, pulse_length: float, xi: float
+                       ) -> LocaliserSettings:
+    """The filter from the run's values: the sensors' stated magnitudes (odometry.*), its
+    own (localisation.*) and the train's figures (its adhesive weights, its protection's
+    efficiency, xi: m/s^2 per N/kN)."""
     jerk = values["localisation.acceleration_sigma"]
+    per_mu = 1000.0 * values["plant.wsp_efficiency"]
     return LocaliserSettings(
         float(period), jerk * jerk * period, values["localisation.scale_drift"] ** 2 * period,
         pulse_length ** 2 / 12.0,  # a whole count of a distance run
         float(values["odometry.radar_noise"]), values["odometry.accelerometer_noise"] ** 2,
         float(values["localisation.gate"]), round(values["localisation.slide_hold"] / period),
-        values["localisation.correction_rate"] * period)
+        values["localisation.correction_rate"] * period,
+        xi, per_mu * values["plant.motored_share"], per_mu * values["plant.braked_share"],
+        max(1, round(ADHESION_READ / period)), SLIP_CREEP)
 
 
 def localiser_start(values, position: float, speed: float) -> LocaliserState:
@@ -108,7 +144,8 @@ def localiser_start(values, position: float, speed: float) -> LocaliserState:
                           np.diag([0.0, 1e-4, 1e-2, values["odometry.accelerometer_bias"] ** 2]),
                           (float(position), 0.0),
                           (values["odometry.beacon_accuracy"] ** 2, 0.0,
-                           values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0, 0.0)
+                           values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0, 0.0,
+                          math.nan, 0.0, (0.0, 0.0))
 
 
 @jitable
@@ -200,9 +237,11 @@ def _mapped(settings: LocaliserSettings, state: LocaliserState, x: tuple, p: np.
 @jitable
 def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: float,
                    radar_speed: float, acceleration: float, mark_reading: float,
-                   mark_sigma: float) -> LocaliserState:
+                   mark_sigma: float, resistance: float, demand: float) -> LocaliserState:
     """One period: the prediction, then the readings of its end (NaN: none); `counted`
-    the tachometer's pulses since departure times the nominal pulse length, m."""
+    the tachometer's pulses since departure times the nominal pulse length, m;
+    `resistance` the train's running resistance (basic and the line's), `demand` the
+    force its drive and brakes ask, N/kN."""
     x, p = _predicted(settings, state)
     frame = 1.0 / (1.0 - state.map[1])  # a true speed in the odometer's frame
     if acceleration == acceleration:  # it reads the acceleration plus its bias
@@ -217,6 +256,21 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
                             settings.gate)
         if not taken:
             set_aside, slide = state.set_aside + 1, 1.0 if reading > x[0] else -1.0
+    adhesion_seen, slip_peak, slip_start = state.adhesion_seen, 0.0, (reading - x[0], x[0])
+    if set_aside > 1:
+        slip_peak, slip_start = state.slip_peak, state.slip_start
+        run = x[0] - slip_start[1]
+        if slide * (reading - x[0] - slip_start[0]) > settings.slip_creep * run > 0.0:
+            # the wheels creeping: the rail's factor as the train moves the way they try to
+            per_mu = settings.slip_force if slide > 0.0 else settings.slide_force
+            rail = x[2] / settings.xi + resistance  # N/kN the rail gives
+            excess = slide * (demand - rail)  # asked more than given, by this much
+            if excess > max(SLIP_EXCESS * slide * rail, SLIP_EXCESS_FORCE):
+                slip_peak = max(slip_peak, slide * rail / (
+                    per_mu * adhesion_coefficient(x[1] * (1.0 - state.map[1]), 1.0)))
+    elif state.set_aside >= settings.adhesion_read and state.slip_peak > 0.0 and not (
+            state.slip_peak >= adhesion_seen):  # a slip or slide over: the lowest (NaN: none)
+        adhesion_seen = state.slip_peak
     if (set_aside > 0 or state.set_aside > 0) and radar_speed == radar_speed:
         # a slip or slide: the radar's speed is the train's, not a word on the scale
         noise = settings.radar_noise * radar_speed
@@ -233,7 +287,7 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
     pending = state.pending + mapped[0] + x[0] * (1.0 - mapped[1]) - before - moved
     pending -= min(max(pending, -settings.correction_step), settings.correction_step)
     return LocaliserState(x, p, mapped, map_covariance, set_aside, slide, pending,
-                          count_offset)
+                          count_offset, adhesion_seen, slip_peak, slip_start)
 
 
 @jitable

@@ -57,7 +57,7 @@ from ..train.line import line_arrays
 from ..train.plant import TrainMotion, TrainSettings, diverged, sensor_reading, train_outputs, \
     train_step
 from .last_stop import LastStop, held, standing
-from .located import ODOMETRY_SERIES, located, odometer_moved
+from .located import ODOMETRY_SERIES, adhesion_seen, located, odometer_moved
 from .python_steps import PYTHON_STEPS, RUNNING, PythonController, running
 from .stages import COLUMNS, SeriesColumns
 
@@ -293,7 +293,7 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
             mass = extras[k - 1, inputs.mass_column]
             mass_sigma = extras[k - 1, inputs.mass_sigma_column]
         profile = profile_step(inputs.profile, journey, profile, k, position, targets,
-                               mass, mass_sigma)
+                               mass, mass_sigma, adhesion_seen(odometry))
         horizon = targets[k]
         target = float(horizon[0])
         if k == 0:

@@ -24,13 +24,14 @@ from ..train.line import Line
 from ..train.odometry import (OdometerState, OdometrySettings, accelerometer_reading,
                               odometer_advance, odometer_start, odometry_settings,
                               radar_reading)
-from ..train.plant import TrainMotion, TrainSettings, demanded_force, train_outputs
+from ..train.plant import TrainMotion, TrainParameters, TrainSettings, demanded_force, \
+    train_outputs
 
 # What a run with odometry records beside the SERIES, one value a step (docs/reference.md);
 # its measured_speed is then the located speed, the controller's input
 ODOMETRY_SERIES = ("located_position", "position_sigma", "scale_error", "tacho_speed",
                    "radar_speed", "acceleration_reading", "mark_reading", "slide_detected",
-                   "wheel_creep")
+                   "wheel_creep", "adhesion_seen")
 
 
 class Odometry(NamedTuple):
@@ -53,7 +54,8 @@ def odometry_of(values, line: Line | None, steps: int
         return None, None
     period, start = values["run.period"], values["plant.initial_position"]
     sensors = odometry_settings(values, period, steps, line, start)
-    return (Odometry(sensors, localiser_settings(values, period, sensors.pulse_length)),
+    xi = TrainParameters.from_values(values).xi  # the nominal train's: what the ATO knows
+    return (Odometry(sensors, localiser_settings(values, period, sensors.pulse_length, xi)),
             OdometryState(odometer_start(values["plant.initial_speed"]),
                           localiser_start(values, start, values["plant.initial_speed"]), 0.0))
 
@@ -69,18 +71,21 @@ def located(odometry: Odometry | None, state: OdometryState | None, k: int,
         return state, math.nan, math.nan
     sensors, odometer = odometry.sensors, state.odometer
     radar = radar_reading(sensors, k, motion.speed)
-    measured_acceleration = accelerometer_reading(sensors, k,
-                                                  train_outputs(train, motion)[0])
+    acceleration, _, resistance, line_resistance = train_outputs(train, motion)
+    measured_acceleration = accelerometer_reading(sensors, k, acceleration)
     localiser = state.localiser
     if k > 0:  # at k = 0 it stands where it departs
         localiser = localiser_step(odometry.localiser, localiser,
                                    odometer.pulses * sensors.pulse_length, radar,
                                    measured_acceleration, odometer.mark_reading,
-                                   odometer.mark_sigma)
+                                   odometer.mark_sigma, resistance + line_resistance,
+                                   demanded_force(train, motion.speed, motion.lag,
+                                                  motion.acting, motion.powered))
     position, speed, sigma, scale_error = located_estimate(localiser)
     row[0], row[1], row[2] = position, sigma, scale_error
     row[3], row[4], row[5] = odometer.tacho_speed, radar, measured_acceleration
     row[6], row[7], row[8] = odometer.mark_reading, localiser.slide, state.creep
+    row[9] = localiser.adhesion_seen
     return OdometryState(odometer, localiser, state.creep), position, speed
 
 
@@ -96,3 +101,12 @@ def odometer_moved(odometry: Odometry | None, state: OdometryState | None,
     creep = wheel_creep(demand, after.speed, train.constants.adhesion)
     return OdometryState(odometer_advance(odometry.sensors, state.odometer, before.position,
                                           after.position, creep), state.localiser, creep)
+
+
+@jitable
+def adhesion_seen(state: OdometryState | None) -> float:
+    """The lowest adhesion factor the localisation has seen in slips and slides (NaN:
+    none, or no odometry)."""
+    if state is None:
+        return math.nan
+    return state.localiser.adhesion_seen

@@ -36,7 +36,7 @@ def simulate(values: dict[str, Any], deadline: float | None = None,
     that step, as a run's bag records them (bagio.Run.parameter_changes). The loop of
     core/run/fast_loop.py runs compiled when numba is installed; compiled=False runs the
     same function as Python, to the same bits. replans: a list the run's mid-run re-plans
-    (core/targets/replan.MassReplan, profile.replan) are appended to, as the bag keeps
+    (core/targets/replan.CurveReplan, profile.replan) are appended to, as the bag keeps
     them."""
     line = line_of(values)
     profile = ProfileStage(NodeValues("profile", values), line)

@@ -42,7 +42,7 @@ from ..config.context import RunContext, ato_train
 from ..config.schema import NodeValues, steps
 from ..control.limiter import CommandLimiter
 from ..targets.horizons import LOOKAHEAD, plan_speed_limit, profile_start, profile_step
-from ..targets.replan import MassReplan, replanned_table
+from ..targets.replan import CurveReplan, degraded_plan, replanned_table
 from ..train.line import Line
 from ..train.lines import line_of
 from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
@@ -74,20 +74,22 @@ class ProfileStage:
         self.total_steps = steps(values)
         self.journey = getattr(self.context.plan, "journey", None)
         self.state = profile_start(max(self.context.planned_mass, 1.0))
-        self.replans: list[MassReplan] = []  # mid-run re-plans (core/targets/replan.py)
+        self.replans: list[CurveReplan] = []  # mid-run re-plans (core/targets/replan.py)
         self.targets = (np.empty((self.total_steps, self.settings.preview + 1))
                         if self.settings.position_indexed else time_horizons(self.context).copy())
         self.received = 0
 
     def on_position(self, position: float, mass: float = math.nan,
-                    mass_sigma: float = math.nan) -> list[list[float]]:
+                    mass_sigma: float = math.nan, adhesion: float = math.nan
+                    ) -> list[list[float]]:
         """Position s_k of step k in (and the on-board mass estimate after step k - 1, for
-        profile.replan); the horizons to publish now out, in step order
-        (horizons.profile_step), the plan re-made after it if the step asked."""
+        profile.replan; the adhesion seen by step k, for profile.degraded); the horizons to
+        publish now out, in step order (horizons.profile_step), the plan re-made after it
+        if the step asked."""
         k = self.received
         self.received += 1
         self.state = profile_step(self.settings, self.journey, self.state, k, position,
-                                  self.targets, mass, mass_sigma)
+                                  self.targets, mass, mass_sigma, adhesion)
         if self.state.request == self.state.request:
             self.replan()
         if self.journey is not None:  # the plan's state and re-plans, for the node to say
@@ -97,16 +99,23 @@ class ProfileStage:
 
     def replan(self) -> None:
         """The re-plan the last step asked for (core/targets/replan.py): the plan's table
-        re-made from the train's state then, for the mass asked; the state keeps it."""
+        re-made from the train's state then, for the mass and within the adhesion asked;
+        the state keeps it."""
         state, values = self.state, self.context.values
-        table = replanned_table(values, self.context.line, ato_train(values, state.request),
-                                self.settings.plan, state.last_position, state.request_speed,
-                                state.replanned_at)
+        train, forces = ato_train(values, state.request), (math.inf, math.inf)
+        if state.request_adhesion < math.inf:
+            values, train, *forces = degraded_plan(values, train, state.request_adhesion,
+                                                   self.settings.plan)
+        table = replanned_table(values, self.context.line, train, self.settings.plan,
+                                state.last_position, state.request_speed, state.replanned_at)
         self.settings = self.settings._replace(plan=table)
-        self.replans.append(MassReplan(state.replanned_at, state.last_position,
-                                       state.request_speed, state.request, state.planned_mass))
+        self.replans.append(CurveReplan(state.replanned_at, state.last_position,
+                                        state.request_speed, state.request, state.planned_mass,
+                                        state.request_adhesion, *forces))
         self.state = state._replace(planned_mass=state.request, request=math.nan,
-                                    request_speed=math.nan)
+                                    request_speed=math.nan,
+                                    planned_adhesion=state.request_adhesion,
+                                    request_adhesion=math.nan)
 
     def speed_limit(self, position: float) -> float:
         """The limit that applies at step k's position, m/s (inf without a line): the

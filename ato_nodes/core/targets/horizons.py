@@ -51,23 +51,27 @@ class ProfileState(NamedTuple):
     replanned_at: float        # s, the last re-plan's (-inf: none)
     request: float             # the mass a re-plan is asked for at this step (NaN: none)
     request_speed: float       # m/s, the train's speed over the step that asked
+    planned_adhesion: float    # the adhesion factor the plan was made within (inf: any)
+    request_adhesion: float    # the one a re-plan is asked for (the plan's when only the
+                               # mass moves; NaN: none)
 
 
 def profile_start(planned_mass: float) -> ProfileState:
     """The profile's state at the start, its plan made for `planned_mass`."""
     return ProfileState(0.0, math.nan, START, False, planned_mass, -math.inf, math.nan,
-                        math.nan)
+                        math.nan, math.inf, math.nan)
 
 
 @jitable
 def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state: ProfileState,
-                 k: int, position: float, targets, mass: float, mass_sigma: float
-                 ) -> ProfileState:
+                 k: int, position: float, targets, mass: float, mass_sigma: float,
+                 adhesion: float) -> ProfileState:
     """Position s_k of step k in: the horizons to publish now written into `targets`
     (steps x (N + 1): rows 0 .. 2 at k = 0, row k + 2 after; a time-indexed plan's rows
     hold its horizons already), each row's first entry under the stepped approach; the
     state after. Arrived in its berth, the horizons are zero, for good. `mass`,
-    `mass_sigma`: the on-board estimate after the step before (NaN: none), from which the
+    `mass_sigma`: the on-board estimate after the step before (NaN: none), `adhesion`: the
+    adhesion factor the localisation has seen by this step (NaN: none), from which the
     state asks for a re-plan (replan.py; its runner makes it after this step)."""
     travel = position - state.last_position if k else 0.0  # over the last step
     speed = travel / settings.period
@@ -86,14 +90,17 @@ def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state:
                              position + LOOKAHEAD * travel if k else position, targets[step])
             targets[step, 0], stair = approach(settings.approach_step, stair,
                                                targets[step, 0], speed)
-    request = replan_request(settings.replan, settings.plan, settings.line, state.planned_mass,
-                             state.replanned_at, k * settings.period, position, mass,
-                             mass_sigma)
+    request, request_adhesion = replan_request(
+        settings.replan, settings.plan, settings.line, state.planned_mass,
+        state.planned_adhesion, state.replanned_at, k * settings.period, position, mass,
+        mass_sigma, adhesion)
     if request == request:
         return ProfileState(position, stair, journey_state, arrived, state.planned_mass,
-                            k * settings.period, request, speed)
+                            k * settings.period, request, speed, state.planned_adhesion,
+                            request_adhesion)
     return ProfileState(position, stair, journey_state, arrived, state.planned_mass,
-                        state.replanned_at, math.nan, math.nan)
+                        state.replanned_at, math.nan, math.nan, state.planned_adhesion,
+                        math.nan)
 
 
 @jitable

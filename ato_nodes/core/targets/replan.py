@@ -24,8 +24,20 @@ the train's belt on a neutral section, and at most once per profile.replan.inter
 (each re-plan moves the target's acceleration: the curve starts from the train's speed
 with its acceleration rounded up from 0).
 
+Degraded adhesion (profile.degraded.enabled, the ato curve, with odometry.enabled): the
+on-board localisation reads the adhesion the rail has from the slips and slides it sees
+(core/control/localisation.py adhesion_seen, a factor on Curtius-Kniffler's curve); once
+that falls more than profile.degraded.change below what the plan was made for (at first:
+any rail), the step asks for a re-plan under the same rules, and the curve is re-planned
+with its acceleration and deceleration no more than profile.degraded.margin of what that
+rail gives at the plan's top speed on the motored axles (less the running resistance) and
+on the braked axles (adhesion falls with speed: the rate holds at every speed below it;
+the line's gradients are left to the margin). The re-plan is said on the events
+topic as a degraded adhesion. It cannot save a stop whose braking has begun: it needs a
+slip or a slide seen before (a departure on bad rail slips).
+
 Journeys and strategies are planned for the bound at departure (the plan's train), not
-re-planned mid-run.
+re-planned mid-run, for the mass or the adhesion.
 
 Units: m, s, m/s; masses over the nominal plant.mass.
 """
@@ -42,7 +54,9 @@ import numpy as np
 from ..base.kernels import jitable
 from ..base.spec import PROFILE_NODES, param
 from ..base.units import MS_TO_KMH
+from ..train.adhesion import adhesion_coefficient
 from ..train.line import LineTables, in_neutral_section
+from ..train.plant import TrainParameters
 from .profiles import PlanTable, ato_curve_arguments, new_ato_curve, plan_table, table_speed
 from .timetable import section_line
 
@@ -61,6 +75,13 @@ PARAMETERS = (
           PROFILE_NODES, 0.0, 1e4),
     param("profile.replan.stop_distance", 100.0, "no re-plan within this distance of the "
           "stop mark, m", PROFILE_NODES, 0.0, 1e5),
+    param("profile.degraded.enabled", False, "degraded adhesion: re-plan the ato curve "
+          "within the adhesion the slips and slides show (needs odometry.enabled with its "
+          "accelerometer or radar)", PROFILE_NODES),
+    param("profile.degraded.margin", 0.7, "the re-planned curve's rates over what the rail "
+          "seen gives at the plan's top speed", PROFILE_NODES, 0.05, 1.0),
+    param("profile.degraded.change", 0.1, "re-plan when the adhesion seen falls this share "
+          "below the plan's", PROFILE_NODES, 0.0, 1.0),
 )
 
 
@@ -76,6 +97,8 @@ class ReplanSettings(NamedTuple):
     train_length: float    # m: no re-plan with the belt on a neutral section
     heaviest: float        # the crush load (train.load_weighing_max; inf: none): no plan
                            # for a heavier train, whatever the estimate says
+    degraded: bool = False         # re-planned for the adhesion seen (profile.degraded)
+    adhesion_change: float = 0.0   # share the adhesion seen must fall below the plan's
 
 
 SLOPE_LOOK = 1.0  # m: a plan lower this far ahead brakes, higher accelerates
@@ -84,57 +107,119 @@ NO_REPLAN = ReplanSettings(False, 0.0, math.inf, math.inf, -math.inf, 0.0, math.
 
 
 def replan_settings(values, plan) -> ReplanSettings:
-    """The run's ReplanSettings: enabled for the ato curve with profile.replan.enabled."""
-    if not values["profile.replan.enabled"] or values["profile.kind"] != "ato":
+    """The run's ReplanSettings: for the ato curve, by the mass with profile.replan.enabled,
+    by the adhesion with profile.degraded.enabled."""
+    by_mass, degraded = values["profile.replan.enabled"], values["profile.degraded.enabled"]
+    if not (by_mass or degraded) or values["profile.kind"] != "ato":
         return NO_REPLAN
-    return ReplanSettings(True, float(values["profile.replan.sigmas"]),
+    return ReplanSettings(bool(by_mass), float(values["profile.replan.sigmas"]),
                           float(values["profile.replan.mass_change"]),
                           float(values["profile.replan.interval"]),
                           float(plan.positions[-1] - values["profile.replan.stop_distance"]),
                           float(values["plant.length"]),
-                          float(values["train.load_weighing_max"] or math.inf))
+                          float(values["train.load_weighing_max"] or math.inf),
+                          bool(degraded), float(values["profile.degraded.change"]))
 
 
 @jitable
 def replan_request(settings: ReplanSettings, plan: PlanTable, line: LineTables,
-                   planned: float, replanned_at: float, t: float, position: float,
-                   mass: float, sigma: float) -> float:
-    """The mass to re-plan for at `t` (s) with the head at `position` (m), from the
-    estimate (`mass`, `sigma`; NaN: none yet) against the `planned` mass and the last
-    re-plan's time; NaN: none. Not while the `plan` brakes: a braking curve re-planned
-    half-way jumps, and the estimate is least sure there (the brakes' force steps at
-    their largest, the actuator's lag the least known); nor for a lighter train while it
+                   planned: float, planned_adhesion: float, replanned_at: float, t: float,
+                   position: float, mass: float, sigma: float, adhesion: float
+                   ) -> tuple[float, float]:
+    """(mass, adhesion factor) to re-plan for at `t` (s) with the head at `position` (m),
+    from the mass estimate (`mass`, `sigma`; NaN: none yet) against the `planned` mass,
+    and from the `adhesion` seen (NaN: none) against the `planned_adhesion`, each the
+    planned one's when only the other moves; (NaN, NaN): none. Not within the last
+    re-plan's interval, nor while the `plan` brakes: a braking curve re-planned half-way
+    jumps, and the estimate is least sure there (the brakes' force steps at their
+    largest, the actuator's lag the least known); nor for a lighter train while it
     accelerates (the bound falls as the estimate's sigma shrinks, before the estimate has
     risen to the heavy train it sees: a lighter plan would ask more of it then)."""
-    if not settings.enabled or mass != mass:
-        return math.nan
-    # never lighter than the nominal train (context.ato_train), nor heavier than crush
-    bound = min(max(mass + settings.sigmas * sigma, 1.0), settings.heaviest)
-    if abs(bound / planned - 1.0) <= settings.mass_change or \
-            t - replanned_at < settings.interval or position > settings.last_position:
-        return math.nan
+    bound = planned
+    if settings.enabled and mass == mass:
+        # never lighter than the nominal train (context.ato_train), nor heavier than crush
+        bound = min(max(mass + settings.sigmas * sigma, 1.0), settings.heaviest)
+    by_mass = abs(bound / planned - 1.0) > settings.mass_change
+    by_adhesion = settings.degraded and adhesion < planned_adhesion * (
+        1.0 - settings.adhesion_change)
+    if not (by_mass or by_adhesion) or t - replanned_at < settings.interval or \
+            position > settings.last_position:
+        return math.nan, math.nan
     ahead, here = table_speed(plan, position + SLOPE_LOOK), table_speed(plan, position)
-    if ahead < here or (bound < planned and ahead > here):
-        return math.nan  # braking; or lighter, which would ask more, while accelerating
-    if in_neutral_section(line, position) or in_neutral_section(
-            line, position - settings.train_length):
-        return math.nan
-    return bound
+    if ahead < here:
+        return math.nan, math.nan  # braking
+    if bound < planned and ahead > here:  # lighter, which would ask more, while accelerating
+        bound, by_mass = planned, False
+    if not (by_mass or by_adhesion) or in_neutral_section(line, position) or \
+            in_neutral_section(line, position - settings.train_length):
+        return math.nan, math.nan
+    return bound, adhesion if by_adhesion else planned_adhesion
 
 
-class MassReplan(NamedTuple):
-    """A mid-run re-plan, as the profile node says it and the bag keeps it."""
+class CurveReplan(NamedTuple):
+    """A mid-run re-plan of the ato curve, as the profile node says it and the bag keeps
+    it."""
 
     time: float          # s
     position: float      # m, the head, where the new curve starts
     speed: float         # m/s, its start speed
     mass: float          # the new plan's mass over the nominal
     planned_mass: float  # the old plan's
+    adhesion: float = math.inf  # the adhesion factor it is planned within (inf: any)
+    traction: float = math.inf  # N/kN, the most it asks of that rail (inf: any)
+    braking: float = math.inf
 
     def text(self) -> str:
-        return (f"the ato curve at {self.time:.1f} s from {self.position:.1f} m at "
-                f"{self.speed * MS_TO_KMH:.2f} km/h for a mass of {self.mass:.3f} x nominal (the "
-                f"on-board estimate; planned for {self.planned_mass:.3f})")
+        said = (f"the ato curve at {self.time:.1f} s from {self.position:.1f} m at "
+                f"{self.speed * MS_TO_KMH:.2f} km/h")
+        if self.adhesion < math.inf:
+            said = (f"for degraded adhesion (the rail seen at {self.adhesion:.2f} x the dry "
+                    f"curve): {said}, within {self.traction:.1f} N/kN of traction and "
+                    f"{self.braking:.1f} N/kN of braking")
+            if self.mass == self.planned_mass:
+                return said
+        return (f"{said} for a mass of {self.mass:.3f} x nominal (the on-board estimate; "
+                f"planned for {self.planned_mass:.3f})")
+
+
+LOWEST_ADHESION = 0.05  # of the dry curve (mu 0.017 at standstill): no plan for less
+
+
+class DegradedPlan(NamedTuple):
+    """What a curve within a rail is planned with (degraded_plan)."""
+
+    values: dict                 # the run's, its ato rates capped
+    train: TrainParameters       # the ATO's, its force envelope capped
+    traction: float              # N/kN: the most the curve asks of the rail
+    braking: float
+
+
+def degraded_plan(values, train: TrainParameters, adhesion: float, table: PlanTable
+                  ) -> DegradedPlan:
+    """The curve's settings within the rail whose adhesion factor is `adhesion`
+    (LOWEST_ADHESION at least): profile.degraded.margin of the force it gives at the top
+    speed of the plan `table`, on the motored axles for traction and on the braked ones
+    for braking. A curve planned at profile.envelope_share of the ATO's `train`'s force
+    envelope has that envelope capped at those forces (the curve's passes keep the line's
+    gradients within them); any other, its rates at what those forces give on the level
+    (traction less `train`'s basic resistance); neither above the scenario's."""
+    top = float(np.max(table.grid[1]))
+    if table.squared:
+        top = math.sqrt(top)
+    rail = (values["profile.degraded.margin"] * 1000.0
+            * adhesion_coefficient(top, max(adhesion, LOWEST_ADHESION)))  # N/kN per share
+    traction, braking = rail * values["plant.motored_share"], rail * values["plant.braked_share"]
+    kilonewtons = train.mass * train.gravity / 1000.0  # per N/kN
+    capped = dataclasses.replace(
+        train, max_traction_force=min(train.max_traction_force, traction * kilonewtons),
+        max_brake_force=min(train.max_brake_force, braking * kilonewtons))
+    acceleration, deceleration = values["profile.ato.acceleration"], values[
+        "profile.ato.deceleration"]
+    if not (values["profile.envelope_share"] > 0.0 and train.limited):
+        acceleration = min(acceleration, max(traction - train.resistance(top), 0.0) * train.xi)
+        deceleration = min(deceleration, braking * train.xi)
+    return DegradedPlan({**values, "profile.ato.acceleration": acceleration,
+                         "profile.ato.deceleration": deceleration}, capped, traction, braking)
 
 
 _CURVE_ARGUMENTS = tuple(inspect.signature(new_ato_curve).parameters)  # in their order

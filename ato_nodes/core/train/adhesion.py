@@ -25,7 +25,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from ..base.kernels import jitable
-from ..base.spec import param
+from ..base.spec import PLANT_NODES, param
 
 # The conditions a run's rail may have: Curtius-Kniffler's dry-rail curve times this.
 ADHESION_FACTORS = {"dry": 1.0, "wet": 0.5, "contaminated": 0.2}
@@ -38,10 +38,10 @@ PARAMETERS = (
     param("plant.adhesion_scale", 1.0, "the run's adhesion over its condition's curve (a "
           "study's draw of how wet or dirty)", "plant", 0.05, 3.0),
     param("plant.motored_share", 1.0, "the share of the train's weight on motored axles: "
-          "traction's adhesive weight (a train preset's, e.g. 4 of 6 cars motored)", "plant",
-          0.01, 1.0),
+          "traction's adhesive weight (a train preset's, e.g. 4 of 6 cars motored)",
+          PLANT_NODES, 0.01, 1.0),
     param("plant.braked_share", 1.0, "the share of the train's weight on braked axles: "
-          "braking's adhesive weight", "plant", 0.01, 1.0),
+          "braking's adhesive weight", PLANT_NODES, 0.01, 1.0),
     param("plant.wsp_efficiency", 0.8, "the force the rail gives while the wheels slide or "
           "slip, over its limit: what the protection's release and reapply cycles keep", "plant",
           0.1, 1.0),
