@@ -96,3 +96,30 @@ def test_the_radar_finds_the_odometers_scale_without_marks():
     series = simulate(values, compiled=False)
     wheel = odometry_settings(values, 0.1, 10, None, 0.0).wheel_scale
     assert series["scale_error"][-1] == pytest.approx(1.0 / wheel - 1.0, abs=0.002)
+
+
+@pytest.mark.slow
+def test_on_contaminated_rail_the_degraded_mode_replans_within_the_rail_and_stops_at_the_mark():
+    """Without it the planned braking asks more than the rail gives: the train slides past
+    the mark; with it the departure's slips show the rail and the curve is re-planned
+    within it, said as degraded adhesion."""
+    rail = [*SENSED, "odometry.radar=true", "plant.adhesion=contaminated",
+            "plant.motored_share=0.667", "run.duration=400"]
+    blind = simulate(metro(*rail))
+    assert blind["position"][-1] - 2600.0 > 2.0  # past the mark
+    replans = []
+    degraded = simulate(metro(*rail, "profile.degraded.enabled=true"), replans=replans)
+    assert abs(degraded["position"][-1] - 2600.0) < 0.3
+    assert replans and all(replan.adhesion < 1.0 for replan in replans)
+    assert "degraded adhesion" in replans[0].text()
+    seen = degraded["adhesion_seen"][np.isfinite(degraded["adhesion_seen"])]
+    assert seen.size and abs(seen[-1] / 0.2 - 1.0) < 0.25  # the rail's factor, 0.2
+    assert np.all(np.isnan(simulate(metro(*SENSED, "plant.adhesion=dry",
+                                          "plant.motored_share=0.667"))["adhesion_seen"]))
+
+
+def test_the_degraded_mode_needs_the_localisation_that_sees_the_rail():
+    with pytest.raises(ScenarioError, match="profile.degraded.enabled"):
+        prepare("seed004-metro-ato", ["profile.degraded.enabled=true"])
+    with pytest.raises(ScenarioError, match="odometry.accelerometer or odometry.radar"):
+        prepare("seed004-metro-ato", ["profile.degraded.enabled=true", "odometry.enabled=true"])
