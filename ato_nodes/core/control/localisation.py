@@ -235,6 +235,30 @@ def _mapped(settings: LocaliserSettings, state: LocaliserState, x: tuple, p: np.
 
 
 @jitable
+def _adhesion_read(settings: LocaliserSettings, state: LocaliserState, x: tuple,
+                   lead: float, set_aside: int, slide: float, resistance: float,
+                   demand: float) -> tuple[float, float, tuple]:
+    """(adhesion_seen, slip_peak, slip_start) after a period whose count leads the
+    filter's distance by `lead` (m) and was set aside `set_aside` times in a row."""
+    adhesion_seen, slip_peak, slip_start = state.adhesion_seen, 0.0, (lead, x[0])
+    if set_aside > 1:
+        slip_peak, slip_start = state.slip_peak, state.slip_start
+        run = x[0] - slip_start[1]
+        if slide * (lead - slip_start[0]) > settings.slip_creep * run > 0.0:
+            # the wheels creeping: the rail's factor as the train moves the way they try to
+            per_mu = settings.slip_force if slide > 0.0 else settings.slide_force
+            rail = x[2] / settings.xi + resistance  # N/kN the rail gives
+            excess = slide * (demand - rail)  # asked more than given, by this much
+            if excess > max(SLIP_EXCESS * slide * rail, SLIP_EXCESS_FORCE):
+                slip_peak = max(slip_peak, slide * rail / (
+                    per_mu * adhesion_coefficient(x[1] * (1.0 - state.map[1]), 1.0)))
+    elif state.set_aside >= settings.adhesion_read and state.slip_peak > 0.0 and not (
+            state.slip_peak >= adhesion_seen):  # a slip or slide over: the lowest (NaN: none)
+        adhesion_seen = state.slip_peak
+    return adhesion_seen, slip_peak, slip_start
+
+
+@jitable
 def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: float,
                    radar_speed: float, acceleration: float, mark_reading: float,
                    mark_sigma: float, resistance: float, demand: float) -> LocaliserState:
@@ -256,21 +280,8 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
                             settings.gate)
         if not taken:
             set_aside, slide = state.set_aside + 1, 1.0 if reading > x[0] else -1.0
-    adhesion_seen, slip_peak, slip_start = state.adhesion_seen, 0.0, (reading - x[0], x[0])
-    if set_aside > 1:
-        slip_peak, slip_start = state.slip_peak, state.slip_start
-        run = x[0] - slip_start[1]
-        if slide * (reading - x[0] - slip_start[0]) > settings.slip_creep * run > 0.0:
-            # the wheels creeping: the rail's factor as the train moves the way they try to
-            per_mu = settings.slip_force if slide > 0.0 else settings.slide_force
-            rail = x[2] / settings.xi + resistance  # N/kN the rail gives
-            excess = slide * (demand - rail)  # asked more than given, by this much
-            if excess > max(SLIP_EXCESS * slide * rail, SLIP_EXCESS_FORCE):
-                slip_peak = max(slip_peak, slide * rail / (
-                    per_mu * adhesion_coefficient(x[1] * (1.0 - state.map[1]), 1.0)))
-    elif state.set_aside >= settings.adhesion_read and state.slip_peak > 0.0 and not (
-            state.slip_peak >= adhesion_seen):  # a slip or slide over: the lowest (NaN: none)
-        adhesion_seen = state.slip_peak
+    adhesion_seen, slip_peak, slip_start = _adhesion_read(
+        settings, state, x, reading - x[0], set_aside, slide, resistance, demand)
     if (set_aside > 0 or state.set_aside > 0) and radar_speed == radar_speed:
         # a slip or slide: the radar's speed is the train's, not a word on the scale
         noise = settings.radar_noise * radar_speed
