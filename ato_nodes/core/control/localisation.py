@@ -97,7 +97,6 @@ class LocaliserSettings(NamedTuple):
     slip_force: float           # N/kN per unit of mu while the wheels slip (traction)
     slide_force: float          # N/kN per unit of mu while they slide (braking)
     adhesion_read: int          # periods set aside before the acceleration says the adhesion
-    slip_creep: float           # the least creep over a slip or slide that says the adhesion
 
 
 class LocaliserState(NamedTuple):
@@ -133,7 +132,7 @@ def localiser_settings(values, period: float, pulse_length: float, xi: float
         float(values["localisation.gate"]), round(values["localisation.slide_hold"] / period),
         values["localisation.correction_rate"] * period,
         xi, per_mu * values["plant.motored_share"], per_mu * values["plant.braked_share"],
-        max(1, round(ADHESION_READ / period)), SLIP_CREEP)
+        max(1, round(ADHESION_READ / period)))
 
 
 def localiser_start(values, position: float, speed: float) -> LocaliserState:
@@ -244,7 +243,7 @@ def _adhesion_read(settings: LocaliserSettings, state: LocaliserState, x: tuple,
     if set_aside > 1:
         slip_peak, slip_start = state.slip_peak, state.slip_start
         run = x[0] - slip_start[1]
-        if slide * (lead - slip_start[0]) > settings.slip_creep * run > 0.0:
+        if slide * (lead - slip_start[0]) > SLIP_CREEP * run > 0.0:
             # the wheels creeping: the rail's factor as the train moves the way they try to
             per_mu = settings.slip_force if slide > 0.0 else settings.slide_force
             rail = x[2] / settings.xi + resistance  # N/kN the rail gives

@@ -45,6 +45,7 @@ class OdometryState(NamedTuple):
     odometer: OdometerState
     localiser: LocaliserState
     creep: float               # the wheels' creep over the last period (true)
+    demand: float              # N/kN the drive and brakes ask at its end (the train knows)
 
 
 def odometry_of(values, line: Line | None, steps: int
@@ -57,7 +58,8 @@ def odometry_of(values, line: Line | None, steps: int
     xi = TrainParameters.from_values(values).xi  # the nominal train's: what the ATO knows
     return (Odometry(sensors, localiser_settings(values, period, sensors.pulse_length, xi)),
             OdometryState(odometer_start(values["plant.initial_speed"]),
-                          localiser_start(values, start, values["plant.initial_speed"]), 0.0))
+                          localiser_start(values, start, values["plant.initial_speed"]), 0.0,
+                          0.0))
 
 
 @jitable
@@ -79,14 +81,13 @@ def located(odometry: Odometry | None, state: OdometryState | None, k: int,
                                    odometer.pulses * sensors.pulse_length, radar,
                                    measured_acceleration, odometer.mark_reading,
                                    odometer.mark_sigma, resistance + line_resistance,
-                                   demanded_force(train, motion.speed, motion.lag,
-                                                  motion.acting, motion.powered))
+                                   state.demand)
     position, speed, sigma, scale_error = located_estimate(localiser)
     row[0], row[1], row[2] = position, sigma, scale_error
     row[3], row[4], row[5] = odometer.tacho_speed, radar, measured_acceleration
     row[6], row[7], row[8] = odometer.mark_reading, localiser.slide, state.creep
     row[9] = localiser.adhesion_seen
-    return OdometryState(odometer, localiser, state.creep), position, speed
+    return OdometryState(odometer, localiser, state.creep, state.demand), position, speed
 
 
 @jitable
@@ -94,13 +95,15 @@ def odometer_moved(odometry: Odometry | None, state: OdometryState | None,
                    train: TrainSettings, before: TrainMotion, after: TrainMotion
                    ) -> OdometryState | None:
     """The sensors after the train's period from `before` to `after`: the wheels at the
-    creep of the force asked of the rail at its end."""
+    creep of the force asked of the rail at its end (kept: the localisation's next step
+    reads it)."""
     if state is None:
         return state
     demand = demanded_force(train, after.speed, after.lag, after.acting, after.powered)
     creep = wheel_creep(demand, after.speed, train.constants.adhesion)
     return OdometryState(odometer_advance(odometry.sensors, state.odometer, before.position,
-                                          after.position, creep), state.localiser, creep)
+                                          after.position, creep), state.localiser, creep,
+                         demand)
 
 
 @jitable

@@ -29,10 +29,11 @@ on-board localisation reads the adhesion the rail has from the slips and slides 
 (core/control/localisation.py adhesion_seen, a factor on Curtius-Kniffler's curve); once
 that falls more than profile.degraded.change below what the plan was made for (at first:
 any rail), the step asks for a re-plan under the same rules, and the curve is re-planned
-with its acceleration and deceleration no more than profile.degraded.margin of what that
-rail gives at the plan's top speed on the motored axles (less the running resistance) and
-on the braked axles (adhesion falls with speed: the rate holds at every speed below it;
-the line's gradients are left to the margin). The re-plan is said on the events
+asking no more than profile.degraded.margin of the force that rail gives at the plan's
+top speed (adhesion falls with speed: it holds at every speed below), on the motored axles
+for traction and on the braked ones for braking (degraded_plan: a curve at
+profile.envelope_share has the ATO train's envelope capped there, its passes keeping the
+line's gradients within it; any other, its rates). The re-plan is said on the events
 topic as a degraded adhesion. It cannot save a stop whose braking has begun: it needs a
 slip or a slide seen before (a departure on bad rail slips).
 
@@ -78,8 +79,8 @@ PARAMETERS = (
     param("profile.degraded.enabled", False, "degraded adhesion: re-plan the ato curve "
           "within the adhesion the slips and slides show (needs odometry.enabled with its "
           "accelerometer or radar)", PROFILE_NODES),
-    param("profile.degraded.margin", 0.7, "the re-planned curve's rates over what the rail "
-          "seen gives at the plan's top speed", PROFILE_NODES, 0.05, 1.0),
+    param("profile.degraded.margin", 0.7, "the most the re-planned curve asks of the rail "
+          "seen, over the force it gives at the plan's top speed", PROFILE_NODES, 0.05, 1.0),
     param("profile.degraded.change", 0.1, "re-plan when the adhesion seen falls this share "
           "below the plan's", PROFILE_NODES, 0.0, 1.0),
 )
