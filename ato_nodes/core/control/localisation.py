@@ -2,10 +2,14 @@
 (core/train/odometry.py), ROS-free.
 
 Two Kalman filters, each linear:
-- the motion in the odometer's own frame, x = (d, w, a, c): the distance the odometer has
-  counted (m), its speed (m/s) and acceleration (m/s^2), and the accelerometer's bias c
-  (m/s^2). Each period h it predicts d += w h + a h^2 / 2, w += a h, a a random walk
-  (localisation.acceleration_sigma per sqrt(s): the train's jerk), and takes the
+- the motion in the odometer's own frame, x = (d, w, a, j, c): the distance the odometer
+  has counted (m), its speed (m/s), acceleration (m/s^2) and jerk (m/s^3), and the
+  accelerometer's bias c (m/s^2). Each period h it predicts at constant jerk (d += w h +
+  a h^2 / 2 + j h^3 / 6, w += a h + j h^2 / 2, a += j h), j a random walk
+  (localisation.jerk_sigma per sqrt(s)) and a one too (localisation.acceleration_sigma):
+  at constant acceleration the speed lags a train easing its braking into a stop, where
+  neither the radar (too slow) nor the tachometer (under a pulse a period) reads it, and
+  the train stops past its mark. It takes the
   accelerometer's reading (a + c, its stated noise; c's prior its stated bias: the
   tachometer finds it while the wheels roll, so the filter coasts true through a slide),
   and the tachometer's count: its pulses since departure times the nominal pulse length
@@ -61,9 +65,10 @@ from ..base.spec import param
 from ..train.adhesion import adhesion_coefficient
 
 LOCALISATION_PARAMETERS = (
-    param("localisation.acceleration_sigma", 0.5, "how fast the train's acceleration may "
-          "change, 1 sigma, m/s^2 per sqrt(s) (the filter's acceleration a random walk)",
-          "plant", 0.001, 10.0),
+    param("localisation.acceleration_sigma", 0.1, "the acceleration's random walk beside "
+          "the jerk's, 1 sigma, m/s^2 per sqrt(s)", "plant", 0.0, 10.0),
+    param("localisation.jerk_sigma", 1.7, "how fast the train's jerk may change, 1 sigma, "
+          "m/s^3 per sqrt(s) (the filter's jerk a random walk)", "plant", 0.001, 100.0),
     param("localisation.scale_drift", 1e-5, "the odometer scale error's random walk, 1 sigma "
           "per sqrt(s)", "plant", 0.0, 1.0),
     param("localisation.gate", 4.0, "a tachometer reading this many sigmas off the "
@@ -86,6 +91,7 @@ SLIP_EXCESS_FORCE = 3.0  # and N/kN: a slipping or sliding wheel gives less than
 class LocaliserSettings(NamedTuple):
     period: float               # s
     acceleration_drift: float   # variance added to a per period, (m/s^2)^2
+    jerk_drift: float           # variance added to j per period, (m/s^3)^2
     scale_drift: float          # variance added to e per period
     count_variance: float       # m^2, the tachometer's count's quantisation
     radar_noise: float          # relative, 1 sigma
@@ -100,9 +106,9 @@ class LocaliserSettings(NamedTuple):
 
 
 class LocaliserState(NamedTuple):
-    motion: tuple               # (d, w, a, c): m, m/s, m/s^2 as the odometer counts them,
-                                # and the accelerometer's bias c, m/s^2
-    motion_covariance: np.ndarray  # 4 x 4
+    motion: tuple               # (d, w, a, j, c): m, m/s, m/s^2, m/s^3 as the odometer
+                                # counts them, and the accelerometer's bias c, m/s^2
+    motion_covariance: np.ndarray  # 5 x 5
     map: tuple                  # (b, e): the position is b + d (1 - e)
     map_covariance: tuple       # (bb, be, ee)
     set_aside: int              # tachometer readings set aside in a row
@@ -115,7 +121,7 @@ class LocaliserState(NamedTuple):
                                 # distance) at its start, m
 
 
-MOTION = 4  # the motion filter's states
+MOTION = 5  # the motion filter's states
 
 
 def localiser_settings(values, period: float, pulse_length: float, xi: float
@@ -123,10 +129,12 @@ def localiser_settings(values, period: float, pulse_length: float, xi: float
     """The filter from the run's values: the sensors' stated magnitudes (odometry.*), its
     own (localisation.*) and the train's figures (its adhesive weights, its protection's
     efficiency, xi: m/s^2 per N/kN)."""
-    jerk = values["localisation.acceleration_sigma"]
+    acceleration = values["localisation.acceleration_sigma"]
+    jerk = values["localisation.jerk_sigma"]
     per_mu = 1000.0 * values["plant.wsp_efficiency"]
     return LocaliserSettings(
-        float(period), jerk * jerk * period, values["localisation.scale_drift"] ** 2 * period,
+        float(period), acceleration * acceleration * period, jerk * jerk * period,
+        values["localisation.scale_drift"] ** 2 * period,
         pulse_length ** 2 / 12.0,  # a whole count of a distance run
         float(values["odometry.radar_noise"]), values["odometry.accelerometer_noise"] ** 2,
         float(values["localisation.gate"]), round(values["localisation.slide_hold"] / period),
@@ -139,8 +147,9 @@ def localiser_start(values, position: float, speed: float) -> LocaliserState:
     """A train departing at `position` and `speed`, known to a beacon's accuracy (it
     stands at a stop), its odometer to the wheel's stated diameter error, its
     accelerometer's bias to the stated one."""
-    return LocaliserState((0.0, float(speed), 0.0, 0.0),
-                          np.diag([0.0, 1e-4, 1e-2, values["odometry.accelerometer_bias"] ** 2]),
+    return LocaliserState((0.0, float(speed), 0.0, 0.0, 0.0),
+                          np.diag([0.0, 1e-4, 1e-2, 1e-2,
+                                   values["odometry.accelerometer_bias"] ** 2]),
                           (float(position), 0.0),
                           (values["odometry.beacon_accuracy"] ** 2, 0.0,
                            values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0, 0.0,
@@ -150,49 +159,59 @@ def localiser_start(values, position: float, speed: float) -> LocaliserState:
 @jitable
 def _predicted(settings: LocaliserSettings, state: LocaliserState
                ) -> tuple[tuple, np.ndarray]:
-    """The motion and its covariance a period on: F = [[1, h, h^2/2, 0], [0, 1, h, 0],
-    [0, 0, 1, 0], [0, 0, 0, 1]], written out."""
+    """The motion and its covariance a period on, at constant jerk."""
     h = settings.period
-    d, w, a, c = state.motion
+    d, w, a, j, c = state.motion
     p = state.motion_covariance
-    f = ((1.0, h, 0.5 * h * h, 0.0), (0.0, 1.0, h, 0.0), (0.0, 0.0, 1.0, 0.0),
-         (0.0, 0.0, 0.0, 1.0))
+    f = ((1.0, h, 0.5 * h * h, h * h * h / 6.0, 0.0), (0.0, 1.0, h, 0.5 * h * h, 0.0),
+         (0.0, 0.0, 1.0, h, 0.0), (0.0, 0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 0.0, 1.0))
     fp = np.zeros((MOTION, MOTION))
     for i in range(MOTION):
-        for j in range(MOTION):
-            fp[i, j] = (f[i][0] * p[0, j] + f[i][1] * p[1, j] + f[i][2] * p[2, j]
-                        + f[i][3] * p[3, j])
+        for k in range(MOTION):
+            total = 0.0
+            for m in range(MOTION):
+                total += f[i][m] * p[m, k]
+            fp[i, k] = total
     covariance = np.zeros((MOTION, MOTION))
     for i in range(MOTION):
-        for j in range(i, MOTION):
-            covariance[i, j] = (fp[i, 0] * f[j][0] + fp[i, 1] * f[j][1] + fp[i, 2] * f[j][2]
-                                + fp[i, 3] * f[j][3])
-            covariance[j, i] = covariance[i, j]
+        for k in range(i, MOTION):
+            total = 0.0
+            for m in range(MOTION):
+                total += fp[i, m] * f[k][m]
+            covariance[i, k] = total
+            covariance[k, i] = total
     covariance[2, 2] += settings.acceleration_drift
-    return (d + h * w + 0.5 * h * h * a, w + h * a, a, c), covariance
+    covariance[3, 3] += settings.jerk_drift
+    return (d + h * w + 0.5 * h * h * a + h * h * h / 6.0 * j, w + h * a + 0.5 * h * h * j,
+            a + h * j, j, c), covariance
 
 
 @jitable
 def _updated(x: tuple, p: np.ndarray, h: tuple, reading: float, variance: float,
              gate: float) -> tuple[tuple, bool]:
-    """The motion's update by one scalar reading with measurement row `h` (by d, w, a,
-    c), `p` updated in place; (motion, taken): a reading past `gate` sigmas (gate > 0) is
-    not taken."""
-    ph = (p[0, 0] * h[0] + p[0, 1] * h[1] + p[0, 2] * h[2] + p[0, 3] * h[3],
-          p[1, 0] * h[0] + p[1, 1] * h[1] + p[1, 2] * h[2] + p[1, 3] * h[3],
-          p[2, 0] * h[0] + p[2, 1] * h[1] + p[2, 2] * h[2] + p[2, 3] * h[3],
-          p[3, 0] * h[0] + p[3, 1] * h[1] + p[3, 2] * h[2] + p[3, 3] * h[3])  # P h'
-    innovation_variance = h[0] * ph[0] + h[1] * ph[1] + h[2] * ph[2] + h[3] * ph[3] + variance
-    innovation = reading - (h[0] * x[0] + h[1] * x[1] + h[2] * x[2] + h[3] * x[3])
+    """The motion's update by one scalar reading with measurement row `h`, `p` updated in
+    place; (motion, taken): a reading past `gate` sigmas (gate > 0) is not taken."""
+    ph = np.zeros(MOTION)
+    for i in range(MOTION):
+        total = 0.0
+        for m in range(MOTION):
+            total += p[i, m] * h[m]
+        ph[i] = total
+    innovation_variance = variance
+    predicted = 0.0
+    for m in range(MOTION):
+        innovation_variance += h[m] * ph[m]
+        predicted += h[m] * x[m]
+    innovation = reading - predicted
     if gate > 0.0 and innovation * innovation > gate * gate * innovation_variance:
         return x, False
     for i in range(MOTION):
-        for j in range(i, MOTION):  # the upper triangle, mirrored: symmetric to the bit
-            p[i, j] = p[i, j] - ph[i] * ph[j] / innovation_variance
-            p[j, i] = p[i, j]
+        for k in range(i, MOTION):
+            p[i, k] = p[i, k] - ph[i] * ph[k] / innovation_variance
+            p[k, i] = p[i, k]
     step = innovation / innovation_variance
     return (x[0] + ph[0] * step, x[1] + ph[1] * step, x[2] + ph[2] * step,
-            x[3] + ph[3] * step), True
+            x[3] + ph[3] * step, x[4] + ph[4] * step), True
 
 
 @jitable
@@ -268,14 +287,14 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
     x, p = _predicted(settings, state)
     frame = 1.0 / (1.0 - state.map[1])  # a true speed in the odometer's frame
     if acceleration == acceleration:  # it reads the acceleration plus its bias
-        x, _ = _updated(x, p, (0.0, 0.0, 1.0, 1.0), acceleration * frame,
+        x, _ = _updated(x, p, (0.0, 0.0, 1.0, 0.0, 1.0), acceleration * frame,
                         settings.accelerometer_noise, 0.0)
     set_aside, slide, count_offset = 0, 0.0, state.count_offset
     reading = counted - count_offset
     if state.set_aside >= settings.slide_hold:  # the count starts again from the filter's
         count_offset = counted - x[0]
     else:
-        x, taken = _updated(x, p, (1.0, 0.0, 0.0, 0.0), reading, settings.count_variance,
+        x, taken = _updated(x, p, (1.0, 0.0, 0.0, 0.0, 0.0), reading, settings.count_variance,
                             settings.gate)
         if not taken:
             set_aside, slide = state.set_aside + 1, 1.0 if reading > x[0] else -1.0
@@ -284,7 +303,7 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
     if (set_aside > 0 or state.set_aside > 0) and radar_speed == radar_speed:
         # a slip or slide: the radar's speed is the train's, not a word on the scale
         noise = settings.radar_noise * radar_speed
-        x, _ = _updated(x, p, (0.0, 1.0, 0.0, 0.0), radar_speed * frame, noise * noise, 0.0)
+        x, _ = _updated(x, p, (0.0, 1.0, 0.0, 0.0, 0.0), radar_speed * frame, noise * noise, 0.0)
         radar_speed = math.nan
     mapped, map_covariance = _mapped(settings, state, x, p, radar_speed, mark_reading,
                                      mark_sigma * mark_sigma)
@@ -304,7 +323,7 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
 def located_estimate(state: LocaliserState) -> tuple[float, float, float, float]:
     """(position m, speed m/s, the position's sigma m, the odometer's scale error e): the
     position with the corrections it has yet to take, their size added to its sigma."""
-    d, w, _, _ = state.motion
+    d, w, _, _, _ = state.motion
     b, e = state.map
     bb, be, ee = state.map_covariance
     variance = (bb - 2.0 * d * be + d * d * ee
