@@ -62,6 +62,13 @@ def test_the_ato_stops_on_its_located_position_within_a_decimetre_with_beacons()
     assert np.abs(located - true).max() > 0.1  # it did not read the truth
     assert not np.array_equal(series["measured_speed"], series["speed"])
     assert np.isfinite(series["mark_reading"]).sum() >= 9  # five balises, four beacons
+    stood = series["speed"] == 0.0
+    stood[:np.argmax(series["speed"] > 0.0)] = False  # after its departure
+    assert stood.sum() > 100  # it stands at its stop for more than 10 s: held there
+    assert np.ptp(located[stood][10:]) == 0.0 and not series["measured_speed"][stood][10:].any()
+    assert not (series["target"][stood][-1]), "the profile's berth took the stop"
+    departing = np.argmax(series["speed"] > 0.1)  # never held while it departs
+    assert series["measured_speed"][departing] > 0.05
 
 
 @pytest.mark.slow

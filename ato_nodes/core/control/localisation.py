@@ -9,7 +9,10 @@ Two Kalman filters, each linear:
   (localisation.jerk_sigma per sqrt(s)) and a one too (localisation.acceleration_sigma):
   at constant acceleration the speed lags a train easing its braking into a stop, where
   neither the radar (too slow) nor the tachometer (under a pulse a period) reads it, and
-  the train stops past its mark. It takes the
+  the train stops past its mark. A train whose tachometer has given no pulse for
+  localisation.standstill_time while no traction is asked stands: its speed, acceleration
+  and jerk are held at zero and its distance still (the profile's berth waits for a train
+  that does not move at all), until a pulse comes or traction is asked. It takes the
   accelerometer's reading (a + c, its stated noise; c's prior its stated bias: the
   tachometer finds it while the wheels roll, so the filter coasts true through a slide),
   and the tachometer's count: its pulses since departure times the nominal pulse length
@@ -28,8 +31,12 @@ Two Kalman filters, each linear:
   its scale (a filter of speed and scale together lets e drift with every reading).
 
 Each update is by one scalar reading, written out (no LAPACK): Python and compiled code
-give the same bits. A count more than localisation.gate sigmas off the prediction is a
-slip (above) or a slide (below): it is set aside, the filter coasting on
+give the same bits. A count more than localisation.gate sigmas off the prediction, or
+(with the radar) an odometer speed more than localisation.gate sigmas off the radar's,
+is a slip (above) or a slide (below): the radar's check catches a slip that starts with
+the train, which a filter free to change its jerk would otherwise follow (its scale
+estimate taking the creep; a contaminated-rail train then overran by 51 m, its slips
+unseen). The count is set aside, the filter coasting on
 the other sensors for at most localisation.slide_hold periods in a row; then the count
 starts again from the filter's distance (the distance a slide lost is not counted
 again), and is taken. The
@@ -76,14 +83,19 @@ LOCALISATION_PARAMETERS = (
     param("localisation.correction_rate", 1.0, "the fastest the located position takes a "
           "mark's correction, m/s: a jump in position is a jump in a position-indexed target",
           "plant", 0.01, 1e3),
+    param("localisation.standstill_time", 0.5, "no tachometer pulse this long while no "
+          "traction is asked: the train stands, its located speed held at zero and its "
+          "position still, s", "plant", 0.01, 60.0),
     param("localisation.slide_hold", 3.0, "the longest a slipping or sliding tachometer is "
           "set aside, s (then taken again)", "plant", 0.0, 60.0),
 )
 
 
 ADHESION_READ = 0.3  # s a count is set aside before the train's acceleration says the adhesion
-SLIP_CREEP = 0.02  # the least creep of the wheels (over the distance run) that does: a count
-                   # set aside at a sharp change of acceleration drifts back, not away
+SLIP_CREEP = 0.05  # the least creep of the wheels (over the distance run) that does: a count
+                   # set aside at a sharp change of acceleration drifts back, not away, and
+                   # one on an odometer scale 1-2 % off runs away slowly (at 2 % it read a
+                   # rolling train for 0.08 of dry); a protection holds 10-20 %
 SLIP_EXCESS = 0.1  # and the least share by which the force asked exceeds the rail's: a
 SLIP_EXCESS_FORCE = 3.0  # and N/kN: a slipping or sliding wheel gives less than it is asked
 
@@ -103,6 +115,7 @@ class LocaliserSettings(NamedTuple):
     slip_force: float           # N/kN per unit of mu while the wheels slip (traction)
     slide_force: float          # N/kN per unit of mu while they slide (braking)
     adhesion_read: int          # periods set aside before the acceleration says the adhesion
+    standstill: int             # periods without a pulse, no traction asked: it stands
 
 
 class LocaliserState(NamedTuple):
@@ -119,6 +132,8 @@ class LocaliserState(NamedTuple):
     slip_peak: float            # the largest factor the slip or slide under way showed (0: none)
     slip_start: tuple           # (the count's lead over the filter's distance, that
                                 # distance) at its start, m
+    last_count: float           # m, the tachometer's count the period before
+    quiet: int                  # periods since the count last changed
 
 
 MOTION = 5  # the motion filter's states
@@ -140,7 +155,8 @@ def localiser_settings(values, period: float, pulse_length: float, xi: float
         float(values["localisation.gate"]), round(values["localisation.slide_hold"] / period),
         values["localisation.correction_rate"] * period,
         xi, per_mu * values["plant.motored_share"], per_mu * values["plant.braked_share"],
-        max(1, round(ADHESION_READ / period)))
+        max(1, round(ADHESION_READ / period)),
+        max(1, round(values["localisation.standstill_time"] / period)))
 
 
 def localiser_start(values, position: float, speed: float) -> LocaliserState:
@@ -153,7 +169,7 @@ def localiser_start(values, position: float, speed: float) -> LocaliserState:
                           (float(position), 0.0),
                           (values["odometry.beacon_accuracy"] ** 2, 0.0,
                            values["odometry.wheel_diameter_error"] ** 2), 0, 0.0, 0.0, 0.0,
-                          math.nan, 0.0, (0.0, 0.0))
+                          math.nan, 0.0, (0.0, 0.0), 0.0, 0)
 
 
 @jitable
@@ -253,6 +269,24 @@ def _mapped(settings: LocaliserSettings, state: LocaliserState, x: tuple, p: np.
 
 
 @jitable
+def _radar_disagrees(settings: LocaliserSettings, state: LocaliserState, x: tuple,
+                     p: np.ndarray, radar_speed: float) -> float:
+    """+1 when the odometer's speed (on the scale's estimate) runs past the radar's by
+    more than localisation.gate sigmas (a slip), -1 under it (a slide), 0 otherwise or
+    without a reading: a slip that starts as the train does grows with its speed, and a
+    filter free to change its acceleration follows the count."""
+    if radar_speed != radar_speed:
+        return 0.0
+    e, ee = state.map[1], state.map_covariance[2]
+    noise = settings.radar_noise * radar_speed
+    variance = noise * noise + (1.0 - e) ** 2 * p[1, 1] + x[1] * x[1] * ee
+    lead = x[1] * (1.0 - e) - radar_speed
+    if lead * lead <= settings.gate * settings.gate * variance:
+        return 0.0
+    return 1.0 if lead > 0.0 else -1.0
+
+
+@jitable
 def _adhesion_read(settings: LocaliserSettings, state: LocaliserState, x: tuple,
                    lead: float, set_aside: int, slide: float, resistance: float,
                    demand: float) -> tuple[float, float, tuple]:
@@ -294,10 +328,16 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
     if state.set_aside >= settings.slide_hold:  # the count starts again from the filter's
         count_offset = counted - x[0]
     else:
-        x, taken = _updated(x, p, (1.0, 0.0, 0.0, 0.0, 0.0), reading, settings.count_variance,
-                            settings.gate)
+        slide = _radar_disagrees(settings, state, x, p, radar_speed)
+        taken = False
+        if slide == 0.0:
+            x, taken = _updated(x, p, (1.0, 0.0, 0.0, 0.0, 0.0), reading,
+                                settings.count_variance, settings.gate)
+            slide = 1.0 if reading > x[0] else -1.0
         if not taken:
-            set_aside, slide = state.set_aside + 1, 1.0 if reading > x[0] else -1.0
+            set_aside = state.set_aside + 1
+        else:
+            slide = 0.0
     adhesion_seen, slip_peak, slip_start = _adhesion_read(
         settings, state, x, reading - x[0], set_aside, slide, resistance, demand)
     if (set_aside > 0 or state.set_aside > 0) and radar_speed == radar_speed:
@@ -307,6 +347,9 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
         radar_speed = math.nan
     mapped, map_covariance = _mapped(settings, state, x, p, radar_speed, mark_reading,
                                      mark_sigma * mark_sigma)
+    quiet = state.quiet + 1 if counted == state.last_count else 0
+    if quiet >= settings.standstill and demand <= 0.0:  # it stands: nothing moves
+        x = (state.motion[0], 0.0, 0.0, 0.0, state.motion[4])
     if mark_reading == mark_reading:  # the counted distance's error is the map's now
         for i in range(MOTION):
             p[0, i], p[i, 0] = 0.0, 0.0
@@ -316,7 +359,7 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
     pending = state.pending + mapped[0] + x[0] * (1.0 - mapped[1]) - before - moved
     pending -= min(max(pending, -settings.correction_step), settings.correction_step)
     return LocaliserState(x, p, mapped, map_covariance, set_aside, slide, pending,
-                          count_offset, adhesion_seen, slip_peak, slip_start)
+                          count_offset, adhesion_seen, slip_peak, slip_start, counted, quiet)
 
 
 @jitable
