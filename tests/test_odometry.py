@@ -27,6 +27,19 @@ def test_without_odometry_the_run_records_no_located_series_and_reads_the_truth(
     assert not set(ODOMETRY_SERIES) & set(series)
 
 
+def test_a_bag_of_a_run_on_its_sensors_runs_again_bit_for_bit(tmp_path):
+    """The located series hold NaN (no radar reading under 0.3 m/s, a mark read now and
+    then): the same NaN are the same run."""
+    from bagfile import write_run_bag
+
+    from ato_nodes.bags.bagio import read_run, resimulate
+    values = metro(*SENSED, "odometry.radar=true", "run.duration=30")
+    series = simulate(values)
+    assert np.isnan(series["radar_speed"]).any()
+    bag = write_run_bag(tmp_path / "bag", series, values, status="completed")
+    assert resimulate(read_run(bag))[1] == []
+
+
 def test_the_rails_condition_limits_the_force_and_a_slide_gives_its_share():
     wet = adhesion_of(metro("plant.adhesion=wet", "plant.motored_share=0.5"))
     dry = adhesion_of(metro("plant.adhesion=dry", "plant.motored_share=0.5"))

@@ -534,5 +534,6 @@ def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
     steps = len(run.series["t"])
     differ = [name for name, recorded in run.series.items()
               if name != "t" and name in series and not (
-                  len(series[name]) >= steps and np.array_equal(series[name][:steps], recorded))]
+                  len(series[name]) >= steps
+                  and np.array_equal(series[name][:steps], recorded, equal_nan=True))]
     return series, differ
