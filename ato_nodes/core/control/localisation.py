@@ -222,7 +222,7 @@ def _updated(x: tuple, p: np.ndarray, h: tuple, reading: float, variance: float,
     if gate > 0.0 and innovation * innovation > gate * gate * innovation_variance:
         return x, False
     for i in range(MOTION):
-        for k in range(i, MOTION):
+        for k in range(i, MOTION):  # the upper triangle, mirrored: symmetric to the bit
             p[i, k] = p[i, k] - ph[i] * ph[k] / innovation_variance
             p[k, i] = p[i, k]
     step = innovation / innovation_variance
@@ -329,15 +329,13 @@ def localiser_step(settings: LocaliserSettings, state: LocaliserState, counted: 
         count_offset = counted - x[0]
     else:
         slide = _radar_disagrees(settings, state, x, p, radar_speed)
-        taken = False
         if slide == 0.0:
             x, taken = _updated(x, p, (1.0, 0.0, 0.0, 0.0, 0.0), reading,
                                 settings.count_variance, settings.gate)
-            slide = 1.0 if reading > x[0] else -1.0
-        if not taken:
+            if not taken:
+                slide = 1.0 if reading > x[0] else -1.0
+        if slide != 0.0:
             set_aside = state.set_aside + 1
-        else:
-            slide = 0.0
     adhesion_seen, slip_peak, slip_start = _adhesion_read(
         settings, state, x, reading - x[0], set_aside, slide, resistance, demand)
     if (set_aside > 0 or state.set_aside > 0) and radar_speed == radar_speed:
