@@ -69,7 +69,7 @@ def test_the_compiled_loop_gives_the_python_loops_bits(monkeypatch, scenario, ov
     compiled, python = simulate(values), python_run(monkeypatch, values)
     assert compiled.keys() == python.keys()
     for name in python:
-        assert np.array_equal(compiled[name], python[name]), name
+        assert np.array_equal(compiled[name], python[name], equal_nan=True), name
 
 
 @pytest.mark.parametrize("fitness", RunningIndex.MONOTONE)
@@ -168,9 +168,9 @@ def test_every_shipped_scenario_gives_the_python_loops_bits(monkeypatch, scenari
 def test_every_run_of_a_kind_calls_one_compiled_signature():
     """So one compilation per controller kind (setup.sh's, or a tuning's before its
     workers start) serves every compiled run of the checkout but journeys and runs with
-    the on-board estimator on: lines or open track, time- or position-indexed targets,
-    dead time or none. Whatever ran in this process before (the count is of the
-    compiled kinds' signatures)."""
+    the on-board estimator or the sensors on: lines or open track, time- or
+    position-indexed targets, dead time or none. Whatever ran in this process before
+    (the count is of the compiled kinds' signatures)."""
     loop.warm()
     for scenario, overrides in VARIANTS:
         values = apply_overrides(load_scenario(scenario), ["run.duration=1", *overrides])
@@ -181,21 +181,23 @@ def test_every_run_of_a_kind_calls_one_compiled_signature():
     variants = [signature_variant(signature) for signature in fast_loop._steps.signatures
                 if "PythonController" not in str(signature)]  # plug-ins share python_steps'
     assert len(variants) == len(set(variants))  # one compilation for each
-    kinds = {state for state, _, _ in variants}
+    kinds = {state for state, _, _, _ in variants}
     assert len(kinds) == len(fast_loop.compiled_kinds())
-    assert {journey for _, journey, _ in variants} == {False, True}
-    assert {estimating for _, _, estimating in variants} == {False, True}
+    assert {journey for _, journey, _, _ in variants} == {False, True}
+    assert {estimating for _, _, estimating, _ in variants} == {False, True}
+    assert {sensing for _, _, _, sensing in variants} == {False, True}
 
 
-def signature_variant(signature) -> tuple[str, bool, bool]:
-    """(the controller kind's state type, a journey's loop, the estimator's loop) of a
-    compiled signature of the loop."""
+def signature_variant(signature) -> tuple[str, bool, bool, bool]:
+    """(the controller kind's state type, a journey's loop, the estimator's loop, the
+    sensors' loop) of a compiled signature of the loop."""
     text = str(signature)
     states = set(re.findall(r"(\w+State)\(", text)) - {
         "LoopState", "ProfileState", "RunningState", "JourneyState", "NominalState",
-        "EstimatorState"}
+        "EstimatorState", "OdometryState", "OdometerState", "LocaliserState"}
     assert len(states) == 1, states
-    return states.pop(), "JourneyTable" in text, "EstimatorState" in text
+    return (states.pop(), "JourneyTable" in text, "EstimatorState" in text,
+            "LocaliserState" in text)
 
 
 def test_warming_takes_any_run_a_tuning_may_start_from():
