@@ -377,7 +377,8 @@ def test_a_run_that_times_out_names_what_the_loop_waited_for(tmp_path):
     assert "the loop stalled at step 99, waiting for controller (" in result.stderr
 
 
-STALLED_TEARDOWN = """
+STALLED_NODE = """
+import ctypes
 import time
 from ato_nodes.nodes import base
 
@@ -389,13 +390,18 @@ class StalledSupervisor(base.AtoNode):
         # the run's end, as the 'shutdown' event brings it, once the node spins
         self.create_timer(0.01, self.shut_down, clock=self._wall_clock)
 
-    def close(self):
-        while True:  # stands for a middleware call that never returns
-            time.sleep(0.1)
+    def {stalled}(self):
+        {stall}
 
 base.TEARDOWN_LIMIT = 1.0
 base.run_node(StalledSupervisor)
 """
+# While the node holds its work (the bag): a call that never returns
+STALLED_TEARDOWN = STALLED_NODE.format(stalled="close", stall="while True: time.sleep(0.1)")
+# After its work: a middleware call that never returns and holds the interpreter lock, as
+# a stalled DDS teardown does (libc's sleep called through ctypes.PyDLL keeps the lock)
+STALLED_MIDDLEWARE = STALLED_NODE.format(stalled="destroy_node",
+                                         stall="ctypes.PyDLL(None).sleep(100)")
 
 
 def test_a_node_whose_teardown_stalls_exits_with_its_stack_on_stderr(ros_domain):
@@ -406,3 +412,12 @@ def test_a_node_whose_teardown_stalls_exits_with_its_stack_on_stderr(ros_domain)
     stack = process.stderr.split("Timeout (0:00:01)!")[1]
     assert "in close\n" in stack and "in run_node\n" in stack
     assert "Exception" not in process.stderr
+
+
+def test_a_node_whose_middleware_stalls_after_its_work_exits_with_its_own_status(ros_domain):
+    process = subprocess.run([sys.executable, "-c", STALLED_MIDDLEWARE], cwd=ROOT,
+                             env=node_environment(ros_domain.domain_id),
+                             capture_output=True, text=True, timeout=60)
+    assert process.returncode == 0, process.stderr
+    stack = process.stderr.split("Timeout (0:00:01)!")[1]
+    assert "in destroy_node\n" in stack and "in _tear_down\n" in stack

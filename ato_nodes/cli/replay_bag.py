@@ -16,13 +16,13 @@ import argparse
 import math
 import os
 import sys
-import threading
 import time
 from pathlib import Path
 
 from ato_nodes import cli
 from ato_nodes.bags.bagio import BagError, read_messages
 from ato_nodes.launcher.launch import DomainLock, isolate_to_this_host
+from ato_nodes.nodes import watchdog
 
 WAIT_LIMIT = 30.0  # s to wait for --wait-subscribers
 TEARDOWN_LIMIT = 10.0  # s the ROS teardown may take before the process just exits
@@ -62,9 +62,7 @@ def main() -> None:
         # after a slow reliable subscriber on a loaded machine: it may not hold the exit.
         leaving = sys.exc_info()[1]  # the exit under way, if any: its status stands
         status = leaving.code if isinstance(leaving, SystemExit) else int(leaving is not None)
-        watchdog = threading.Timer(TEARDOWN_LIMIT, exit_now, (status,))
-        watchdog.daemon = True
-        watchdog.start()
+        watchdog.exit_after(TEARDOWN_LIMIT, status)
         node.destroy_node()
         rclpy.try_shutdown()
 
@@ -152,12 +150,6 @@ def create_publishers(node, types: dict[str, str], bag: Path) -> dict:
         except (ImportError, AttributeError, ValueError):
             cli.fail(f"{bag}: message type {type_name} of {topic} is not installed")
     return publishers
-
-
-def exit_now(status: int) -> None:
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(status)
 
 
 def wait_for_subscribers(publishers, count: int) -> None:

@@ -38,6 +38,7 @@ from ato_nodes.core.config.schema import (SPEC_BY_NAME, NodeValues, ParamSpec, f
                                           load_plugins)
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.base.topics import Topic, topic_map
+from ato_nodes.nodes import watchdog
 from ato_nodes.nodes.timing import install as install_timing
 
 QOS = {
@@ -68,8 +69,9 @@ HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
 # s a node's teardown (its last records flushed, the bag closed, the middleware shut down)
 # may take before the process gives up on it: every Python thread's stack on stderr, then
-# exit status 1 (faulthandler's watchdog runs without the interpreter lock, which a call
-# stalled in the middleware holds), rather than a process that never exits
+# exit status 1 while the node still holds its work (faulthandler's watchdog runs without
+# the interpreter lock, which a call stalled in the middleware holds), the node's own
+# status once that is released (watchdog.exit_after), rather than a process never exiting
 TEARDOWN_LIMIT = 10.0
 # Run events logged (INFO, /rosout): each node logs the start it hears and its own
 # shutdown; the end of the run once, by the node that announces it (the plant's
@@ -667,12 +669,16 @@ def _unreadable_arguments(exc: RCLError) -> str:
 
 def _tear_down(node: AtoNode | None, status: int) -> int:
     """Release what the node holds (the recorder's bag first), then the middleware, within
-    TEARDOWN_LIMIT; the process's exit status."""
+    TEARDOWN_LIMIT each; the process's exit status."""
     faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True)
     if node is not None:
         node.close()
-        node.destroy_node()
         status = status or node.exit_status
+    # the node's work is done: a stall in the middleware's teardown (seen once: a Fast DDS
+    # node destroyed on a loaded machine) ends the process with the status it earned
+    watchdog.exit_after(TEARDOWN_LIMIT, status)
+    if node is not None:
+        node.destroy_node()
     rclpy.try_shutdown()
     return status
 
