@@ -22,8 +22,11 @@ def staged_run(values, changes=None):
     rows, extras, horizons, located = [], [], [], []
     for k in range(steps(values)):
         out = plant.outputs()  # published: measured speed, position, state
-        seen = out.odometry[SEEN] if out.odometry else np.nan  # the adhesion, its topic's
-        controller.horizons.extend(profile.on_position(out.located_position, adhesion=seen))
+        # the adhesion seen and the located speed, from the odometry topic
+        seen, speed = (out.odometry[SEEN], out.odometry[LOCATED_SPEED]) if out.odometry else (
+            np.nan, np.nan)
+        controller.horizons.extend(profile.on_position(out.located_position, adhesion=seen,
+                                                       located_speed=speed))
         horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
         if changes and k in changes:  # `ros2 param set` between two steps
@@ -50,6 +53,7 @@ def staged_run(values, changes=None):
 
 
 SEEN = ODOMETRY_SERIES.index("adhesion_seen")
+LOCATED_SPEED = ODOMETRY_SERIES.index("located_speed")
 
 RUNS = [
     ("seed000", ["run.duration=60"], None),  # time-indexed, Han's ADRC

@@ -37,15 +37,17 @@ class ProfileNode(AtoNode):
         self.count_said = False
         # Step k's position waits, with profile.replan, for the controller's outputs of
         # step k - 1 (its on-board mass estimate): both queued, paired in step order.
-        self.positions: deque[tuple[float, float]] = deque()  # and the adhesion seen
+        # with the adhesion seen and the located speed
+        self.positions: deque[tuple[float, float, float]] = deque()
         self.estimates: deque[tuple[float, float]] = deque()
         self.estimate_columns: tuple[int, int] | None = None  # from the outputs' names
         if self.values["odometry.enabled"]:  # it drives on the located position (and the
-            # adhesion seen); the true one's edge is matched (the topic map's), left unread
-            located = ODOMETRY_SERIES.index("located_position")
-            seen = ODOMETRY_SERIES.index("adhesion_seen")
-            self.subscription("odometry", lambda msg: self.on_located(msg.data[located],
-                                                                      msg.data[seen]))
+            # adhesion seen, the located speed); the true one's edge is matched (the topic
+            # map's), left unread
+            entries = [ODOMETRY_SERIES.index(name) for name in (
+                "located_position", "adhesion_seen", "located_speed")]
+            self.subscription("odometry", lambda msg: self.on_located(
+                *(msg.data[i] for i in entries)))
             self.subscription("position", lambda msg: None)
         else:
             self.subscription("position", self.on_position)
@@ -55,10 +57,10 @@ class ProfileNode(AtoNode):
         self.ready_when_matched()
 
     def on_position(self, msg: Float64) -> None:
-        self.on_located(msg.data, math.nan)
+        self.on_located(msg.data, math.nan, math.nan)
 
-    def on_located(self, position: float, adhesion: float) -> None:
-        self.positions.append((position, adhesion))
+    def on_located(self, position: float, adhesion: float, speed: float) -> None:
+        self.positions.append((position, adhesion, speed))
         self.run_ready_steps()
 
     def on_estimate(self, msg: Float64MultiArray) -> None:
@@ -77,9 +79,10 @@ class ProfileNode(AtoNode):
                 math.nan, math.nan)
             self.step(*self.positions.popleft(), *estimate)
 
-    def step(self, position: float, adhesion: float, mass: float, mass_sigma: float) -> None:
+    def step(self, position: float, adhesion: float, speed: float, mass: float,
+             mass_sigma: float) -> None:
         self.inject_fault(self.stage.received)
-        horizons = self.stage.on_position(position, mass, mass_sigma, adhesion)
+        horizons = self.stage.on_position(position, mass, mass_sigma, adhesion, speed)
         self.say_replans()
         for horizon in horizons:
             self.horizon_msg.data = horizon

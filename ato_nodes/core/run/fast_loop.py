@@ -287,13 +287,13 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
         if position == position:  # located (PlantStage.outputs)
             measured = speed
         else:
-            position = plant.position
+            position = plant.position  # and the speed NaN: the profile's is its travel
         mass, mass_sigma = math.nan, math.nan
         if k > 0 and inputs.mass_column >= 0:  # the estimate after step k - 1
             mass = extras[k - 1, inputs.mass_column]
             mass_sigma = extras[k - 1, inputs.mass_sigma_column]
-        profile = profile_step(inputs.profile, journey, profile, k, position, targets,
-                               mass, mass_sigma, adhesion_seen(odometry))
+        profile = profile_step(inputs.profile, journey, profile, k, position, speed,
+                               targets, mass, mass_sigma, adhesion_seen(odometry))
         horizon = targets[k]
         target = float(horizon[0])
         if k == 0:

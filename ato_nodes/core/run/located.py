@@ -31,7 +31,7 @@ from ..train.plant import TrainMotion, TrainParameters, TrainSettings, demanded_
 # its measured_speed is then the located speed, the controller's input
 ODOMETRY_SERIES = ("located_position", "position_sigma", "scale_error", "tacho_speed",
                    "radar_speed", "acceleration_reading", "mark_reading", "slide_detected",
-                   "wheel_creep", "adhesion_seen")
+                   "wheel_creep", "adhesion_seen", "located_speed")
 
 
 class Odometry(NamedTuple):
@@ -86,7 +86,7 @@ def located(odometry: Odometry | None, state: OdometryState | None, k: int,
     row[0], row[1], row[2] = position, sigma, scale_error
     row[3], row[4], row[5] = odometer.tacho_speed, radar, measured_acceleration
     row[6], row[7], row[8] = odometer.mark_reading, localiser.slide, state.creep
-    row[9] = localiser.adhesion_seen
+    row[9], row[10] = localiser.adhesion_seen, speed
     return OdometryState(odometer, localiser, state.creep, state.demand), position, speed
 
 

@@ -80,16 +80,17 @@ class ProfileStage:
         self.received = 0
 
     def on_position(self, position: float, mass: float = math.nan,
-                    mass_sigma: float = math.nan, adhesion: float = math.nan
-                    ) -> list[list[float]]:
+                    mass_sigma: float = math.nan, adhesion: float = math.nan,
+                    located_speed: float = math.nan) -> list[list[float]]:
         """Position s_k of step k in (and the on-board mass estimate after step k - 1, for
-        profile.replan; the adhesion seen by step k, for profile.degraded); the horizons to
+        profile.replan; the adhesion seen by step k, for profile.degraded; the located
+        speed then, NaN without odometry: horizons.profile_step); the horizons to
         publish now out, in step order (horizons.profile_step), the plan re-made after it
         if the step asked."""
         k = self.received
         self.received += 1
         self.state = profile_step(self.settings, self.journey, self.state, k, position,
-                                  self.targets, mass, mass_sigma, adhesion)
+                                  located_speed, self.targets, mass, mass_sigma, adhesion)
         if self.state.request == self.state.request:
             self.replan()
         if self.journey is not None:  # the plan's state and re-plans, for the node to say

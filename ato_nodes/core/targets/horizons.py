@@ -64,9 +64,12 @@ def profile_start(planned_mass: float) -> ProfileState:
 
 @jitable
 def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state: ProfileState,
-                 k: int, position: float, targets, mass: float, mass_sigma: float,
-                 adhesion: float) -> ProfileState:
-    """Position s_k of step k in: the horizons to publish now written into `targets`
+                 k: int, position: float, located_speed: float, targets, mass: float,
+                 mass_sigma: float, adhesion: float) -> ProfileState:
+    """Position s_k of step k in (and the localisation's speed then, `located_speed`; NaN:
+    the train's speed is its travel over the last step, on the true position -- a located
+    position's step holds the filter's corrections, a few cm that are 0.3 m/s over one
+    step, where a re-plan starts from it): the horizons to publish now written into `targets`
     (steps x (N + 1): rows 0 .. 2 at k = 0, row k + 2 after; a time-indexed plan's rows
     hold its horizons already), each row's first entry under the stepped approach; the
     state after. Arrived in its berth, the horizons are zero, for good. `mass`,
@@ -74,7 +77,7 @@ def profile_step(settings: ProfileSettings, journey: JourneyTable | None, state:
     adhesion factor the localisation has seen by this step (NaN: none), from which the
     state asks for a re-plan (replan.py; its runner makes it after this step)."""
     travel = position - state.last_position if k else 0.0  # over the last step
-    speed = travel / settings.period
+    speed = travel / settings.period if located_speed != located_speed else located_speed
     stair, journey_state = state.stair, state.journey
     if journey is not None:  # its section and when the train stood at its end
         journey_state = observed(journey, journey_state, k * settings.period, position, speed)
