@@ -178,6 +178,22 @@ def test_a_heavy_train_weighed_light_is_replanned_from_its_estimate_and_keeps_1_
 
 
 @pytest.mark.slow
+def test_on_its_sensors_a_replan_starts_at_the_located_speed_and_the_target_holds():
+    sensors = ("odometry.enabled=true", "odometry.radar=true", "odometry.accelerometer=true",
+               "odometry.balise_spacing=500", "odometry.beacon_distances=150,50,20,5")
+    values, series, replans = run(*HEAVY, *READ_LIGHT, *REPLAN, *sensors)
+    assert replans
+    period = values["run.period"]
+    for replan in replans:
+        k = round(replan.time / period)
+        # the located speed (the controller's measured speed), not the located position's
+        # travel over the step, which holds the filter's corrections
+        assert replan.speed == series["measured_speed"][k]
+        assert replan.position == series["located_position"][k]
+        assert series["target"][k + 1] > series["measured_speed"][k] - 0.05
+
+
+@pytest.mark.slow
 def test_the_replans_give_the_same_bits_compiled_and_as_python():
     _, compiled, made = run(*HEAVY, *READ_LIGHT, *REPLAN)
     _, python, made_python = run(*HEAVY, *READ_LIGHT, *REPLAN, compiled=False)
