@@ -156,6 +156,32 @@ def test_standstill_and_the_holding_brake_freeze_the_estimates():
     assert moving.updates == stopped.updates + 1
 
 
+def test_a_period_beyond_the_gate_is_not_learned_from_and_its_speed_is_taken():
+    """Wheels slipping give the train less than it asked: a speed 0.3 m/s short of the
+    prediction (some 20 sigmas) moves no estimate through the gate, and moves them without."""
+    values, series = metro_run("plant.mass_factor=1.0", "plant.resistance_factor=1.0")
+    moving = np.flatnonzero(series["measured_speed"] > 10.0)[0]
+    states = {}
+    for gate in (0.0, 4.0):
+        settings, state = estimator_of({**ESTIMATOR, "estimator.gate": gate},
+                                       TrainParameters.from_values(values),
+                                       values["run.period"], 1.0,
+                                       load_line(values["line.file"]),
+                                       values["plant.initial_position"])
+        for command, speed in zip(series["command"][:moving], series["measured_speed"][:moving],
+                                  strict=True):
+            state = estimator_step(settings, state, command, speed)
+        states[gate] = (state, estimator_step(settings, state, series["command"][moving],
+                                              series["measured_speed"][moving] - 0.3))
+    before, gated = states[4.0]
+    assert (gated.inverse_mass, gated.resistance_scale, gated.lag_factor, gated.updates) == (
+        before.inverse_mass, before.resistance_scale, before.lag_factor, before.updates)
+    assert gated.speed == series["measured_speed"][moving] - 0.3
+    before, learned = states[0.0]
+    assert learned.updates == before.updates + 1
+    assert learned.resistance_scale != before.resistance_scale
+
+
 def test_the_updates_stop_below_the_minimum_speed_along_a_run():
     rows, series, last = estimated_run()
     values, _ = metro_run("plant.mass_factor=1.0", "plant.resistance_factor=1.0")

@@ -152,6 +152,11 @@ PARAMETERS = (
           "square-root second", "controller", 0.0, 1.0),
     param("estimator.min_speed", 1.0, "below this speed (standstill, holding brake, the "
           "last metres of a stop) the estimates are frozen, m/s", "controller", 0.0, 100.0),
+    param("estimator.gate", 0.0, "a period whose measured speed is more than this many "
+          "sigmas of its innovation off the prediction is not learned from (the wheels "
+          "slipping or sliding on a poor rail give less than the train asked: read as the "
+          "train's, the resistance and lag ran to their bounds); its speed is taken, the "
+          "estimates kept; 0: every period learned from", "controller", 0.0, 100.0),
     param("estimator.neutral_margin", 5.0, "estimates frozen while the pantograph is this "
           "close to a neutral section's edge, m", "controller", 0.0, 1000.0),
 )
@@ -169,6 +174,7 @@ class EstimatorSettings(NamedTuple):
     envelope: Envelope         # the nominal envelope (kN, kW; weight kN)
     limited: bool              # the train has an envelope
     speed_variance: float      # (m/s)^2, of a speed reading
+    gate: float                # sigmas^2 of the innovation an update takes (inf: any)
     speed_drift: float         # (m/s)^2 per period, the unexplained acceleration's
     inverse_mass_drift: float  # per period, variance added to theta
     resistance_drift: float    # per period, variance added to r
@@ -227,6 +233,7 @@ def estimator_settings(values, train: TrainParameters, period: float,
     return EstimatorSettings(
         model._replace(train=unlimited.constants()), train.envelope, train.limited,
         values["estimator.speed_noise"] ** 2,
+        values["estimator.gate"] ** 2 if values["estimator.gate"] > 0.0 else math.inf,
         (values["estimator.acceleration_noise"] * period) ** 2,
         values["estimator.mass_drift"] ** 2 * period,
         values["estimator.resistance_drift"] ** 2 * period,
@@ -274,11 +281,13 @@ def estimator_step(settings: EstimatorSettings, state: EstimatorState, command: 
                    measured_speed: float) -> EstimatorState:
     """One control period: `measured_speed` (m/s) closes the period the last command
     acted over (an update, or frozen), then `command` (N/kN, just sent) opens the next."""
-    if state.informative and measured_speed >= settings.min_speed:
-        speed, inverse_mass, resistance_scale, lag_factor, covariance = _closed_period(
-            settings, state, measured_speed)
+    learned = state.informative and measured_speed >= settings.min_speed
+    if learned:
+        learned, speed, inverse_mass, resistance_scale, lag_factor, covariance = (
+            _closed_period(settings, state, measured_speed))
         updates = state.updates + 1
-    else:  # no information: the estimates and their covariance kept, the speed measured
+    if not learned:  # no information: the estimates and their covariance kept, the speed
+        # measured
         speed, inverse_mass, resistance_scale, lag_factor = (
             measured_speed, state.inverse_mass, state.resistance_scale, state.lag_factor)
         covariance = _frozen_covariance(settings, state.covariance)
@@ -373,9 +382,10 @@ def _predict(settings: EstimatorSettings, state: EstimatorState
 
 @jitable
 def _closed_period(settings: EstimatorSettings, state: EstimatorState, measured: float
-                   ) -> tuple[float, float, float, float, np.ndarray]:
+                   ) -> tuple[bool, float, float, float, float, np.ndarray]:
     """The Kalman filter's prediction over the period and its update by the `measured`
-    speed: (speed, theta, r, lambda, covariance). Written out (the transition only has a
+    speed: (within the gate, speed, theta, r, lambda, covariance; the rest of the tuple
+    meaningless outside the gate). Written out (the transition only has a
     first row to fill), so Python and compiled code do the same operations, on tuples and
     one new array (a small array's allocation costs the compiled step more than its
     arithmetic); a lag not estimated has a zero row and column, which add exact zeros."""
@@ -396,21 +406,24 @@ def _closed_period(settings: EstimatorSettings, state: EstimatorState, measured:
     first = (covariance[SPEED, SPEED], covariance[SPEED, INVERSE_MASS],  # the prior's
              covariance[SPEED, RESISTANCE], covariance[SPEED, LAG])    # first row
     innovation_variance = first[SPEED] + settings.speed_variance
+    innovation = measured - predicted
+    if innovation * innovation > settings.gate * innovation_variance:
+        return False, predicted, state.inverse_mass, state.resistance_scale, \
+            state.lag_factor, p
     gain = (first[SPEED] / innovation_variance, first[INVERSE_MASS] / innovation_variance,
             first[RESISTANCE] / innovation_variance, first[LAG] / innovation_variance)
     for i in range(STATES):
         for j in range(i, STATES):  # the upper triangle, mirrored: symmetric to the bit
             covariance[i, j] = covariance[i, j] - gain[i] * first[j]
             covariance[j, i] = covariance[i, j]
-    innovation = measured - predicted
     inverse_mass = clamp(state.inverse_mass + gain[INVERSE_MASS] * innovation,
                          1.0 / HIGHEST_FACTOR, 1.0 / LOWEST_FACTOR)
     resistance_scale = clamp(state.resistance_scale + gain[RESISTANCE] * innovation,
                              LOWEST_FACTOR, HIGHEST_FACTOR)
     lag_factor = clamp(state.lag_factor + gain[LAG] * innovation, LOWEST_FACTOR,
                        HIGHEST_FACTOR)
-    return (predicted + gain[SPEED] * innovation, inverse_mass, resistance_scale, lag_factor,
-            covariance)
+    return (True, predicted + gain[SPEED] * innovation, inverse_mass, resistance_scale,
+            lag_factor, covariance)
 
 
 @jitable
