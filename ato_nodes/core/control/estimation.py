@@ -174,7 +174,8 @@ class EstimatorSettings(NamedTuple):
     envelope: Envelope         # the nominal envelope (kN, kW; weight kN)
     limited: bool              # the train has an envelope
     speed_variance: float      # (m/s)^2, of a speed reading
-    gate: float                # sigmas^2 of the innovation an update takes (inf: any)
+    gate_squared: float        # estimator.gate^2: innovations^2 an update takes, in
+                               # innovation variances (inf: any)
     speed_drift: float         # (m/s)^2 per period, the unexplained acceleration's
     inverse_mass_drift: float  # per period, variance added to theta
     resistance_drift: float    # per period, variance added to r
@@ -282,16 +283,15 @@ def estimator_step(settings: EstimatorSettings, state: EstimatorState, command: 
     """One control period: `measured_speed` (m/s) closes the period the last command
     acted over (an update, or frozen), then `command` (N/kN, just sent) opens the next."""
     learned = state.informative and measured_speed >= settings.min_speed
-    if learned:
+    if learned:  # an update, unless the speed is beyond the gate
         learned, speed, inverse_mass, resistance_scale, lag_factor, covariance = (
             _closed_period(settings, state, measured_speed))
-        updates = state.updates + 1
     if not learned:  # no information: the estimates and their covariance kept, the speed
         # measured
         speed, inverse_mass, resistance_scale, lag_factor = (
             measured_speed, state.inverse_mass, state.resistance_scale, state.lag_factor)
         covariance = _frozen_covariance(settings, state.covariance)
-        updates = state.updates
+    updates = state.updates + 1 if learned else state.updates
     # dead reckoning by the trapezoid, now the period's end speed is known (the
     # actuator model steps by its start speed: ~1 m behind after an acceleration)
     ended = state.actuator
@@ -407,7 +407,7 @@ def _closed_period(settings: EstimatorSettings, state: EstimatorState, measured:
              covariance[SPEED, RESISTANCE], covariance[SPEED, LAG])    # first row
     innovation_variance = first[SPEED] + settings.speed_variance
     innovation = measured - predicted
-    if innovation * innovation > settings.gate * innovation_variance:
+    if innovation * innovation > settings.gate_squared * innovation_variance:
         return False, predicted, state.inverse_mass, state.resistance_scale, \
             state.lag_factor, p
     gain = (first[SPEED] / innovation_variance, first[INVERSE_MASS] / innovation_variance,
