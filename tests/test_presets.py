@@ -57,6 +57,18 @@ def test_the_ato_scenarios_and_journeys_take_the_product_from_the_presets():
         assert values["ladrc.feedforward"] == "target" and not values["train.load_weighing"]
 
 
+def test_the_wheeled_metro_and_journey_scenarios_run_on_board():
+    """The ATO on its own sensors, learning its train (ato-on-board); the HSR trains, the
+    Swiss journey and the maglev on the true position (docs/localisation.md says why)."""
+    on_board = {name for name in BUILT_ON_THE_ATO if resolved(name)[0]["odometry.enabled"]}
+    assert on_board == {"seed004-metro-ato", "seed004-yizhuang-ato", "seed004-metro-line",
+                        "yizhuang-line", "seed002-journey"}
+    for name in on_board:
+        values, _ = resolved(name)
+        assert values["estimator.enabled"] and values["profile.replan.enabled"]
+        assert values["estimator.lag_sigma"] > 0 and values["odometry.radar"]
+
+
 def test_one_product_decision_is_one_edit(tmp_path, monkeypatch):
     config = tmp_path / "msg_config"
     shutil.copytree(ROOT / "msg_config", config)
@@ -71,7 +83,7 @@ def test_one_product_decision_is_one_edit(tmp_path, monkeypatch):
 
 def test_a_preset_is_no_scenario():
     presets = preset_names()
-    assert {"ato", "ato-operation", "ato-controller"} <= set(presets)
+    assert {"ato", "ato-on-board", "ato-operation", "ato-controller"} <= set(presets)
     assert not set(presets) & set(scenario_names())  # `base: NAME` names one file
     with pytest.raises(ScenarioError, match="unknown scenario 'ato'"):
         load_scenario("ato")
@@ -107,5 +119,5 @@ def test_an_unknown_base_names_the_presets_and_scenarios(tmp_path):
     scenario = tmp_path / "mine.yaml"
     scenario.write_text("base: atto\n")
     with pytest.raises(ScenarioError, match=r"mine.yaml: unknown base 'atto'; presets: ato, "
-                                            r"ato-controller, ato-operation; scenarios: "):
+                                            r"ato-controller, ato-on-board, ato-operation; scenarios: "):
         load_scenario(str(scenario))
