@@ -119,5 +119,6 @@ def test_an_unknown_base_names_the_presets_and_scenarios(tmp_path):
     scenario = tmp_path / "mine.yaml"
     scenario.write_text("base: atto\n")
     with pytest.raises(ScenarioError, match=r"mine.yaml: unknown base 'atto'; presets: ato, "
-                                            r"ato-controller, ato-on-board, ato-operation; scenarios: "):
+                                            r"ato-controller, ato-on-board, ato-operation; "
+                                            r"scenarios: "):
         load_scenario(str(scenario))
