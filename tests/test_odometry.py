@@ -23,7 +23,7 @@ def metro(*overrides):
 
 
 def test_without_odometry_the_run_records_no_located_series_and_reads_the_truth():
-    series = simulate(metro("run.duration=20"), compiled=False)
+    series = simulate(metro("odometry.enabled=false", "run.duration=20"), compiled=False)
     assert not set(ODOMETRY_SERIES) & set(series)
 
 
@@ -57,7 +57,7 @@ def test_the_rails_condition_limits_the_force_and_a_slide_gives_its_share():
 
 
 def test_each_sensor_draws_from_its_own_stream():
-    plain = prepare("seed004-metro-ato", SENSED)
+    plain = prepare("seed004-metro-ato", [*SENSED, "odometry.radar=false"])
     more = prepare("seed004-metro-ato", [*SENSED, "odometry.radar=true"])
     first, second = (odometry_settings(values, 0.1, 100, None, 0.0) for values in (plain, more))
     assert first.wheel_scale == second.wheel_scale
@@ -140,6 +140,7 @@ def test_on_contaminated_rail_the_degraded_mode_replans_within_the_rail_and_stop
 
 def test_the_degraded_mode_needs_the_localisation_that_sees_the_rail():
     with pytest.raises(ScenarioError, match="profile.degraded.enabled"):
-        prepare("seed004-metro-ato", ["profile.degraded.enabled=true"])
+        prepare("seed004-metro-ato", ["profile.degraded.enabled=true", "odometry.enabled=false"])
     with pytest.raises(ScenarioError, match="odometry.accelerometer or odometry.radar"):
-        prepare("seed004-metro-ato", ["profile.degraded.enabled=true", "odometry.enabled=true"])
+        prepare("seed004-metro-ato", ["profile.degraded.enabled=true", "odometry.enabled=true",
+                                      "odometry.accelerometer=false", "odometry.radar=false"])

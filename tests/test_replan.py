@@ -51,7 +51,7 @@ def test_the_plan_is_made_for_the_bound_of_what_the_ato_knows():
     context = RunContext(NodeValues("profile", values))
     assert context.plan_train == ato_train(values, 1.3)
     assert context.train == ato_train(values)  # the controllers' model keeps the reading
-    off = prepare("seed004-metro-ato", list(UNWEIGHED))
+    off = prepare("seed004-metro-ato", [*UNWEIGHED, "profile.replan.enabled=false"])
     assert planned_mass(off) == 1.0
     read_wrong = prepare("seed004-metro-ato", [*UNWEIGHED[:1], *UNWEIGHED[2:], *REPLAN,
                                                "train.mass_reading=1.2"])
@@ -204,7 +204,7 @@ def test_the_replans_give_the_same_bits_compiled_and_as_python():
 
 def test_replans_need_the_estimate_and_refuse_in_one_line():
     with pytest.raises(ScenarioError, match="needs estimator.enabled true") as error:
-        prepare("seed004-metro-ato", [*REPLAN])
+        prepare("seed004-metro-ato", [*REPLAN, "estimator.enabled=false"])
     assert "\n" not in str(error.value)
 
 
