@@ -85,9 +85,11 @@ def warm(values: dict | None = None) -> None:
     shortest = SPEC_BY_NAME["run.duration"].low
     duration = max(2 * values["run.period"], shortest)
     for kind in fast_loop.compiled_kinds():
+        estimates = CONTROLLERS[kind].estimates  # else no estimate, nor plans made from it
         simulate(apply_overrides(values, {
             "run.duration": duration, "controller.kind": kind,
-            "estimator.enabled": values["estimator.enabled"] and CONTROLLERS[kind].estimates,
+            "estimator.enabled": values["estimator.enabled"] and estimates,
+            "profile.replan.enabled": values["profile.replan.enabled"] and estimates,
             **dict(CONTROLLERS[kind].warm_up)}))
     cheap = next((component for component in CONTROLLERS.components.values()
                   if not component.steps and component.warm_up), None)
