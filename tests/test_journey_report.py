@@ -220,5 +220,7 @@ stops:
     values = apply_overrides(load_scenario("seed004-metro-line"), [
         f"{TIMETABLE}={tmp_path / 'short.yaml'}"])
     indices = score_with_journey(values)
-    assert indices["stopping_error"] == indices[WORST_STOP] < 0.1
+    # scored at Riverside, not kilometres short of the line's last station; one of the
+    # journey's stops, so no worse than its worst
+    assert abs(indices["stopping_error"]) <= indices[WORST_STOP] < 0.1
     assert indices["stopping_error"] == score_run(simulate(values), values)["stopping_error"]
