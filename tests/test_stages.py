@@ -25,8 +25,15 @@ def staged_run(values, changes=None):
         # the adhesion seen and the located speed, from the odometry topic
         seen, speed = (out.odometry[SEEN], out.odometry[LOCATED_SPEED]) if out.odometry else (
             np.nan, np.nan)
-        controller.horizons.extend(profile.on_position(out.located_position, adhesion=seen,
-                                                       located_speed=speed))
+        # with the re-plan, the controller's estimate after the step before (as the node
+        # pairs /ato/controller_state with the position)
+        mass, mass_sigma = (np.nan, np.nan)
+        if values["profile.replan.enabled"] and extras:
+            names = controller.output_names
+            mass = extras[-1][names.index("mass_factor")]
+            mass_sigma = extras[-1][names.index("mass_sigma")]
+        controller.horizons.extend(profile.on_position(out.located_position, mass, mass_sigma,
+                                                       seen, speed))
         horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
         if changes and k in changes:  # `ros2 param set` between two steps
