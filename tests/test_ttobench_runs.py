@@ -199,7 +199,8 @@ def test_a_bag_recorded_in_another_checkout_runs_again_bit_for_bit(tmp_path):
                         {**values, **kept_files(values)}, status="completed")
     series, differ = resimulate(read_run(bag))
     assert differ == []
-    assert all(np.array_equal(series[name], ours) for name, ours in simulate(here).items())
+    assert all(np.array_equal(series[name], ours, equal_nan=True)  # the located series' NaN
+               for name, ours in simulate(here).items())
     shutil.rmtree(tmp_path / "checkout")
     assert resimulate(read_run(bag))[1] == []
 
