@@ -88,7 +88,7 @@ def test_the_run_ends_its_hold_after_the_train_stands_at_the_last_stop_as_the_sc
     unended = simulate(apply_overrides(values, {"run.last_stop_hold": 0.0}), compiled=False)
     assert len(unended["t"]) == steps(values)
     for name in python:
-        assert np.array_equal(python[name], unended[name][:len(t)]), name
+        assert np.array_equal(python[name], unended[name][:len(t)], equal_nan=True), name
 
 
 @pytest.mark.slow
@@ -103,8 +103,8 @@ def test_the_compiled_loop_ends_at_the_python_loops_step_with_its_bits_in_chunks
         chunked = simulate(values)
     assert len(python["t"]) == len(compiled["t"]) == len(chunked["t"]) < steps(values)
     for name in python:
-        assert np.array_equal(compiled[name], python[name]), name
-        assert np.array_equal(chunked[name], python[name]), name
+        assert np.array_equal(compiled[name], python[name], equal_nan=True), name
+        assert np.array_equal(chunked[name], python[name], equal_nan=True), name
 
 
 def test_a_train_that_does_not_reach_its_last_stop_ends_at_run_duration(tmp_path):
@@ -179,7 +179,7 @@ def test_the_stack_ends_at_the_in_process_step_with_its_bits_and_a_complete_bag(
     run = read_run(bag)
     for name in series:
         if name != "t":
-            assert np.array_equal(run.series[name], series[name]), name
+            assert np.array_equal(run.series[name], series[name], equal_nan=True), name
     assert run.partial is None and run.ended_at_last_stop
     assert run.planned_steps == run.recorded_steps == len(series["t"])
     assert resimulate(run)[1] == []  # the bag's values run the same run again

@@ -100,7 +100,9 @@ def test_a_bad_beacon_list_is_one_line():
 
 @pytest.mark.slow
 def test_the_tachometer_alone_keeps_its_scale_and_errs_by_the_wheels_diameter():
-    values = metro("odometry.enabled=true", "odometry.wheel_diameter_error=0.01")
+    values = metro("odometry.enabled=true", "odometry.radar=false",
+                   "odometry.accelerometer=false", "odometry.balise_spacing=0",
+                   "odometry.beacon_distances=", "odometry.wheel_diameter_error=0.01")
     series = simulate(values, compiled=False)
     wheel = odometry_settings(values, 0.1, 10, None, 0.0).wheel_scale
     assert not series["scale_error"].any()  # no mark, no radar: e stays at its prior
@@ -124,7 +126,8 @@ def test_on_contaminated_rail_the_degraded_mode_replans_within_the_rail_and_stop
     the mark; with it the departure's slips show the rail and the curve is re-planned
     within it, said as degraded adhesion."""
     rail = [*SENSED, "odometry.radar=true", "plant.adhesion=contaminated",
-            "plant.motored_share=0.667", "run.duration=400"]
+            "plant.motored_share=0.667", "run.duration=400", "estimator.enabled=false",
+            "profile.replan.enabled=false"]  # the re-plans for the rail alone
     blind = simulate(metro(*rail))
     assert blind["position"][-1] - 2600.0 > 2.0  # past the mark
     replans = []

@@ -13,7 +13,8 @@ import psutil
 import pytest
 
 from ato_nodes.core.base.errors import ScenarioError
-from ato_nodes.studies.robustness import COLUMNS, draw_train
+from ato_nodes.core.config.scenario import load_scenario
+from ato_nodes.studies.robustness import draw_train, study_columns
 from ato_nodes.studies.samples import SampleFile, write_json_with_rows
 from commands import invocation, one_line_exit_2, script
 from progress_lines import read_progress_until
@@ -151,7 +152,7 @@ def test_a_stopped_study_keeps_every_finished_sample_and_resumes_to_the_same_res
     assert (out / "robustness.json").read_text() == uninterrupted
     report = json.loads(uninterrupted)
     assert [s["sample"] for s in report["samples"]] == list(range(300))
-    assert set(report["samples"][0]) <= {"sample", *COLUMNS}
+    assert set(report["samples"][0]) <= {"sample", *study_columns(load_scenario(STUDY[0]))}
 
 
 @pytest.mark.slow
