@@ -16,7 +16,10 @@ from ato_nodes.core.targets.horizons import has_arrived
 CREEPING = ("plant.mass_factor=1.023364659182611", "plant.resistance_factor=1.167200766910856",
             "plant.lag_factor=1.2216867448341637", "plant.noise_seed=354096443",
             "train.load_weighing_seed=340331917", "estimator.enabled=true",
-            "profile.departure_jerk=0")  # the departure this train was found creeping with
+            "profile.departure_jerk=0",  # the departure this train was found creeping with
+            # on the true position, as it was found (not the ato-on-board preset's)
+            "odometry.enabled=false", "profile.replan.enabled=false", "estimator.lag_sigma=0",
+            "estimator.gate=0")
 
 
 @pytest.mark.parametrize("k, travel, position, expected", [

@@ -45,8 +45,10 @@ def test_the_standing_train_follows_its_departure_target(scenario):
     start = values["profile.ato.start_speed"]
     assert stepped["target"][0] == start and ramped["target"][0] == 0.0
     error = np.abs(ramped["target"] - ramped["speed"])
-    # the step asks the standing train for the start speed at once; the ramp never does
-    assert error.max() < np.abs(stepped["target"] - stepped["speed"]).max() == start
+    # the step asks the standing train for the start speed at once (on the located position
+    # a hair more: the curve from a few cm on); the ramp never does
+    stepped_error = np.abs(stepped["target"] - stepped["speed"]).max()
+    assert error.max() < start <= stepped_error < start + 1e-3
     delay = values["plant.dead_time"] + values["plant.actuator_lag"]
     assert not ramped["target"][ramped["t"] < delay - 1e-9].any()
 
