@@ -294,7 +294,7 @@ def test_a_node_given_an_old_switch_in_its_parameter_file_names_the_mode(tmp_pat
 
 
 @pytest.mark.parametrize("content, line", [
-    (None, "builds on the preset 'ato' (base:), which a ROS parameter file cannot"),
+    (None, "builds on the preset 'ato-on-board' (base:), which a ROS parameter file cannot"),
     ("a: [\n", "malformed YAML"),
     ("", "cannot read parameter file")], ids=["based-scenario", "malformed", "missing"])
 def test_a_parameter_file_rcl_refuses_is_one_line_and_exit_2(content, line, tmp_path,
