@@ -9,8 +9,10 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
 from ato_nodes.core.run.located import ODOMETRY_SERIES
 from ato_nodes.core.run.loop import simulate
+from ato_nodes.core.run.scoring import limit_where_the_train_is, score_series
 from ato_nodes.core.train.adhesion import (ADHESION_FACTORS, adhered, adhesion_limits,
                                            adhesion_of, wheel_creep)
+from ato_nodes.core.train.lines import line_of
 from ato_nodes.core.train.odometry import odometry_settings
 
 SENSED = ["odometry.enabled=true", "odometry.balise_spacing=500",
@@ -38,6 +40,20 @@ def test_a_bag_of_a_run_on_its_sensors_runs_again_bit_for_bit(tmp_path):
     assert np.isnan(series["radar_speed"]).any()
     bag = write_run_bag(tmp_path / "bag", series, values, status="completed")
     assert resimulate(read_run(bag))[1] == []
+
+
+def test_overspeed_is_judged_where_the_train_is_not_where_the_ato_has_it():
+    """On its sensors the run records the limit at its located position; the scorer
+    judges the true speed against the limit at the true position."""
+    off_values = metro("odometry.enabled=false", "run.duration=120")
+    off = simulate(off_values)
+    assert np.array_equal(limit_where_the_train_is(off, off_values, line_of(off_values)),
+                          off["speed_limit"])  # without sensors: the recorded limit
+    values = metro(*SENSED, "run.duration=120")
+    series = simulate(values)
+    misread = {**series, "speed_limit": np.full_like(series["speed_limit"], 0.5)}
+    judged = score_series(series, values)["max_overspeed_kmh"]
+    assert judged < 1.0 and score_series(misread, values)["max_overspeed_kmh"] == judged
 
 
 def test_the_rails_condition_limits_the_force_and_a_slide_gives_its_share():

@@ -70,11 +70,11 @@ def test_bad_robustness_ranges_are_one_line(tmp_path, args, words):
 
 def test_a_timing_point_journey_counts_its_timing_points_and_others_keep_their_columns():
     from ato_nodes.results.journeys import TIMING_MISSED
-    from ato_nodes.studies.robustness import (COLUMNS, SENSOR_SEED, WITHIN, study_columns,
-                                              summarise)
+    from ato_nodes.studies.robustness import (COLUMNS, OVERSPEED, SENSOR_SEED, WITHIN,
+                                              study_columns, summarise)
     assert study_columns(load_scenario("seed004-metro")) == COLUMNS  # no journey, no sensors
     on_board = list(study_columns(load_scenario("seed004-metro-line")))  # the sensors' seed
-    assert on_board == [*COLUMNS, SENSOR_SEED, "overrun"]
+    assert on_board == [*COLUMNS, SENSOR_SEED, "overrun", OVERSPEED]
     columns = list(study_columns(load_scenario("stgallen-wil-journey")))
     assert columns == [*COLUMNS, TIMING_MISSED]
     kept = next(text for key, _, text in WITHIN if key == TIMING_MISSED)

@@ -33,12 +33,16 @@ SEEDS = ("plant.noise_seed", "train.load_weighing_seed")
 SENSOR_SEED = "odometry.seed"
 RAIL = "plant.adhesion_scale"
 RAIL_RANGE = (0.8, 1.2)  # the adhesion's share of its condition's curve
+# On its sensors the ATO knows the limit where it has the train; the scorer judges it
+# where the train is (core/run/scoring.limit_where_the_train_is)
+OVERSPEED = "max_overspeed_kmh"
 INDICES = (  # key, heading; worst is the largest
     ("max_abs_error_kmh", "max abs(e) km/h"),
     ("p95_abs_error_kmh", "p95 abs(e) km/h"),
     ("abs_stopping_error", "abs(stop error) m"),
     ("max_jerk", "max jerk (1 s) m/s^3"),
     ("itae", "ITAE"),
+    (OVERSPEED, "max overspeed km/h"),
     (WORST_STOP, "journey: worst stop m"),
     (WORST_ARRIVAL, "journey: worst arrival s"),
     (TIMING_MISSED, "journey: timing points missed"),
@@ -49,6 +53,7 @@ WITHIN = (  # key, bound, what the count says
     ("abs_running_time_error", 5.0, "arrivals within 5 s"),
     ("abs_stopping_error", 0.3, "stops within 0.3 m"),
     ("overrun", 0.0, "no overrun (past 0.3 m)"),
+    (OVERSPEED, 0.0, "no overspeed"),
     (WORST_STOP, 0.1, "every stop of the journey within 0.1 m"),
     (WORST_STOP, 0.3, "every stop of the journey within 0.3 m"),
     (WORST_ARRIVAL, 5.0, "every arrival of the journey within 5 s"),
@@ -56,15 +61,17 @@ WITHIN = (  # key, bound, what the count says
 )
 COLUMNS = {  # a sample's row (after its number): its draw, what the ATO knew, its indices
     **dict.fromkeys(FACTORS, float), **dict.fromkeys(SEEDS, int), "train.mass_reading": float,
-    **{key: float for key, _ in INDICES if key != TIMING_MISSED}, "running_time_error": float,
+    **{key: float for key, _ in INDICES if key not in (TIMING_MISSED, OVERSPEED)},
+    "running_time_error": float,
     "abs_running_time_error": float}
 SEED_BOUND = 2**31 - 1  # the schema's bound of a noise or weighing seed
 
 
 def study_columns(base: Mapping[str, Any]) -> dict[str, type]:
     """The samples' columns of a study on `base`: COLUMNS, and the timing points missed
-    when its journey has timing points (a TTOBench journey's): a column only those
-    studies have, so that a study recorded without it still resumes."""
+    when its journey has timing points (a TTOBench journey's), the overrun and the
+    overspeed on sensors or a rail of limited adhesion: columns only those studies have,
+    so that a study recorded without them still resumes."""
     columns = dict(COLUMNS)
     if base["profile.kind"] == "journey" and \
             load_timetable(base["profile.journey.timetable"]).journey:
@@ -74,7 +81,7 @@ def study_columns(base: Mapping[str, Any]) -> dict[str, type]:
     if base["plant.adhesion"] != "unlimited":
         columns[RAIL] = float
     if base["odometry.enabled"] or base["plant.adhesion"] != "unlimited":
-        columns["overrun"] = float
+        columns["overrun"] = columns[OVERSPEED] = float
     return columns
 
 

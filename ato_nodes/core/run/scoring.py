@@ -16,6 +16,7 @@ from ..config.context import RunContext
 from ..config.schema import defaults
 from ..scoring.indices import tracking_indices
 from ..scoring.operation import STANDSTILL, Regeneration, operation_indices
+from ..targets.horizons import plan_speed_limit
 from ..train.line import Line
 from ..train.lines import for_train, load_line_file, parse_line_file
 from ..train.ttobench import is_library_file
@@ -150,6 +151,8 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
     to_station = line is not None and line.stop_position > 0.0
     if "speed_limit" in series and not np.any(np.isfinite(series["speed_limit"])):
         series = {name: values for name, values in series.items() if name != "speed_limit"}
+    if "speed_limit" in series and "located_position" in series:
+        series = {**series, "speed_limit": limit_where_the_train_is(series, parameters, line)}
     indices = operation_indices(
         series, **energy_terms(parameters),
         stop_position=line.stop_position if to_station else None,
@@ -162,6 +165,17 @@ def operation(series: dict[str, np.ndarray], parameters: dict) -> dict[str, floa
             if error.size else 0.0
         indices["stepped_time"] = float(np.count_nonzero(steps) * parameters["run.period"])
     return indices
+
+
+def limit_where_the_train_is(series: dict[str, np.ndarray], parameters: dict,
+                             line: Line | None) -> np.ndarray:
+    """The limit at each sample's true position, m/s (inf: none). A run on its sensors
+    records the limit where the ATO has the train (its located position): overspeed is
+    judged where the train is. The plan's limits as it started (a re-plan keeps them)."""
+    context = RunContext({**defaults(), **parameters}, line)
+    settings, journey = context.profile_settings, getattr(context.plan, "journey", None)
+    return np.array([plan_speed_limit(settings, journey, position)
+                     for position in np.asarray(series["position"], dtype=float)])
 
 
 def pantograph_in_neutral(series: dict[str, np.ndarray], parameters: dict, line: Line | None
