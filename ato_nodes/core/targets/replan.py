@@ -233,25 +233,30 @@ def replanned_table(values, line, train, table: PlanTable, position: float, spee
     stop from `speed`, on time for the planned arrival (profile.ato.on_time: the line's
     planned running time less `t`; at the limits when that is past).
 
-    The train is accelerating when a re-plan comes (the mass shows at the envelope), and
-    a jerk-rounded curve from its speed would start at zero acceleration, the train running
-    ahead of it by about a T / 2 (T = the rounding's time, a the acceleration). So the
-    curve starts as the unrounded one from `speed`, at the new plan's own rate, under the
-    rounded curve planned from a T / 2 higher (which it meets once the rounding has caught
-    up): the target keeps its speed and nearly its acceleration."""
+    A train accelerating when a re-plan comes (the mass shows at the envelope) would run
+    ahead of a jerk-rounded curve from its speed, which starts at zero acceleration, by
+    about a T / 2 (T = the rounding's time, a the acceleration). So the curve then starts
+    as the unrounded one from `speed`, at the new plan's own rate, under the rounded curve
+    planned from a T / 2 higher (which it meets once the rounding has caught up): the
+    target keeps its speed and nearly its acceleration. A train cruising (the old plan
+    flat there: a lighter train's plan, faster) starts on the rounded curve, at zero
+    acceleration as it is: the unrounded one would ask the plan's rate at once, and the
+    train, its actuator lagging, fall a km/h behind."""
     stop = line.stop_position
     rest = section_line(line, position, stop)
     given = ato_curve_arguments(values, rest, train)
     arguments = dict(zip(_CURVE_ARGUMENTS[:len(given)], given, strict=True))
     arguments.update(start_speed=max(speed, 0.01), floor=values["profile.ato.start_speed"],
                      departure=0.0 if values["profile.ato.on_time"] else None)
-    # no planned time, no bisection; as near the limits as the rounded curve may come
-    sharp = new_ato_curve(**{**arguments, "jerk": 0.0, "margin": 0.5 * arguments["margin"]})
+    jerk = values["profile.jerk"]
+    unrounded_start = jerk > 0.0 and \
+        table_speed(table, position + SLOPE_LOOK) > table_speed(table, position)
+    if unrounded_start:  # no planned time, no bisection; as near the limits as may be
+        sharp = new_ato_curve(**{**arguments, "jerk": 0.0, "margin": 0.5 * arguments["margin"]})
     if values["profile.ato.on_time"] and line.planned_run_time is not None:
         rest = dataclasses.replace(rest, planned_run_time=max(line.planned_run_time - t, 0.0))
         arguments["line"] = rest
-    jerk = values["profile.jerk"]
-    if jerk > 0.0:
+    if unrounded_start:
         rounding = max(values["profile.ato.acceleration"],
                        values["profile.ato.deceleration"]) / jerk
         reach = min(max(speed, 1.0) * rounding, sharp.positions[-1])  # about T s ahead
@@ -259,7 +264,7 @@ def replanned_table(values, line, train, table: PlanTable, position: float, spee
         arguments["start_speed"] = sharp.speeds[0] + 0.5 * max(rising, 0.0)
     curve = new_ato_curve(**arguments)
     speeds = curve.speeds
-    if jerk > 0.0:  # the unrounded start, up to where the rounded curve has caught up
+    if unrounded_start:  # up to where the rounded curve has caught up
         start = sharp.curve(curve.cruise)
         met = np.flatnonzero(start >= speeds)
         ends = met[met > 0][0] if np.any(met > 0) else len(speeds)
