@@ -171,9 +171,14 @@ def limit_where_the_train_is(series: dict[str, np.ndarray], parameters: dict,
                              line: Line | None) -> np.ndarray:
     """The limit at each sample's true position, m/s (inf: none). A run on its sensors
     records the limit where the ATO has the train (its located position): overspeed is
-    judged where the train is. The plan's limits as it started (a re-plan keeps them)."""
-    context = RunContext({**defaults(), **parameters}, line)
-    settings, journey = context.profile_settings, getattr(context.plan, "journey", None)
+    judged where the train is. The plan's limits as it started (a re-plan keeps them); the
+    recorded limit when the plan cannot be made again here (a bag whose timetable is not
+    on this machine, or no longer the one it ran)."""
+    try:
+        context = RunContext({**defaults(), **parameters}, line)
+        settings, journey = context.profile_settings, getattr(context.plan, "journey", None)
+    except ScenarioError:
+        return np.asarray(series["speed_limit"], dtype=float)
     return np.array([plan_speed_limit(settings, journey, position)
                      for position in np.asarray(series["position"], dtype=float)])
 
