@@ -5,6 +5,7 @@ core/run/located.py): off, the ATO reads the truth; on, it drives on its estimat
 import numpy as np
 import pytest
 
+from ato_nodes.bags.bagio import read_series
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario, prepare
 from ato_nodes.core.run.located import ODOMETRY_SERIES
@@ -14,6 +15,7 @@ from ato_nodes.core.train.adhesion import (ADHESION_FACTORS, adhered, adhesion_l
                                            adhesion_of, wheel_creep)
 from ato_nodes.core.train.lines import line_of
 from ato_nodes.core.train.odometry import odometry_settings
+from commands import run_stack
 
 SENSED = ["odometry.enabled=true", "odometry.balise_spacing=500",
           "odometry.beacon_distances=150,50,20,5", "odometry.beacon_accuracy=0.02",
@@ -163,3 +165,50 @@ def test_the_degraded_mode_needs_the_localisation_that_sees_the_rail():
     with pytest.raises(ScenarioError, match="odometry.accelerometer or odometry.radar"):
         prepare("seed004-metro-ato", ["profile.degraded.enabled=true", "odometry.enabled=true",
                                       "odometry.accelerometer=false", "odometry.radar=false"])
+
+
+# A train of a wet-rail study (seed 1, sample 54 of seed004-metro-ato) whose wheels slip
+# under full traction just before the line's limit rises 200 m out
+SLIPPING_TRAIN = ["run.duration=60", "plant.adhesion=wet", "plant.motored_share=0.667",
+                  "profile.degraded.enabled=true", "plant.mass_factor=0.9217981550334462",
+                  "plant.resistance_factor=1.1946685749465082",
+                  "plant.lag_factor=1.2983890344069313", "plant.noise_seed=1593272116",
+                  "train.load_weighing_seed=1083626686", "odometry.seed=522334131",
+                  "plant.adhesion_scale=1.119330297656854"]
+
+
+def test_a_slipping_trains_command_is_held_at_what_the_rail_gives():
+    """With controller.slip_hold (the on-board preset's) the jerk limit ramps from the
+    force the rail gives while the wheels slip: the command is not wound up to its
+    ceiling and the train does not pass its limit once it grips again (without: 0.59
+    km/h over it)."""
+    held = prepare("seed004-metro-ato", SLIPPING_TRAIN)
+    assert held["controller.slip_hold"]
+    series = simulate(held)
+    slipping = series["wheel_creep"] > 0.0
+    assert slipping.any()
+    change = held["controller.max_rate"] * held["run.period"]
+    after = np.flatnonzero(slipping[:-1]) + 1  # the step after each slipping period
+    assert np.all(series["command"][after] <= series["force"][after] + change + 1e-9)
+    wound = simulate(apply_overrides(held, ["controller.slip_hold=false"]))
+    assert series["command"][slipping].max() < wound["command"][wound["wheel_creep"] > 0].max()
+    over = {name: score_series(run, held)["max_overspeed_kmh"]
+            for name, run in (("held", series), ("wound", wound))}
+    assert over["held"] == 0.0 < over["wound"]
+
+
+def test_the_slip_hold_needs_the_jerk_limit_it_ramps():
+    with pytest.raises(ScenarioError, match="controller.slip_hold .* controller.max_rate"):
+        prepare("seed004-metro-ato", ["controller.max_rate=0"])
+
+
+@pytest.mark.integration
+def test_a_slipping_train_through_the_stack_is_the_in_process_run(tmp_path):
+    """The drive's effort reaches the controller node on its own topic, step by step: the
+    held commands, and every series, are the loop's bits."""
+    run_stack("seed004-metro-ato", tmp_path / "bag", SLIPPING_TRAIN)
+    stack = read_series(tmp_path / "bag")
+    looped = simulate(prepare("seed004-metro-ato", SLIPPING_TRAIN))
+    assert (looped["wheel_creep"] > 0.0).any()
+    for name in set(looped) - {"t"}:
+        assert np.array_equal(stack[name], looped[name], equal_nan=True), name

@@ -36,6 +36,8 @@ def staged_run(values, changes=None):
                                                        seen, speed))
         horizon = controller.horizons[0]
         controller.speeds.append(out.measured_speed)
+        if controller.efforts is not None:  # controller.slip_hold: /train/drive_effort
+            controller.efforts.append(out.drive_effort)
         if changes and k in changes:  # `ros2 param set` between two steps
             controller.pending.update(changes[k])
         (command,) = controller.run_ready_steps()

@@ -39,6 +39,8 @@ class ControllerNode(AtoNode):
         # Inputs are handled in the order subscribed: y_k first, so u_k goes out with the
         # horizon already queued before the horizons that came meanwhile are taken.
         self.subscription("measured_speed", self.on_speed)
+        if self.stage.efforts is not None:  # controller.slip_hold: published beside y_k
+            self.subscription("drive_effort", self.on_effort)
         self.subscription("target_preview", self.on_horizon,
                           wakes=lambda: not self.stage.horizons)
         self.ready_when_matched()
@@ -62,6 +64,10 @@ class ControllerNode(AtoNode):
 
     def on_horizon(self, msg: Float64MultiArray) -> None:
         self.stage.horizons.append(msg.data)
+        self.publish(self.stage.run_ready_steps())
+
+    def on_effort(self, msg: Float64) -> None:
+        self.stage.efforts.append(msg.data)
         self.publish(self.stage.run_ready_steps())
 
     def on_speed(self, msg: Float64) -> None:

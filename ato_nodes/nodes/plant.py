@@ -36,6 +36,10 @@ class PlantNode(AtoNode):
         self.clock_pub = self.publisher("clock")
         self.position_pub = self.publisher("position")
         self.speed_pub = self.publisher("measured_speed")
+        # with controller.slip_hold, the controller's second input of a step
+        self.effort_pub = (self.publisher("drive_effort")
+                           if self.values["controller.slip_hold"] else None)
+        self.effort_msg = Float64()
         # with odometry, the profile takes the located position from it (core/run/located.py)
         self.odometry_pub = (self.publisher("odometry")
                              if self.values["odometry.enabled"] else None)
@@ -62,6 +66,9 @@ class PlantNode(AtoNode):
         out = self.stage.outputs()
         self.speed_msg.data = out.measured_speed
         self.speed_pub.publish(self.speed_msg)
+        if self.effort_pub is not None:
+            self.effort_msg.data = out.drive_effort
+            self.effort_pub.publish(self.effort_msg)
         if self.odometry_pub is not None:
             self.odometry_msg.data = out.odometry
             self.odometry_pub.publish(self.odometry_msg)

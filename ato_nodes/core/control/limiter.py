@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+from ..base.errors import ScenarioError
 from ..base.kernels import jitable
 from ..base.spec import param
 
@@ -21,6 +22,12 @@ LIMITER_PARAMETERS = (
           "most this, m/s (0 = only a zero target; a distance-indexed target is a few mm/s in "
           "the last centimetres before the mark, where a train would otherwise creep for "
           "seconds; keep it below the departure target)", "controller", 0.0, 1.0),
+    param("controller.slip_hold", False, "while the drive's anti-slip or the wheel-slide "
+          "protection acts, the jerk limit ramps the command from the force the rail gives "
+          "(the achieved effort a train's TCMS reports to its ATO; the plant publishes it on "
+          "/train/drive_effort): back-calculation, so that a slipping train's command, and the "
+          "observer fed with it, is not wound up past what the rail gives (needs "
+          "controller.max_rate)", ("plant", "controller")),
 )
 
 
@@ -36,6 +43,7 @@ class LimiterSettings(NamedTuple):
     mode_band: float       # m/s (0: off)
     holding_brake: float   # N/kN (0: none)
     holding_target: float  # m/s
+    slip_hold: bool = False  # the ramp starts from the rail's force while the wheels slip
 
 
 @jitable
@@ -70,6 +78,18 @@ def limit_command(u: float, target: float, speed: float, last: float,
 
 
 @jitable
+def held_at_rail(last: float, effort: float) -> float:
+    """The command the jerk limit ramps from with controller.slip_hold: the last one, no
+    further past `effort` (N/kN: the force the rail gives while the drive's anti-slip or
+    the wheel-slide protection acts; NaN while the wheels roll) than the wheels let it."""
+    if effort > 0.0:
+        return min(last, effort)
+    if effort < 0.0:
+        return max(last, effort)
+    return last
+
+
+@jitable
 def limit_under(u: float, ceiling: float, target: float, speed: float, last: float,
                 settings: LimiterSettings) -> float:
     """limit_command of `u` asked at most `ceiling` (N/kN; inf: no bound, `u`'s bits). A
@@ -90,6 +110,9 @@ class CommandLimiter:
     * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
       (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
     * saturation to [u_min, u_max] (acceleration limit);
+    * slip hold, `slip_hold`: while the wheels slip or slide, the jerk limit ramps from
+      the force the rail gives, not from the last command (held_at_rail; the stage and
+      the loop hold `last` before the step);
     * holding brake, `holding_brake` > 0: with a zero target (at most `holding_target`)
       and the train (nearly) stopped, at least this much braking, as an ATO holds a train
       berthed at a station; without it a controller dithers about zero speed and creeps.
@@ -97,13 +120,16 @@ class CommandLimiter:
 
     def __init__(self, u_min: float, u_max: float, period: float = 0.0, max_rate: float = 0.0,
                  mode_band: float = 0.0, holding_brake: float = 0.0,
-                 holding_target: float = 0.0):
+                 holding_target: float = 0.0, slip_hold: bool = False):
+        if slip_hold and not max_rate > 0.0:
+            raise ScenarioError("controller.slip_hold ramps the command from the force the rail "
+                                "gives: it needs controller.max_rate above 0")
         self.u_min, self.u_max = u_min, u_max
         self.max_change = max_rate * period
         self.mode_band = mode_band
         self.holding_brake, self.holding_target = holding_brake, holding_target
         self.settings = LimiterSettings(u_min, u_max, self.max_change, mode_band, holding_brake,
-                                        holding_target)
+                                        holding_target, bool(slip_hold))
         self.last = 0.0
 
     def apply(self, u: float, target: float, speed: float) -> float:
@@ -114,4 +140,5 @@ class CommandLimiter:
     def from_values(cls, values) -> CommandLimiter:
         return cls(values["controller.u_min"], values["controller.u_max"], values["run.period"],
                    values["controller.max_rate"], values["controller.mode_band"],
-                   values["controller.holding_brake"], values["controller.holding_target"])
+                   values["controller.holding_brake"], values["controller.holding_target"],
+                   values["controller.slip_hold"])

@@ -48,17 +48,17 @@ import numpy as np
 
 from ..base.kernels import AVAILABLE, Sources, compiled, jitable, overload
 from ..config.components import CONTROLLERS
-from ..control.limiter import LimiterSettings
+from ..control.limiter import LimiterSettings, held_at_rail
 from ..control.stepped import ControllerSteps
 from ..scoring.indices import RunningIndex, RunningState, running_step
 from ..targets.horizons import ProfileSettings, ProfileState, plan_speed_limit, profile_step
 from ..targets.served import JourneyTable
 from ..train.line import line_arrays
-from ..train.plant import TrainMotion, TrainSettings, diverged, sensor_reading, train_outputs, \
-    train_step
+from ..train.plant import TrainMotion, TrainSettings, diverged, drive_effort, sensor_reading, \
+    train_outputs, train_step
 from .last_stop import LastStop, held, standing
 from .located import ODOMETRY_SERIES, adhesion_seen, located, odometer_moved
-from .python_steps import PYTHON_STEPS, RUNNING, PythonController, running
+from .python_steps import PYTHON_STEPS, PythonController, running
 from .stages import COLUMNS, SeriesColumns
 
 
@@ -173,7 +173,7 @@ def _controller_seam(stage):
     if stage.component.steps is not None:
         yield stage.controller.settings, stage.controller.state
         return
-    with running(stage.controller) as slot:
+    with running(stage) as slot:
         yield slot, slot
 
 
@@ -183,8 +183,7 @@ def _retuned(stage, inputs: LoopInputs, loop: LoopState, change: dict[str, float
     ControllerStage.retune rebuilds the controller from its state now; a kind's steps
     then go on with the new settings, a Python controller is the rebuilt one."""
     if stage.component.steps is None:
-        stage.retune(change)
-        RUNNING[loop.controller.slot] = stage.controller
+        stage.retune(change)  # the stage RUNNING holds: its controller is the rebuilt one
         return inputs, loop
     stage.controller.state = loop.controller
     stage.retune(change)
@@ -299,6 +298,8 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
         if k == 0:
             controller = controller_start(inputs.settings, controller, target, measured,
                                           as_read(horizon))
+        if inputs.limits.slip_hold:  # ControllerStage.run_ready_steps
+            last = held_at_rail(last, drive_effort(inputs.train, plant))
         u, outputs, controller = controller_step(inputs.settings, controller, target,
                                                  measured, as_read(horizon), last, inputs.limits)
         last = u

@@ -32,15 +32,16 @@ def _as_python(**types):
 
 _objmode = objmode if objmode is not None else _as_python
 
-RUNNING: dict[int, Any] = {}  # the controllers of the runs in progress, by slot
+RUNNING: dict[int, Any] = {}  # the controller stages of the runs in progress, by slot
 _slots = itertools.count()
 
 
 @contextmanager
-def running(controller) -> Iterator[PythonController]:
-    """`controller` reachable from compiled code for the time of a run."""
+def running(stage) -> Iterator[PythonController]:
+    """The controller `stage` (its controller and limiter, a retune's controller too)
+    reachable from compiled code for the time of a run."""
     slot = next(_slots)
-    RUNNING[slot] = controller
+    RUNNING[slot] = stage
     try:
         yield PythonController(slot)
     finally:
@@ -48,12 +49,15 @@ def running(controller) -> Iterator[PythonController]:
 
 
 def _start(slot: int, target: float, measured: float, horizon: np.ndarray) -> None:
-    RUNNING[slot].start(target, measured, horizon)
+    RUNNING[slot].controller.start(target, measured, horizon)
 
 
-def _step(slot: int, target: float, measured: float, horizon: np.ndarray
-          ) -> tuple[float, np.ndarray]:
-    output = RUNNING[slot].step(target, measured, horizon)
+def _step(slot: int, target: float, measured: float, horizon: np.ndarray, last: float,
+          slip_hold: bool) -> tuple[float, np.ndarray]:
+    stage = RUNNING[slot]
+    if slip_hold:  # the loop's last, held at the rail (ControllerStage.run_ready_steps)
+        stage.limiter.last = last
+    output = stage.controller.step(target, measured, horizon)
     return output.u, np.array(output.extras, dtype=float)
 
 
@@ -68,9 +72,10 @@ def python_start(settings: PythonController, state: PythonController, target: fl
 @jitable
 def python_step(settings: PythonController, state: PythonController, target: float,
                 measured: float, horizon, last: float, limits):
-    """The controller's step; it applies its own limiter (`last`, `limits` unread)."""
+    """The controller's step; it applies its own limiter (`last`, held at the rail, read
+    with controller.slip_hold only)."""
     with _objmode(u="float64", outputs="float64[:]"):
-        u, outputs = _step(state.slot, target, measured, horizon)
+        u, outputs = _step(state.slot, target, measured, horizon, last, limits.slip_hold)
     return u, outputs, state
 
 

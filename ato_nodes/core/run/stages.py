@@ -40,13 +40,13 @@ from ..base.errors import ScenarioError
 from ..config.components import CONTROLLERS
 from ..config.context import RunContext, ato_train
 from ..config.schema import NodeValues, steps
-from ..control.limiter import CommandLimiter
+from ..control.limiter import CommandLimiter, held_at_rail
 from ..targets.horizons import LOOKAHEAD, plan_speed_limit, profile_start, profile_step
 from ..targets.replan import CurveReplan, degraded_plan, replanned_table
 from ..train.line import Line
 from ..train.lines import line_of
 from ..train.plant import (PointMassTrain, TrainParameters, TrainState, diverged,
-                           sensor_reading, train_outputs)
+                           drive_effort, sensor_reading, train_outputs)
 from ..train.adhesion import adhesion_of
 from .last_stop import held, last_stop, standing
 from .located import ODOMETRY_SERIES, located, odometer_moved, odometry_of
@@ -156,6 +156,7 @@ class PlantOutputs:
     line_resistance: float  # N/kN gradient + curve + tunnel resistance of the belt
     located_position: float  # m, where the ATO has the train (the true position without
     odometry: list[float]    # odometry); ODOMETRY_SERIES' values (empty without)
+    drive_effort: float      # N/kN the rail gives while the wheels slip or slide (else NaN)
 
 
 class PlantStage:
@@ -216,7 +217,7 @@ class PlantStage:
             row = values.tolist()
         return PlantOutputs(motion.position, measured, motion.speed, acceleration,
                             disturbance, motion.force, resistance, line_resistance, position,
-                            row)
+                            row, drive_effort(self.train.settings, motion))
 
     def apply(self, command: float) -> None:
         state = self.train.state  # step k's, as its outputs gave it
@@ -247,6 +248,8 @@ class ControllerStage:
         self.controller = self.component.factory(values, self.context, self.limiter)
         self.horizons: deque[list[float]] = deque()
         self.speeds: deque[float] = deque()
+        # with controller.slip_hold, the drive's effort of each step (PlantOutputs')
+        self.efforts: deque[float] | None = deque() if values["controller.slip_hold"] else None
         self.step_index = 0
         self.pending: dict[str, float] = {}
         self.applied: list[tuple[int, dict[str, float]]] = []
@@ -278,13 +281,15 @@ class ControllerStage:
     def run_ready_steps(self) -> list:
         """Run every step whose inputs have both arrived; their outputs in order."""
         outputs = []
-        while self.speeds and self.horizons:
+        while self.speeds and self.horizons and (self.efforts is None or self.efforts):
             if self.pending:
                 self.retune(self.pending)
                 self.applied.append((self.step_index, self.pending))
                 self.pending = {}
             horizon = self.horizons.popleft()
             speed = self.speeds.popleft()
+            if self.efforts is not None:
+                self.limiter.last = held_at_rail(self.limiter.last, self.efforts.popleft())
             if self.step_index == 0:
                 self.controller.start(horizon[0], speed, horizon)
             outputs.append(self.controller.step(horizon[0], speed, horizon))

@@ -35,7 +35,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..base.kernels import jitable
-from .adhesion import UNLIMITED, Adhesion, adhered
+from .adhesion import UNLIMITED, Adhesion, adhered, wheel_creep
 from .line import Line, LineTables, belt_resistance, in_neutral_section, line_tables
 
 OPEN_TRACK = line_tables(None, tuple)  # no gradients, curves, tunnels, limits or neutral sections
@@ -337,6 +337,17 @@ def demanded_force(settings: TrainSettings, v: float, lag: float, acting: float,
     if not powered and force > 0.0:
         force = 0.0
     return force
+
+
+@jitable
+def drive_effort(settings: TrainSettings, motion: TrainMotion) -> float:
+    """The force the rail gives (N/kN) at the end of `motion`'s period while the drive's
+    anti-slip or the wheel-slide protection acts (the achieved effort a TCMS reports to the
+    ATO); NaN while the wheels roll."""
+    demand = demanded_force(settings, motion.speed, motion.lag, motion.acting, motion.powered)
+    if wheel_creep(demand, motion.speed, settings.constants.adhesion) == 0.0:
+        return math.nan
+    return motion.force
 
 
 @jitable(inline=True)
