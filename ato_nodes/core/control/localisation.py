@@ -172,6 +172,19 @@ def localiser_start(values, position: float, speed: float) -> LocaliserState:
                           math.nan, 0.0, (0.0, 0.0), 0.0, 0)
 
 
+@jitable(inline=True)
+def _row_by_column(row: tuple, p: np.ndarray, k: int) -> float:
+    """sum_m row[m] p[m, k], summed from m = 0."""
+    return 0.0 + row[0] * p[0, k] + row[1] * p[1, k] + row[2] * p[2, k] + row[3] * p[3, k] \
+        + row[4] * p[4, k]
+
+
+@jitable(inline=True)
+def _dot(a: tuple, b: tuple) -> float:
+    """sum_m a[m] b[m], summed from m = 0."""
+    return 0.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4]
+
+
 @jitable
 def _predicted(settings: LocaliserSettings, state: LocaliserState
                ) -> tuple[tuple, np.ndarray]:
@@ -181,19 +194,13 @@ def _predicted(settings: LocaliserSettings, state: LocaliserState
     p = state.motion_covariance
     f = ((1.0, h, 0.5 * h * h, h * h * h / 6.0, 0.0), (0.0, 1.0, h, 0.5 * h * h, 0.0),
          (0.0, 0.0, 1.0, h, 0.0), (0.0, 0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 0.0, 1.0))
-    fp = np.zeros((MOTION, MOTION))
-    for i in range(MOTION):
-        for k in range(MOTION):
-            total = 0.0
-            for m in range(MOTION):
-                total += f[i][m] * p[m, k]
-            fp[i, k] = total
-    covariance = np.zeros((MOTION, MOTION))
-    for i in range(MOTION):
+    covariance = np.empty((MOTION, MOTION))
+    for i in range(MOTION):  # F P F', a row of F P at a time (no array for it)
+        row = f[i]
+        fp = (_row_by_column(row, p, 0), _row_by_column(row, p, 1), _row_by_column(row, p, 2),
+              _row_by_column(row, p, 3), _row_by_column(row, p, 4))
         for k in range(i, MOTION):
-            total = 0.0
-            for m in range(MOTION):
-                total += fp[i, m] * f[k][m]
+            total = _dot(fp, f[k])
             covariance[i, k] = total
             covariance[k, i] = total
     covariance[2, 2] += settings.acceleration_drift
@@ -207,12 +214,8 @@ def _updated(x: tuple, p: np.ndarray, h: tuple, reading: float, variance: float,
              gate: float) -> tuple[tuple, bool]:
     """The motion's update by one scalar reading with measurement row `h`, `p` updated in
     place; (motion, taken): a reading past `gate` sigmas (gate > 0) is not taken."""
-    ph = np.zeros(MOTION)
-    for i in range(MOTION):
-        total = 0.0
-        for m in range(MOTION):
-            total += p[i, m] * h[m]
-        ph[i] = total
+    ph = (_row_by_column(h, p, 0), _row_by_column(h, p, 1), _row_by_column(h, p, 2),
+          _row_by_column(h, p, 3), _row_by_column(h, p, 4))  # P h' (P symmetric)
     innovation_variance = variance
     predicted = 0.0
     for m in range(MOTION):
