@@ -187,9 +187,8 @@ def test_a_slipping_trains_command_is_held_at_what_the_rail_gives():
     series = simulate(held)
     slipping = series["wheel_creep"] > 0.0
     assert slipping.any()
-    change = held["controller.max_rate"] * held["run.period"]
     after = np.flatnonzero(slipping[:-1]) + 1  # the step after each slipping period
-    assert np.all(series["command"][after] <= series["force"][after] + change + 1e-9)
+    assert np.all(series["command"][after] <= series["force"][after])  # the wheels may grip
     wound = simulate(apply_overrides(held, ["controller.slip_hold=false"]))
     assert series["command"][slipping].max() < wound["command"][wound["wheel_creep"] > 0].max()
     over = {name: score_series(run, held)["max_overspeed_kmh"]

@@ -23,7 +23,8 @@ LIMITER_PARAMETERS = (
           "the last centimetres before the mark, where a train would otherwise creep for "
           "seconds; keep it below the departure target)", "controller", 0.0, 1.0),
     param("controller.slip_hold", False, "while the drive's anti-slip or the wheel-slide "
-          "protection acts, the jerk limit ramps the command from the force the rail gives "
+          "protection acts, the command asks at most the force the rail gives, and the jerk "
+          "limit ramps it from there "
           "(the achieved effort a train's TCMS reports to its ATO; the plant publishes it on "
           "/train/drive_effort): back-calculation, so that a slipping train's command, and the "
           "observer fed with it, is not wound up past what the rail gives (needs "
@@ -78,14 +79,16 @@ def limit_command(u: float, target: float, speed: float, last: float,
 
 
 @jitable
-def held_at_rail(last: float, effort: float) -> float:
-    """The command the jerk limit ramps from with controller.slip_hold: the last one, no
-    further past `effort` (N/kN: the force the rail gives while the drive's anti-slip or
-    the wheel-slide protection acts; NaN while the wheels roll) than the wheels let it."""
+def held_at_rail(last: float, effort: float, change: float) -> float:
+    """The command the jerk limit ramps from with controller.slip_hold: the last one, or
+    while the drive's anti-slip or the wheel-slide protection acts (`effort`, N/kN: the
+    force the rail gives; NaN while the wheels roll) at most `change` (a period's ramp)
+    short of it, so that the command asks no more than the rail gave and the wheels grip
+    again."""
     if effort > 0.0:
-        return min(last, effort)
+        return min(last, effort - change)
     if effort < 0.0:
-        return max(last, effort)
+        return max(last, effort + change)
     return last
 
 
@@ -110,9 +113,9 @@ class CommandLimiter:
     * jerk limit, `max_rate` > 0: the command moves at most max_rate * h per period
       (jerk ~ xi * max_rate with the train's xi, m/s^2 per N/kN);
     * saturation to [u_min, u_max] (acceleration limit);
-    * slip hold, `slip_hold`: while the wheels slip or slide, the jerk limit ramps from
-      the force the rail gives, not from the last command (held_at_rail; the stage and
-      the loop hold `last` before the step);
+    * slip hold, `slip_hold`: while the wheels slip or slide, the command asks at most
+      the force the rail gives and the jerk limit ramps from there, not from the last
+      command (held_at_rail; the stage and the loop hold `last` before the step);
     * holding brake, `holding_brake` > 0: with a zero target (at most `holding_target`)
       and the train (nearly) stopped, at least this much braking, as an ATO holds a train
       berthed at a station; without it a controller dithers about zero speed and creeps.

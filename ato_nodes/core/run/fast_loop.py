@@ -299,7 +299,8 @@ def _steps_source(inputs: LoopInputs, journey: JourneyTable | None, loop: LoopSt
             controller = controller_start(inputs.settings, controller, target, measured,
                                           as_read(horizon))
         if inputs.limits.slip_hold:  # ControllerStage.run_ready_steps
-            last = held_at_rail(last, drive_effort(inputs.train, plant))
+            last = held_at_rail(last, drive_effort(inputs.train, plant),
+                                inputs.limits.max_change)
         u, outputs, controller = controller_step(inputs.settings, controller, target,
                                                  measured, as_read(horizon), last, inputs.limits)
         last = u

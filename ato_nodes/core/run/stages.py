@@ -289,7 +289,8 @@ class ControllerStage:
             horizon = self.horizons.popleft()
             speed = self.speeds.popleft()
             if self.efforts is not None:
-                self.limiter.last = held_at_rail(self.limiter.last, self.efforts.popleft())
+                self.limiter.last = held_at_rail(self.limiter.last, self.efforts.popleft(),
+                                                 self.limiter.max_change)
             if self.step_index == 0:
                 self.controller.start(horizon[0], speed, horizon)
             outputs.append(self.controller.step(horizon[0], speed, horizon))
