@@ -16,7 +16,7 @@ from ..config.context import RunContext
 from ..config.schema import defaults
 from ..scoring.indices import tracking_indices
 from ..scoring.operation import STANDSTILL, Regeneration, operation_indices
-from ..targets.horizons import plan_speed_limit
+from ..targets.horizons import plan_speed_limits
 from ..train.line import Line
 from ..train.lines import for_train, load_line_file, parse_line_file
 from ..train.ttobench import is_library_file
@@ -179,8 +179,7 @@ def limit_where_the_train_is(series: dict[str, np.ndarray], parameters: dict,
         settings, journey = context.profile_settings, getattr(context.plan, "journey", None)
     except ScenarioError:
         return np.asarray(series["speed_limit"], dtype=float)
-    return np.array([plan_speed_limit(settings, journey, position)
-                     for position in np.asarray(series["position"], dtype=float)])
+    return plan_speed_limits(settings, journey, line, series["position"])
 
 
 def pantograph_in_neutral(series: dict[str, np.ndarray], parameters: dict, line: Line | None

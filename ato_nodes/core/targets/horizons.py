@@ -16,8 +16,10 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from ..base.kernels import jitable, overload
-from ..train.line import LineTables, speed_limit
+import numpy as np
+
+from ..base.kernels import compiled, jitable, overload
+from ..train.line import Line, LineTables, line_arrays, speed_limit
 from .profiles import DepartureRamp, PlanTable, departing, table_limit, table_speed
 from .replan import ReplanSettings, replan_request
 from .served import START, JourneyState, JourneyTable, journey_limit, journey_speed, observed
@@ -183,3 +185,25 @@ def plan_speed_limit(settings: ProfileSettings, journey: JourneyTable | None,
     if settings.line.limits_end > settings.line.tunnels_end:
         return speed_limit(settings.line, position)
     return math.inf
+
+
+def _limits_at(settings: ProfileSettings, journey: JourneyTable | None, positions: np.ndarray
+               ) -> np.ndarray:
+    limits = np.empty(len(positions))
+    for i in range(len(positions)):
+        limits[i] = plan_speed_limit(settings, journey, positions[i])
+    return limits
+
+
+_compiled_limits_at = compiled(_limits_at)
+
+
+def plan_speed_limits(settings: ProfileSettings, journey: JourneyTable | None,
+                      line: Line | None, positions: np.ndarray) -> np.ndarray:
+    """plan_speed_limit at each of `positions` (m), m/s, for the settings made on `line`:
+    compiled when numba is installed (the line read as one array, as the loop reads it),
+    the same bits."""
+    positions = np.asarray(positions, dtype=float)
+    if _compiled_limits_at is None:
+        return _limits_at(settings, journey, positions)
+    return _compiled_limits_at(settings._replace(line=line_arrays(line)), journey, positions)
