@@ -44,7 +44,7 @@ class LimiterSettings(NamedTuple):
     mode_band: float       # m/s (0: off)
     holding_brake: float   # N/kN (0: none)
     holding_target: float  # m/s
-    slip_hold: bool = False  # the ramp starts from the rail's force while the wheels slip
+    slip_hold: bool = False  # the command held at the rail's force while the wheels slip
 
 
 @jitable
@@ -125,8 +125,8 @@ class CommandLimiter:
                  mode_band: float = 0.0, holding_brake: float = 0.0,
                  holding_target: float = 0.0, slip_hold: bool = False):
         if slip_hold and not max_rate > 0.0:
-            raise ScenarioError("controller.slip_hold ramps the command from the force the rail "
-                                "gives: it needs controller.max_rate above 0")
+            raise ScenarioError("controller.slip_hold holds the command's ramp at the force the "
+                                "rail gives: it needs controller.max_rate above 0")
         self.u_min, self.u_max = u_min, u_max
         self.max_change = max_rate * period
         self.mode_band = mode_band

@@ -279,7 +279,7 @@ class ControllerStage:
         self.controller, self.values = rebuilt, values
 
     def run_ready_steps(self) -> list:
-        """Run every step whose inputs have both arrived; their outputs in order."""
+        """Run every step whose inputs have all arrived; their outputs in order."""
         outputs = []
         while self.speeds and self.horizons and (self.efforts is None or self.efforts):
             if self.pending:
