@@ -32,14 +32,19 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = "seed004-metro-ato"
 BALISES = {"odometry.balise_spacing": 500.0}
 BEACONS = {"odometry.beacon_distances": "150,50,20,5", "odometry.beacon_accuracy": 0.02}
+# every sensor but the tachometer off: each case names what it has (the scenario's own
+# sensor set, ato-on-board's, would otherwise stand in for those it leaves out)
+TACHOMETER = {"odometry.radar": False, "odometry.accelerometer": False,
+              "odometry.balise_spacing": 0.0, "odometry.beacon_distances": ""}
 SENSORS = {  # label -> the odometry.* values of the case
     "tachometer, radar, accelerometer, balises, beacons": {
-        **BALISES, **BEACONS, "odometry.radar": True, "odometry.accelerometer": True},
+        **TACHOMETER, **BALISES, **BEACONS, "odometry.radar": True,
+        "odometry.accelerometer": True},
     "tachometer, accelerometer, balises, beacons": {
-        **BALISES, **BEACONS, "odometry.accelerometer": True},
-    "tachometer, balises, beacons": {**BALISES, **BEACONS},
-    "tachometer, balises (no beacons)": BALISES,
-    "tachometer alone": {},
+        **TACHOMETER, **BALISES, **BEACONS, "odometry.accelerometer": True},
+    "tachometer, balises, beacons": {**TACHOMETER, **BALISES, **BEACONS},
+    "tachometer, balises (no beacons)": {**TACHOMETER, **BALISES},
+    "tachometer alone": TACHOMETER,
 }
 
 
