@@ -15,7 +15,7 @@ from ato_nodes.core.train.adhesion import (ADHESION_FACTORS, adhered, adhesion_l
                                            adhesion_of, wheel_creep)
 from ato_nodes.core.train.lines import line_of
 from ato_nodes.core.train.odometry import odometry_settings
-from commands import run_stack
+from commands import run_stack, script
 
 SENSED = ["odometry.enabled=true", "odometry.balise_spacing=500",
           "odometry.beacon_distances=150,50,20,5", "odometry.beacon_accuracy=0.02",
@@ -211,3 +211,13 @@ def test_a_slipping_train_through_the_stack_is_the_in_process_run(tmp_path):
     assert (looped["wheel_creep"] > 0.0).any()
     for name in set(looped) - {"t"}:
         assert np.array_equal(stack[name], looped[name], equal_nan=True), name
+
+
+def test_the_accuracy_study_runs_each_sensor_set_it_names(tmp_path):
+    """scripts/localisation_accuracy.py on a scenario with its own sensors (ato-on-board):
+    every case runs the sensors its label names, not the scenario's (fails before: five
+    identical rows)."""
+    result = script("localisation_accuracy.py", "--figure", tmp_path / "accuracy.png")
+    assert result.returncode == 0, result.stderr
+    rows = [line for line in result.stdout.splitlines() if line.startswith("| tach")]
+    assert len(rows) == 5 and len({row.split("|")[2] for row in rows}) >= 3, result.stdout
