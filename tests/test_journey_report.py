@@ -16,7 +16,8 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
 from ato_nodes.core.run.loop import simulate
-from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
+from ato_nodes.core.run.scoring import (LINE_BASE64, encode_line, kept_files,
+                                      limit_where_the_train_is, run_line)
 from ato_nodes.core.targets.timetable import load_timetable
 from ato_nodes.core.train.line import Section
 from ato_nodes.results.journeys import (TIMETABLE, WORST_ARRIVAL, WORST_STOP, run_journey,
@@ -159,6 +160,14 @@ def test_a_bag_moved_to_another_machine_is_scored_on_the_timetable_it_keeps(jour
     assert run_timetable(elsewhere.parameters).stops == here.timetable.stops
     (there,), notes = journey_reports([judge(elsewhere)])
     assert station_rows(there.indices) == station_rows(here.indices) and not notes  # NaNs
+    # overspeed judged where the train was, from the plan the bag's copies make again,
+    # not from the limit recorded where the ATO had it (here misread: 0.5 m/s)
+    misread = {**journey.series, "speed_limit": np.full(len(journey.series["t"]), 0.5)}
+    true_limit = limit_where_the_train_is(misread, journey.parameters,
+                                          run_line(journey.parameters))
+    assert np.array_equal(limit_where_the_train_is(
+        misread, elsewhere.parameters, run_line(elsewhere.parameters)), true_limit)
+    assert true_limit.min() > 0.5
     journeys, notes = journey_reports([judge(moved(journey, tmp_path, keep=False))])
     assert not journeys and "neither kept in the bag nor on this machine" in notes[0]
     tampered = dict(elsewhere.parameters)

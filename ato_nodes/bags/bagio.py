@@ -22,9 +22,7 @@ file.
 
 from __future__ import annotations
 
-import base64
 import json
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
@@ -37,7 +35,7 @@ from rosbags.typesys import Stores, get_typestore
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.schema import SPEC_BY_NAME, load_plugins, steps, upgraded
 from ato_nodes.core.run.last_stop import planned_steps
-from ato_nodes.core.run.scoring import KEPT_FILES, LINE_BASE64, kept_file, run_line
+from ato_nodes.core.run.scoring import KEPT_FILES, LINE_BASE64, files_kept, run_line
 from ato_nodes.core.base.topics import topic_map
 
 PARAMETERS_KEY = "ato_nodes.parameters"  # the run's parameters, JSON, in metadata custom_data
@@ -488,45 +486,19 @@ def read_frame(bag: str | Path, mapping: dict[str, str] | None = None):
     return pandas.DataFrame(run_columns(read_run(bag, mapping))).set_index("t")
 
 
-def _on_kept_line(timetable: Path, line_copy: str) -> None:
-    """The timetable's copy made to name the line's copy: its `line:` named the line
-    where it was then (absolute, or relative to a folder the copy is not in)."""
-    text = timetable.read_text(encoding="utf-8")
-    try:
-        named = next(value for key, value in yaml.compose(text).value
-                     if key.value == "line")
-    except (yaml.YAMLError, AttributeError, TypeError, ValueError, StopIteration):
-        return  # the plan says what is wrong with the copy, in one line
-    timetable.write_text(text[:named.start_mark.index] + json.dumps(line_copy)
-                         + text[named.end_mark.index:], encoding="utf-8")
-
-
 def resimulate(run: Run) -> tuple[dict[str, np.ndarray], list[str]]:
     """The run simulated in-process from its bag alone: its parameters, the files it
     keeps (line, tables, model) and its live parameter changes. Returns the series and
     the names of the recorded series that differ from it over the steps the bag holds
     (empty: bit for bit; an interrupted run's bag is compared over what it holds)."""
     from ato_nodes.core.run.loop import simulate
-    from ato_nodes.results.journeys import TIMETABLE
     if not run.parameters:
         raise BagError(f"{run.path}: the bag keeps no run parameters to simulate from")
     if run.parameters.get(EXTERNAL_LAW):
         raise ExternalLaw(f"not re-simulated: the controller was an external node's law "
                           f"({run.parameters[EXTERNAL_LAW]}), which only that node runs; the "
                           "bag is scored as recorded")
-    values = dict(run.parameters)
-    with tempfile.TemporaryDirectory() as folder:
-        kept = {"line.file": base64.b64decode(values[LINE_BASE64])
-                if values.get(LINE_BASE64) else None}
-        kept.update({name: kept_file(values, name) for name in KEPT_FILES})
-        for name, content in kept.items():
-            if content is not None:  # a folder each: a line and its timetable share a name
-                copy = Path(folder) / name / Path(values[name]).name
-                copy.parent.mkdir()
-                copy.write_bytes(content)
-                values[name] = str(copy)
-        if kept[TIMETABLE] is not None and kept["line.file"] is not None:
-            _on_kept_line(Path(values[TIMETABLE]), values["line.file"])
+    with files_kept(run.parameters) as values:
         try:
             series = simulate(values, changes=run.parameter_changes)
         except ScenarioError as exc:

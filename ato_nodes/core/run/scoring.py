@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import json
 import math
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ..base.errors import ScenarioError
 from ..base.units import MS_TO_KMH
@@ -57,6 +62,42 @@ def kept_file(parameters: dict, name: str) -> bytes | None:
     if hashlib.sha256(content).hexdigest() != parameters.get(f"{name}.sha256"):
         raise ValueError(f"the copy of {name} kept in the bag does not match its sha256")
     return content
+
+
+@contextmanager
+def files_kept(parameters: dict) -> Iterator[dict]:
+    """The run's parameters with the files its bag keeps (the line, tables, model,
+    timetable) written out to a temporary folder and named there, for as long as the
+    context lasts: a bag's run made again without the files it once read."""
+    values = dict(parameters)
+    with tempfile.TemporaryDirectory() as folder:
+        kept = {"line.file": base64.b64decode(values[LINE_BASE64])
+                if values.get(LINE_BASE64) else None}
+        kept.update({name: kept_file(values, name) for name in KEPT_FILES})
+        for name, content in kept.items():
+            if content is not None:  # a folder each: a line and its timetable share a name
+                copy = Path(folder) / name / Path(values[name]).name
+                copy.parent.mkdir()
+                copy.write_bytes(content)
+                values[name] = str(copy)
+        timetable = "profile.journey.timetable"
+        if kept[timetable] is not None and kept["line.file"] is not None:
+            _on_kept_line(Path(values[timetable]), values["line.file"])
+        yield values
+
+
+def _on_kept_line(timetable: Path, line_copy: str) -> None:
+    """The timetable's copy made to name the line's copy: its `line:` named the line
+    where it was then (absolute, or relative to a folder the copy is not in)."""
+    text = timetable.read_text(encoding="utf-8")
+    try:
+        named = next(value for key, value in yaml.compose(text).value
+                     if key.value == "line")
+    except (yaml.YAMLError, AttributeError, TypeError, ValueError, StopIteration):
+        return  # the plan says what is wrong with the copy, in one line
+    timetable.write_text(text[:named.start_mark.index] + json.dumps(line_copy)
+                         + text[named.end_mark.index:], encoding="utf-8")
+
 
 
 def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
@@ -171,15 +212,20 @@ def limit_where_the_train_is(series: dict[str, np.ndarray], parameters: dict,
                              line: Line | None) -> np.ndarray:
     """The limit at each sample's true position, m/s (inf: none). A run on its sensors
     records the limit where the ATO has the train (its located position): overspeed is
-    judged where the train is. The plan's limits as it started (a re-plan keeps them); the
-    recorded limit when the plan cannot be made again here (a bag whose timetable is not
-    on this machine, or no longer the one it ran)."""
-    try:
-        context = RunContext({**defaults(), **parameters}, line)
-        settings, journey = context.profile_settings, getattr(context.plan, "journey", None)
-    except ScenarioError:
-        return np.asarray(series["speed_limit"], dtype=float)
-    return plan_speed_limits(settings, journey, line, series["position"])
+    judged where the train is. The plan's limits as it started (a re-plan keeps them),
+    made from the files the run names, else from the copies its bag keeps (a bag moved
+    to another machine, its timetable gone or changed); the recorded limit when neither
+    makes it."""
+    for made_again in (nullcontext(parameters), files_kept(parameters)):
+        try:
+            with made_again as values:
+                context = RunContext({**defaults(), **values}, line)
+                settings, journey = context.profile_settings, getattr(context.plan,
+                                                                      "journey", None)
+        except (ScenarioError, ValueError):
+            continue
+        return plan_speed_limits(settings, journey, line, series["position"])
+    return np.asarray(series["speed_limit"], dtype=float)
 
 
 def pantograph_in_neutral(series: dict[str, np.ndarray], parameters: dict, line: Line | None
