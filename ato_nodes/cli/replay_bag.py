@@ -25,7 +25,6 @@ from ato_nodes.launcher.launch import DomainLock, isolate_to_this_host
 from ato_nodes.nodes import watchdog
 
 WAIT_LIMIT = 30.0  # s to wait for --wait-subscribers
-TEARDOWN_LIMIT = 10.0  # s the ROS teardown may take before the process just exits
 
 
 def parse_args() -> argparse.Namespace:
@@ -62,7 +61,7 @@ def main() -> None:
         # after a slow reliable subscriber on a loaded machine: it may not hold the exit.
         leaving = sys.exc_info()[1]  # the exit under way, if any: its status stands
         status = leaving.code if isinstance(leaving, SystemExit) else int(leaving is not None)
-        watchdog.exit_after(TEARDOWN_LIMIT, status)
+        watchdog.exit_after(watchdog.TEARDOWN_LIMIT, status)
         node.destroy_node()
         rclpy.try_shutdown()
 

@@ -39,6 +39,7 @@ from ato_nodes.core.config.schema import (SPEC_BY_NAME, NodeValues, ParamSpec, f
 from ato_nodes.core.run.scoring import LINE_BASE64, encode_line, kept_files
 from ato_nodes.core.base.topics import Topic, topic_map
 from ato_nodes.nodes import watchdog
+from ato_nodes.nodes.watchdog import TEARDOWN_LIMIT
 from ato_nodes.nodes.timing import install as install_timing
 
 QOS = {
@@ -67,12 +68,6 @@ HOUSEKEEPING_PERIOD = 0.02
 RUNNING_HOUSEKEEPING_PERIOD = 0.1
 HOUSEKEEPING_CALLBACKS = 16
 FLUSH_TIMEOUT = 2.0  # s a stopping node waits for its subscribers to acknowledge its data
-# s a node's teardown (its last records flushed, the bag closed, the middleware shut down)
-# may take before the process gives up on it: every Python thread's stack on stderr, then
-# exit status 1 while the node still holds its work (faulthandler's watchdog runs without
-# the interpreter lock, which a call stalled in the middleware holds), the node's own
-# status once that is released (watchdog.exit_after), rather than a process never exiting
-TEARDOWN_LIMIT = 10.0
 # Run events logged (INFO, /rosout): each node logs the start it hears and its own
 # shutdown; the end of the run once, by the node that announces it (the plant's
 # 'finished', the recorder's 'recorded'): a node hears events of different nodes in no

@@ -18,6 +18,12 @@ import sys
 CLOCK_MONOTONIC = 1
 SIGEV_THREAD = 2
 EXIT_DELAY = 0.5  # s after the stacks are written: faulthandler's dump takes milliseconds
+# s a process's teardown (its last records flushed, a bag closed, the middleware shut
+# down) may take before it gives up on it: every Python thread's stack on stderr, then exit
+# status 1 while it still holds its work (faulthandler's watchdog runs without the
+# interpreter lock, which a call stalled in the middleware holds), its own status once
+# that is released (exit_after), rather than a process never exiting
+TEARDOWN_LIMIT = 10.0
 
 
 class _ThreadNotify(ctypes.Structure):
