@@ -19,12 +19,11 @@ import numpy as np
 from ..base.kernels import jitable
 from ..control.localisation import (LocaliserSettings, LocaliserState, localiser_settings,
                                     localiser_start, localiser_step, located_estimate)
-from ..train.adhesion import wheel_creep
 from ..train.line import Line
 from ..train.odometry import (OdometerState, OdometrySettings, accelerometer_reading,
                               odometer_advance, odometer_start, odometry_settings,
                               radar_reading)
-from ..train.plant import TrainMotion, TrainParameters, TrainSettings, demanded_force, \
+from ..train.plant import TrainMotion, TrainParameters, TrainSettings, demand_and_creep, \
     train_outputs
 
 # What a run with odometry records beside the SERIES, one value a step (docs/reference.md);
@@ -99,8 +98,7 @@ def odometer_moved(odometry: Odometry | None, state: OdometryState | None,
     reads it)."""
     if state is None:
         return state
-    demand = demanded_force(train, after.speed, after.lag, after.acting, after.powered)
-    creep = wheel_creep(demand, after.speed, train.constants.adhesion)
+    demand, creep = demand_and_creep(train, after)
     return OdometryState(odometer_advance(odometry.sensors, state.odometer, before.position,
                                           after.position, creep), state.localiser, creep,
                          demand)

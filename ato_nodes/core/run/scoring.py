@@ -99,7 +99,6 @@ def _on_kept_line(timetable: Path, line_copy: str) -> None:
                          + text[named.end_mark.index:], encoding="utf-8")
 
 
-
 def score_series(series: dict[str, np.ndarray], parameters: dict | None = None
                  ) -> dict[str, float]:
     """Indices of a run. Series of unequal length (an interrupted run) are cut to

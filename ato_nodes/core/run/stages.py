@@ -156,7 +156,8 @@ class PlantOutputs:
     line_resistance: float  # N/kN gradient + curve + tunnel resistance of the belt
     located_position: float  # m, where the ATO has the train (the true position without
     odometry: list[float]    # odometry); ODOMETRY_SERIES' values (empty without)
-    drive_effort: float      # N/kN the rail gives while the wheels slip or slide (else NaN)
+    drive_effort: float      # N/kN the rail gives while the wheels slip or slide (NaN while
+                             # they roll, or without controller.slip_hold)
 
 
 class PlantStage:
@@ -179,6 +180,7 @@ class PlantStage:
             TrainState(position=values["plant.initial_position"],
                        speed=values["plant.initial_speed"]), line)
         self.max_speed = values["plant.max_speed"]
+        self.slip_hold = values["controller.slip_hold"]  # the drive's effort published
         self.noise = values["plant.speed_noise"]
         self.quantum = values["plant.speed_quantum"]
         self.rng = np.random.default_rng(values["plant.noise_seed"])
@@ -217,7 +219,8 @@ class PlantStage:
             row = values.tolist()
         return PlantOutputs(motion.position, measured, motion.speed, acceleration,
                             disturbance, motion.force, resistance, line_resistance, position,
-                            row, drive_effort(self.train.settings, motion))
+                            row, drive_effort(self.train.settings, motion)
+                            if self.slip_hold else math.nan)
 
     def apply(self, command: float) -> None:
         state = self.train.state  # step k's, as its outputs gave it

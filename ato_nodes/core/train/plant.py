@@ -340,14 +340,20 @@ def demanded_force(settings: TrainSettings, v: float, lag: float, acting: float,
 
 
 @jitable
+def demand_and_creep(settings: TrainSettings, motion: TrainMotion) -> tuple[float, float]:
+    """At the end of `motion`'s period: the force asked of the rail (N/kN,
+    demanded_force) and the wheels' creep under it (core/train/adhesion.wheel_creep)."""
+    demand = demanded_force(settings, motion.speed, motion.lag, motion.acting, motion.powered)
+    return demand, wheel_creep(demand, motion.speed, settings.constants.adhesion)
+
+
+@jitable
 def drive_effort(settings: TrainSettings, motion: TrainMotion) -> float:
     """The force the rail gives (N/kN) at the end of `motion`'s period while the drive's
     anti-slip or the wheel-slide protection acts (the achieved effort a TCMS reports to the
     ATO); NaN while the wheels roll."""
-    demand = demanded_force(settings, motion.speed, motion.lag, motion.acting, motion.powered)
-    if wheel_creep(demand, motion.speed, settings.constants.adhesion) == 0.0:
-        return math.nan
-    return motion.force
+    _, creep = demand_and_creep(settings, motion)
+    return math.nan if creep == 0.0 else motion.force
 
 
 @jitable(inline=True)
