@@ -34,7 +34,8 @@ setup(
                       "mcap", "mcap-ros2-support", "plotly"],
     extras_require={"dask": ["dask[distributed]"],  # tune.py --cluster
                     "tables": ["pandas", "pyarrow"],  # bags.bagio.read_frame, export.py --parquet
-                    "fast": ["numba"]},  # compiled in-process runs (core/run/fast_loop.py)
+                    "fast": ["numba"],  # compiled in-process runs (core/run/fast_loop.py)
+                    "pareto": ["pymoo", "moocore"]},  # tune.py --objectives
     zip_safe=True,
     maintainer="ATO stack maintainers",
     description="ROS 2 automatic train operation stack: nodes, lockstep runs, MCAP scoring",

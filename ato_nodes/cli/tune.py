@@ -34,6 +34,9 @@ from ato_nodes.core.optimizers import ALGORITHMS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import check_launcher_free, prepare
 from ato_nodes.studies.runner import COUNT_BOUNDS, check_counts
+from ato_nodes.core.optimizers.pareto import PARETO_ALGORITHMS
+from ato_nodes.studies.pareto_tuning import Choice, ParetoTuner
+from ato_nodes.studies.train_spread import TrainSpread
 from ato_nodes.studies.tuning import (DEFAULT_ALGORITHM, FITNESS, PENALTY, Requirement,
                                       SearchSpace, Tuner, TuningLost, TuningSettings,
                                       best_command, check_external)
@@ -43,7 +46,8 @@ def parse_args() -> argparse.Namespace:
     from ato_nodes.launcher.launch import split_command  # its command after --
     ours, command = split_command(sys.argv[1:])
     parser = cli.argument_parser(__doc__)
-    parser.add_argument("--algorithm", default=DEFAULT_ALGORITHM, choices=sorted(ALGORITHMS))
+    parser.add_argument("--algorithm", choices=sorted(ALGORITHMS) + list(PARETO_ALGORITHMS),
+                        help=f"default {DEFAULT_ALGORITHM}; with --objectives nsga2")
     parser.add_argument("--scenario", default="seed000")
     parser.add_argument("--params", action="append", metavar="NAME=LOW:HIGH,...",
                         help="parameters to tune and their bounds (repeatable; default: the "
@@ -52,11 +56,13 @@ def parse_args() -> argparse.Namespace:
                         help="budget of fitness evaluations")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--workers", type=int, default=1, help="candidates run in parallel")
-    parser.add_argument("--fitness", default="itae", choices=sorted(FITNESS))
+    parser.add_argument("--fitness", choices=sorted(FITNESS), help="the index minimised "
+                        "(default itae)")
     parser.add_argument("--require", action="append", default=[], metavar="INDEX<=VALUE",
                         help="operational requirement on a scored index (repeatable), e.g. "
                         "abs_stopping_error<=0.3: a candidate that breaks one is infeasible and "
                         "ranks after every feasible one, by how far it misses")
+    add_objective_arguments(parser)
     parser.add_argument("--population", type=int, help="population size (default: the paper's)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="fixed parameter override for every candidate (repeatable)")
@@ -86,6 +92,31 @@ def parse_args() -> argparse.Namespace:
     return args
 
 
+def add_objective_arguments(parser: argparse.ArgumentParser) -> None:
+    """Several objectives at once, and how a member of the front is chosen."""
+    parser.add_argument("--objectives", metavar="NAME,NAME[,...]",
+                        help="several objectives at once, each an index of the catalogue "
+                        "(e.g. energy,itae,p95_abs_error_kmh), minimised or maximised as it "
+                        "should be: the front with nsga2 or nsga3, --require as hard "
+                        "constraints (docs/reference.md)")
+    parser.add_argument("--trains", type=int, metavar="N",
+                        help="judge each candidate over the same N real trains, drawn as "
+                        "robustness.py draws them (in-process)")
+    parser.add_argument("--train-seed", type=int, default=1,
+                        help="with --trains: the trains' seed (robustness.py's --seed; the "
+                        "optimizer's is --seed)")
+    parser.add_argument("--statistic", default="mean", metavar="mean|worst|qP",
+                        help="with --trains: each objective over the trains (qP: the P "
+                        "quantile); every requirement must hold for every train")
+    parser.add_argument("--weights", metavar="W,W[,...]",
+                        help="with --objectives: best.yaml is the front's member whose "
+                        "pseudo-weights are nearest these (default: the knee)")
+    parser.add_argument("--reference", metavar="V,V[,...]",
+                        help="with --objectives: the hypervolume's reference point, in the "
+                        "objectives' units (default: the front's nadir plus a tenth of its "
+                        "span)")
+
+
 def search_space(args: argparse.Namespace, values: dict) -> SearchSpace:
     """The tuned parameters: the scenario's (--params, else the kind's default space) or,
     with --external, the external node's own, as it declares them."""
@@ -103,6 +134,30 @@ def search_space(args: argparse.Namespace, values: dict) -> SearchSpace:
         raise ScenarioError(f"--external controller: command {args.command[0]} not found")
     from ato_nodes.cli.check_node import declared_parameters
     return SearchSpace.of_node(declared_parameters(args.command, values), args.params)
+
+
+def tuning_settings(args: argparse.Namespace, space: SearchSpace
+                    ) -> tuple[TuningSettings, Choice]:
+    """The tuning the arguments ask for, and how a front's member is chosen."""
+    options = {"population_size": args.population} if args.population else {}
+    objectives = tuple(name.strip() for name in (args.objectives or "").split(",")
+                       if name.strip())
+    if objectives and args.fitness:
+        raise ScenarioError("--fitness is one objective; with --objectives name them all")
+    if not objectives and (args.weights or args.reference):
+        raise ScenarioError("--weights and --reference choose from a front: give "
+                            "--objectives")
+    algorithm = args.algorithm or (PARETO_ALGORITHMS[0] if objectives
+                                   else DEFAULT_ALGORITHM)
+    settings = TuningSettings(algorithm, args.scenario, space, args.evaluations,
+                              args.seed, args.workers, args.in_process,
+                              args.fitness or "itae", args.timeout, options,
+                              tuple(Requirement.parse(text) for text in args.require),
+                              args.keep_bags, not args.no_prune, args.cluster,
+                              tuple(args.command), objectives,
+                              TrainSpread(args.trains, args.train_seed, args.statistic)
+                              if args.trains is not None else None)
+    return settings, Choice.parse(args.weights, args.reference, len(objectives))
 
 
 def main() -> None:
@@ -123,13 +178,8 @@ def tune() -> None:
         values = prepare(args.scenario, args.set)
         check_launcher_free(values)
         space = search_space(args, values)
-        options = {"population_size": args.population} if args.population else {}
-        settings = TuningSettings(args.algorithm, args.scenario, space, args.evaluations,
-                                  args.seed, args.workers, args.in_process, args.fitness,
-                                  args.timeout, options,
-                                  tuple(Requirement.parse(text) for text in args.require),
-                                  args.keep_bags, not args.no_prune, args.cluster,
-                                  tuple(args.command))
+        settings, choice = tuning_settings(args, space)
+        objectives = settings.objectives
         if not args.params and not args.quiet:
             print(f"tuning the {'external node' if args.external else 'default'} search "
                   f"space: {space.describe()}")
@@ -139,7 +189,9 @@ def tune() -> None:
                   "'overspeed_time<=0')", file=sys.stderr)
         if args.out.exists() and any(args.out.iterdir()) and not args.resume:
             raise ScenarioError(f"{args.out} is not empty; use --resume or another --out")
-        tuner = Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet)
+        tuner = (ParetoTuner(values, settings, args.out, choice, resume=args.resume,
+                             progress=not args.quiet) if objectives else
+                 Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet))
         if tuner.finished:
             print(f"the tuning in {args.out} is finished; nothing to run")
         else:
@@ -159,6 +211,9 @@ def tune() -> None:
 def report(summary: dict, out: Path) -> None:
     """What a finished tuning prints, from its summary.json (a resume of a finished
     tuning prints it again)."""
+    if "objectives" in summary or "front_size" in summary:
+        report_front(summary, out)
+        return
     if summary["best_fitness"] >= PENALTY:
         cli.fail(f"every one of the {summary['evaluations_used']} candidates failed "
                  f"({summary['failed_evaluations']}), so there is no best.yaml; see "
@@ -179,3 +234,27 @@ def report(summary: dict, out: Path) -> None:
     print(f"outputs: {out}/best.yaml, evaluations.jsonl, history.csv, convergence.png")
     print("run the best: " + best_command(out, tuple(summary.get("external", ())),
                                           summary["best_params"]))
+
+
+def report_front(summary: dict, out: Path) -> None:
+    """What a finished multi-objective tuning prints."""
+    if not summary["front_size"]:
+        cli.fail(f"none of the {summary['evaluations_used']} candidates met every "
+                 f"requirement, so there is no front and no best.yaml; see "
+                 f"{out / 'evaluations.jsonl'}", 1)
+    chosen = summary["chosen"]
+    print(f"front of {summary['front_size']} after {summary['evaluations_used']} evaluations "
+          f"({summary['feasible_evaluations']} feasible), {summary['generations']} "
+          f"generations; hypervolume {summary['hypervolume']:.6g} against "
+          f"({', '.join(f'{value:.6g}' for value in summary['reference_point'])})")
+    for objective in summary["objectives"]:
+        print(f"  {objective['sense']} {objective['index']}: "
+              f"{objective['ideal']:.6g} .. {objective['nadir']:.6g} on the front, chosen "
+              f"{chosen['objectives'][objective['index']]:.6g}")
+    print(f"chosen: row {chosen['row']} ({chosen['by']})")
+    for name, value in chosen["params"].items():
+        print(f"  {name} = {value:.6g}")
+    print(f"outputs: {out}/best.yaml, front.csv, front.json, hypervolume.csv, pareto.png, "
+          "evaluations.jsonl")
+    print("run the chosen: " + best_command(out, tuple(summary.get("external", ())),
+                                            chosen["params"]))

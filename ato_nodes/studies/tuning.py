@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import importlib.util
 import json
 import math
 import os
@@ -32,12 +33,14 @@ import yaml
 
 from ato_nodes.results import jsontext
 from ato_nodes.studies.backend import Backend, ClusterLost, check_cluster, show_progress
+from ato_nodes.studies.train_spread import TrainSpread, evaluate_over_trains
 from ato_nodes.studies.directory import (check_same_settings, conditions_digest, hold_directory,
                                          name_holder)
 from ato_nodes.reports.analysis import plot_convergence
 from ato_nodes.core.base import kernels
 from ato_nodes.core.run.loop import simulate, warm
 from ato_nodes.core.optimizers import ALGORITHMS, Result, create, optimize
+from ato_nodes.core.optimizers.pareto import PARETO_ALGORITHMS
 from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.scoring.indices import RunningIndex
@@ -46,7 +49,7 @@ from ato_nodes.core.config.scenario import (apply_overrides, check_used, load_sc
                                             resolve_scenario, ros_parameter_file)
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import planned_steps
-from ato_nodes.core.scoring.catalogue import FITNESS, Requirement
+from ato_nodes.core.scoring.catalogue import FITNESS, MAXIMISED, Requirement, objective_index
 from ato_nodes.core.run.scoring import score_series
 
 DEFAULT_ALGORITHM = "bas-pso"  # tune.py's, and the league's for every kind
@@ -175,6 +178,11 @@ class Objective:
     requirements: tuple[Requirement, ...] = ()
 
     @property
+    def indices(self) -> tuple[str, ...]:
+        """The indices it judges a run by."""
+        return (FITNESS[self.fitness],)
+
+    @property
     def prunable(self) -> bool:
         """The fitness only grows along a run (ITAE, IAE, max abs(e)), so a partial run
         bounds it from below."""
@@ -193,6 +201,51 @@ class Objective:
                             for r, _ in broken)
         miss = min(sum(v for _, v in broken), 1e5)  # stays below PENALTY: still a run
         return INFEASIBLE + 1e6 * miss, "infeasible", message
+
+
+@dataclass(frozen=True)
+class Objectives(Objective):
+    """Several objectives at once (tune.py --objectives), each an index of the catalogue
+    minimised, or maximised when more of it is better (catalogue.MAXIMISED), and the
+    requirements as hard constraints. A run's fitness in the log is its first objective;
+    nothing is pruned (a front has no one bound to prune against)."""
+
+    objectives: tuple[str, ...] = ()  # as given: names or catalogue.OBJECTIVE_NAMES' short
+
+    @property
+    def indices(self) -> tuple[str, ...]:
+        return tuple(objective_index(name) for name in self.objectives)
+
+    @property
+    def prunable(self) -> bool:
+        return False
+
+    def score(self, indices: dict[str, Any]) -> tuple[float, str, str]:
+        first = indices.get(self.indices[0], math.nan)
+        broken = [r for r in self.requirements if r.violation(indices) > 0.0]
+        if not all(math.isfinite(indices.get(name, math.nan)) for name in self.indices):
+            missing = [name for name in self.indices if not math.isfinite(
+                indices.get(name, math.nan))]
+            return PENALTY, "diverged", f"{', '.join(missing)} not finite"
+        message = "; ".join(f"{r.name} {indices.get(r.name, math.nan):.4g} > {r.limit:g}"
+                            for r in broken)
+        return float(first), "infeasible" if broken else "ok", message
+
+    def vector(self, record: Evaluation) -> tuple[np.ndarray, np.ndarray]:
+        """(F, G) of an evaluation for the optimizer: F every objective minimised (a
+        maximised one negated), G each requirement's signed violation (relative to
+        max(|limit|, 1): <= 0 met) and last whether the run completed (<= 0: it did). A
+        run that failed has every G at FAILED_VIOLATION and F at PENALTY."""
+        if record.status not in ("ok", "infeasible"):
+            return (np.full(len(self.objectives), PENALTY),
+                    np.full(len(self.requirements) + 1, FAILED_VIOLATION))
+        F = np.array([-record.indices[name] if name in MAXIMISED else record.indices[name]
+                      for name in self.indices], dtype=float)
+        G = [r.signed_violation(record.indices) for r in self.requirements]
+        return F, np.array([*G, -1.0])
+
+
+FAILED_VIOLATION = 1e3  # a failed run's every constraint: more than any run that ended
 
 
 def objective_of(objective: Objective | str) -> Objective:
@@ -426,9 +479,13 @@ class TuningSettings:
     prune: bool = True         # in-process: end candidates that cannot matter (see Tuner)
     cluster: str = ""          # "" = local worker processes; local:N or tcp://HOST:PORT = Dask
     external: tuple[str, ...] = ()  # an external controller's command (its own parameters)
+    objectives: tuple[str, ...] = ()  # several at once (ParetoTuner); else the fitness
+    spread: TrainSpread | None = None  # each candidate over many trains
 
     @property
     def objective(self) -> Objective:
+        if self.objectives:
+            return Objectives(self.fitness, self.requirements, self.objectives)
         return Objective(self.fitness, self.requirements)
 
     def describe(self) -> dict[str, Any]:
@@ -439,7 +496,9 @@ class TuningSettings:
                 "in_process": self.in_process, "options": self.options,
                 "prune": self.prune,
                 "requirements": [f"{r.name}<={r.limit:g}" for r in self.requirements],
-                **({"external": list(self.external)} if self.external else {})}
+                **({"external": list(self.external)} if self.external else {}),
+                **({"objectives": list(self.objectives)} if self.objectives else {}),
+                **(self.spread.describe() if self.spread else {})}
 
 
 class Tuner:
@@ -474,19 +533,23 @@ class Tuner:
             self.log.start()
         self.in_process_pool = evaluate is None and settings.in_process
         self.evaluate = evaluate if evaluate is not None else self._evaluator()
-        algorithm = create(settings.algorithm, **settings.options)
-        # Pruning: a fitness that only grows, an algorithm that bounds its candidates
-        # (optimizers/base.py); in-process or by the supervisor; the result is the same.
-        self.prune = (settings.prune and evaluate is None and settings.objective.prunable
-                      and getattr(algorithm, "own_best_bound", False))
-        self.initial_evaluations = algorithm.initial_evaluations()
-        self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
+        self._plan(evaluate is None)
         self.cancel = threading.Event()  # stops the stack candidates under way
         self.next_index = 0
         self.fresh = 0  # evaluations run by this process (not replayed from the log)
         self.pruned = 0  # of them, ended early by pruning
         self.started = time.monotonic()
         self.best = math.inf
+
+    def _plan(self, own_evaluator: bool) -> None:
+        """The algorithm's pace (for the progress line) and whether it prunes: a fitness
+        that only grows, an algorithm that bounds its candidates (optimizers/base.py),
+        in-process or by the supervisor; the result is the same."""
+        algorithm = create(self.settings.algorithm, **self.settings.options)
+        self.prune = (self.settings.prune and own_evaluator and self.settings.objective.prunable
+                      and getattr(algorithm, "own_best_bound", False) and not self.settings.spread)
+        self.initial_evaluations = algorithm.initial_evaluations()
+        self.evaluations_per_iteration = algorithm.evaluations_per_iteration()
 
     @property
     def finished(self) -> bool:
@@ -497,6 +560,9 @@ class Tuner:
     def _evaluator(self) -> Callable[..., Evaluation]:
         """How the settings run a candidate: in a worker process, through the stack on
         any host of a Dask cluster, or through the stack here with its bag in OUT/runs."""
+        if self.settings.spread:
+            return functools.partial(evaluate_over_trains, timeout=self.settings.timeout,
+                                     spread=self.settings.spread, evaluate=evaluate_in_process)
         if self.settings.in_process:
             return functools.partial(evaluate_in_process, timeout=self.settings.timeout)
         if self.settings.cluster:  # a remote worker cannot reach this tuner's OUT/runs
@@ -542,6 +608,13 @@ class Tuner:
 
     def _batch_fitness(self, backend: Backend, population: np.ndarray,
                        bounds: np.ndarray | None = None) -> np.ndarray:
+        return np.array([record.fitness for record in self._batch(backend, population,
+                                                                    bounds)])
+
+    def _batch(self, backend: Backend, population: np.ndarray,
+               bounds: np.ndarray | None = None) -> list[Evaluation]:
+        """The population's evaluations in its order: from the log where it has them
+        (a resume), the rest run on the backend and logged as they finish."""
         requests = []
         for x in population:
             overrides = self.settings.space.overrides(x)
@@ -568,7 +641,7 @@ class Tuner:
                 self.log.append(record)
                 results[record.index] = record
                 self._report(record)
-        return np.array([results[index].fitness for index, _ in requests])
+        return [results[index] for index, _ in requests]
 
     def _report(self, record: Evaluation) -> None:
         self.best = min(self.best, record.fitness)
@@ -580,11 +653,15 @@ class Tuner:
         eta = (time.monotonic() - self.paced) / max(self.fresh, 1) * (total - done)
         iteration = max(0, done - self.initial_evaluations) // self.evaluations_per_iteration
         pruned = f"  pruned {self.pruned / max(self.fresh, 1):4.0%}" if self.prune else ""
-        line = (f"iteration {iteration:4d}  evaluations {done:5d}/{total}  best {self.best:.6g}"
+        line = (f"iteration {iteration:4d}  evaluations {done:5d}/{total}  {self._standing()}"
                 f"{pruned}  ETA {eta:6.0f} s")
         notable = record.status not in ("ok", "pruned")
         show_progress(done, total, line, f"candidate {record.index}: {record.status}"
                       if notable else "")
+
+    def _standing(self) -> str:
+        """Where the tuning stands, for the progress line."""
+        return f"best {self.best:.6g}"
 
     def run(self) -> Result:
         """The tuning. Ctrl-C stops the candidates under way at once (their runs are
@@ -644,21 +721,30 @@ class Tuner:
         """best.yaml: the base scenario by name (or by path relative to OUT) and what the
         best run changes in it, the tuned parameters and any --set; commented."""
         s = self.settings
+        feasible = "feasible" if result.best_f < INFEASIBLE else "INFEASIBLE"
+        return self.scenario_text(
+            f"Best of a {s.algorithm} tuning (seed {s.seed}, {result.evaluations} evaluations) "
+            f"on {s.scenario}, {time.strftime('%Y-%m-%d')}: fitness {s.fitness} = "
+            f"{result.best_f:.9g} ({feasible}"
+            + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ").",
+            s.space.overrides(result.best_x), best_values)
+
+    def scenario_text(self, header: str, overrides: dict[str, Any],
+                      best_values: dict[str, Any]) -> str:
+        """A scenario run_stack.py accepts: the base scenario by name (or by path relative
+        to OUT) and what `best_values` change in it, the tuned parameters and any --set,
+        under `header` and the command that runs it."""
+        s = self.settings
         base_path = resolve_scenario(s.scenario)
         base = (s.scenario if base_path.parent == config_dir() / "scenarios"
                 else os.path.relpath(base_path.resolve(), self.out.resolve()))
         base_values = load_scenario(s.scenario)
         changed = [name for name in SPEC_BY_NAME if best_values[name] != base_values[name]
                    and name not in ("recorder.output", "supervisor.report")]
-        feasible = "feasible" if result.best_f < INFEASIBLE else "INFEASIBLE"
-        run_best = best_command(self.out, s.external, s.space.overrides(result.best_x))
-        header = (f"# Best of a {s.algorithm} tuning (seed {s.seed}, {result.evaluations} "
-                  f"evaluations) on {s.scenario}, {time.strftime('%Y-%m-%d')}: fitness "
-                  f"{s.fitness} = {result.best_f:.9g} ({feasible}"
-                  + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ").\n"
-                  f"# Run it: {run_best}\n")
+        run_best = best_command(self.out, s.external, overrides)
         document = {"base": base, **ros_parameter_file(best_values, set(changed))}
-        return header + yaml.safe_dump(document, sort_keys=False)
+        return (f"# {header}\n# Run it: {run_best}\n"
+                + yaml.safe_dump(document, sort_keys=False))
 
 
 def best_command(out: Path, external: tuple[str, ...], best: dict[str, Any]) -> str:
@@ -683,9 +769,22 @@ def _check_settings(settings: TuningSettings) -> None:
     """A ScenarioError for an unknown algorithm or fitness, bags kept from a cluster, or
     an external node not run through the stack here."""
     check_external(settings.external, settings.in_process, settings.cluster)
-    if settings.algorithm not in ALGORITHMS:
-        raise ScenarioError(f"unknown algorithm {settings.algorithm!r}; known: "
-                            f"{', '.join(ALGORITHMS)}")
+    known = PARETO_ALGORITHMS if settings.objectives else tuple(ALGORITHMS)
+    if settings.algorithm not in known:
+        what = "multi-objective algorithm" if settings.objectives else "algorithm"
+        raise ScenarioError(f"unknown {what} {settings.algorithm!r}; known: "
+                            f"{', '.join(known)}")
+    for name in settings.objectives:
+        objective_index(name)
+    if settings.objectives and not all(importlib.util.find_spec(name)
+                                       for name in ("pymoo", "moocore")):
+        raise ScenarioError("--objectives needs pymoo and moocore: pip install pymoo moocore "
+                            "(requirements.txt pins them)")
+    if len(settings.objectives) == 1:
+        raise ScenarioError("--objectives needs two or more (one is --fitness)")
+    if settings.spread and not settings.in_process:
+        raise ScenarioError("--trains runs each candidate's trains in-process: give "
+                            "--in-process")
     if settings.fitness not in FITNESS:
         raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
                             f"{', '.join(FITNESS)}")

@@ -38,6 +38,25 @@ STOP_INDICES = ("stopping_error", "abs_stopping_error", "overrun", "arrival_time
 # A tuning's fitness (tune.py --fitness) -> the index it minimises.
 FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
            "p95_abs_error_kmh": "p95_abs_error_kmh"}
+# A multi-objective tuning's objectives (tune.py --objectives): any index with a size
+# (not a sign, a count of steps or a verdict) by its name, or by a fitness's or these
+# short names; each minimised but those more of which is better.
+NOT_OBJECTIVES = ("steps", "finite", "stopping_error", "overrun", "running_time_error")
+MAXIMISED = ("regenerated_energy_kwh",)
+OBJECTIVE_NAMES = {**FITNESS, "energy": "traction_energy_kwh", "net_energy": "net_energy_kwh",
+                   "jerk": "max_jerk", "comfort": "comfort_index", "stop": "abs_stopping_error",
+                   **{name: name for name in INDEX_NAMES if name not in NOT_OBJECTIVES}}
+
+
+def objective_index(name: str, source: str = "--objectives") -> str:
+    """The index an objective `name` names; one ScenarioError naming `source` otherwise."""
+    index = OBJECTIVE_NAMES.get(name.strip())
+    if index is None:
+        close = difflib.get_close_matches(name.strip(), OBJECTIVE_NAMES, n=1)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise ScenarioError(f"{source}: {name.strip()!r} is not an objective{hint}; an index "
+                            "with a size (e.g. energy, itae, p95_abs_error_kmh, max_jerk)")
+    return index
 
 
 @dataclass(frozen=True)
@@ -78,10 +97,15 @@ class Requirement:
 
     def violation(self, indices: dict[str, Any]) -> float:
         """0 when met; else how far it is broken, relative to max(|limit|, 1)."""
+        return max(0.0, self.signed_violation(indices))
+
+    def signed_violation(self, indices: dict[str, Any]) -> float:
+        """How far the index is past its limit, relative to max(|limit|, 1): <= 0 when
+        met (how far inside), 1e3 when the run has no finite value of it."""
         value = indices.get(self.name, math.nan)
         if not isinstance(value, (int, float)) or not math.isfinite(value):
             return 1e3
-        return max(0.0, value - self.limit) / max(abs(self.limit), 1.0)
+        return (value - self.limit) / max(abs(self.limit), 1.0)
 
 
 def format_indices(indices: dict) -> str:

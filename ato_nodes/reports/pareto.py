@@ -1,0 +1,45 @@
+"""A multi-objective tuning's figure (pareto.png): its front, the first two objectives
+against each other (the three in 3-D beside them when there are three), the chosen member
+marked, and the hypervolume after every generation against the evaluations."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+from ato_nodes.reports.analysis import _pyplot, _save
+
+
+def plot_pareto(front_file: Path, history_file: Path, path: Path) -> Path:
+    front = json.loads(front_file.read_text())
+    with history_file.open() as handle:
+        history = list(csv.DictReader(handle))
+    names = [objective["index"] for objective in front["objectives"]]
+    rows, chosen = front["rows"], [row for row in front["rows"] if row["chosen"]]
+    plt = _pyplot()
+    three = len(names) >= 3
+    figure = plt.figure(figsize=(14 if three else 10, 4.5))
+    panels = 3 if three else 2
+    axes = figure.add_subplot(1, panels, 1)
+    axes.scatter([row[names[0]] for row in rows], [row[names[1]] for row in rows], s=14,
+                 label="front")
+    axes.scatter([row[names[0]] for row in chosen], [row[names[1]] for row in chosen],
+                 marker="*", s=160, color="C3", label=f"chosen ({front['chosen']['by']})")
+    axes.set(xlabel=names[0], ylabel=names[1], title=f"Front: {len(rows)} candidates")
+    axes.grid(alpha=0.3)
+    axes.legend()
+    if three:
+        cube = figure.add_subplot(1, panels, 2, projection="3d")
+        cube.scatter(*([row[name] for row in rows] for name in names[:3]), s=10)
+        cube.scatter(*([row[name] for row in chosen] for name in names[:3]), marker="*",
+                     s=160, color="C3")
+        cube.set(xlabel=names[0], ylabel=names[1], zlabel=names[2])
+    volume = figure.add_subplot(1, panels, panels)
+    volume.plot([int(row["evaluations"]) for row in history],
+                [float(row["hypervolume"]) for row in history], marker="o", markersize=3)
+    reference = ", ".join(f"{value:.4g}" for value in front["reference_point"])
+    volume.set(xlabel="evaluations", ylabel="hypervolume",
+               title=f"Hypervolume against ({reference})")
+    volume.grid(alpha=0.3)
+    return _save(figure, path)
