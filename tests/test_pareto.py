@@ -76,6 +76,10 @@ def test_objectives_by_name_their_sense_and_refusals():
             objective_index(signed)
     with pytest.raises(ScenarioError, match="did you mean energy"):
         objective_index("enregy")
+    assert objective_index("worst_arrival") == "journey_worst_arrival_s"
+    assert Requirement.parse("journey_worst_stop_m<=0.1").limit == 0.1
+    with pytest.raises(ScenarioError, match="unknown index"):  # a run's report has no such
+        Requirement.parse_list("journey_worst_stop_m<=0.1", "report.require")
     objectives = Objectives("itae", (Requirement("max_jerk", 0.75),),
                             ("energy", "regenerated_energy_kwh"))
     record = Evaluation(0, {}, 0.0, "ok", 0.0, {"traction_energy_kwh": 30.0,
@@ -141,6 +145,14 @@ def test_a_tuning_writes_its_front_hypervolume_and_chosen_member(tmp_path):
     tuned = {name: value for node in best.values() if isinstance(node, dict)
              for name, value in node["ros__parameters"].items()}
     assert tuned["adrc.mu1"] == pytest.approx(float(chosen[0]["adrc.mu1"]))
+    for row in rows:  # every member re-run by its row id: a scenario of its own
+        member = yaml.safe_load((tmp_path / row["scenario"]).read_text())
+        assert row["scenario"] == f"front/row-{int(row['row']):05d}.yaml"
+        assert {name: value for node in member.values() if isinstance(node, dict)
+                for name, value in node["ros__parameters"].items()}["adrc.beta1"] == \
+            pytest.approx(float(row["adrc.beta1"]))
+    assert len(list((tmp_path / "front").iterdir())) == len(rows)
+    assert best == yaml.safe_load((tmp_path / chosen[0]["scenario"]).read_text())
     assert (tmp_path / "pareto.png").stat().st_size > 0
 
 
@@ -246,3 +258,22 @@ def test_a_candidate_over_trains_is_judged_by_its_statistic_and_its_worst_train(
     other = evaluate_over_trains(values, overrides, objective, 0, spread=TrainSpread(3, 8),
                                  evaluate=evaluate_in_process)
     assert other.indices["traction_energy_kwh"] != pytest.approx(np.mean(energies), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_a_journey_candidate_is_judged_by_its_worst_station():
+    values = load_scenario("seed004-metro-line")
+    objective = Objectives("itae", (Requirement("journey_worst_stop_m", 0.1),),
+                           ("energy", "worst_arrival"))
+    record = evaluate_in_process(values, {"ladrc.omega_c": 3.0}, objective, 0)
+    from ato_nodes.results.journeys import score_with_journey
+    journey = score_with_journey(apply_overrides(values, {"ladrc.omega_c": 3.0}))
+    stations = journey["journey"]["stations"][1:]
+    assert record.indices["journey_worst_stop_m"] == max(abs(s["stop_error"]) for s in stations)
+    assert record.indices["journey_worst_arrival_s"] == max(abs(s["arrival_lateness"])
+                                                            for s in stations)
+    assert "journey" not in record.indices  # the log keeps a line a candidate
+    F, G = objective.vector(record)
+    assert list(F) == [record.indices["traction_energy_kwh"],
+                       record.indices["journey_worst_arrival_s"]]
+    assert G[0] == pytest.approx(record.indices["journey_worst_stop_m"] - 0.1)

@@ -21,7 +21,8 @@ from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.run.loop import simulate
 from ato_nodes.core.run.scoring import (common_steps, energy_terms, kept_file,
                                         pantograph_in_neutral, run_line, score_series)
-from ato_nodes.core.scoring.catalogue import STOP_INDICES
+from ato_nodes.core.scoring.catalogue import (STOP_INDICES, TIMING_MISSED, WORST_ARRIVAL,  # noqa: F401
+                                              WORST_STOP)  # (studies read them here)
 from ato_nodes.core.scoring.journey import (PASS, STOPPED, JourneyIndices, journey_indices,
                                             journey_record, last_stop_indices)
 from ato_nodes.core.targets.timetable import Timetable, timetable_on
@@ -109,10 +110,6 @@ def _scored(series: dict[str, np.ndarray], parameters: dict | None
     return indices, journey
 
 
-# The worst station of a journey run, as studies count it (inf: a station missed or not
-# reached, which no bound admits); a TTOBench journey's timing points not kept.
-WORST_STOP, WORST_ARRIVAL = "journey_worst_stop_m", "journey_worst_arrival_s"
-TIMING_MISSED = "journey_timing_points_missed"
 
 
 def worst_stations(indices: JourneyIndices) -> dict[str, float]:

@@ -13,6 +13,7 @@ the one nearest --weights) and summary.json (last: the tuning finished).
 from __future__ import annotations
 
 import csv
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,17 +140,9 @@ class ParetoTuner(Tuner):
             best = records[on_front[chosen]]
             summary.update(self._front_summary(front, reference, best))
             history = self._hypervolume_history(result, reference)
-            text = (f"Chosen from the front of a {s.algorithm} tuning (seed {s.seed}, "
-                    f"{len(result.X)} evaluations) on {s.scenario}, "
-                    f"{time.strftime('%Y-%m-%d')}: row {best.index} ("
-                    f"{summary['chosen']['by']}), "
-                    + ", ".join(f"{index} = {best.indices[index]:.6g}" for index in indices)
-                    + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ".")
-            (self.out / "best.yaml").write_text(self.scenario_text(
-                text, best.params, apply_overrides(self.values, best.params)))
         else:
-            history = []
-            (self.out / "best.yaml").unlink(missing_ok=True)
+            history, best = [], None
+        self._write_members([records[k] for k in on_front], best, len(result.X))
         self._write_tables(rows, history, summary)
         if rows:
             from ato_nodes.reports.pareto import plot_pareto
@@ -158,6 +151,32 @@ class ParetoTuner(Tuner):
         summary["wall_time"] = time.monotonic() - self.started
         summary["conditions"] = self.conditions
         (self.out / "summary.json").write_text(jsontext.dumps(summary, indent=2))
+
+    def _write_members(self, members: list[Evaluation], best: Evaluation | None,
+                       evaluations: int) -> None:
+        """Each member of the front as a scenario run_stack.py accepts, front/row-N.yaml
+        (N its row id), and the chosen one as best.yaml; none of them without a front."""
+        s = self.settings
+        folder = self.out / "front"
+        shutil.rmtree(folder, ignore_errors=True)
+        (self.out / "best.yaml").unlink(missing_ok=True)
+        if best is not None:
+            folder.mkdir()
+        how = "pseudo-weights" if self.choice.weights else "knee"
+        for member in members:
+            chosen = member is best
+            text = (f"Row {member.index} of the front{f' (chosen: {how})' if chosen else ''} "
+                    f"of a {s.algorithm} tuning (seed {s.seed}, {evaluations} evaluations) on "
+                    f"{s.scenario}, {time.strftime('%Y-%m-%d')}: "
+                    + ", ".join(f"{index} = {member.indices[index]:.6g}"
+                                for index in self.objectives.indices)
+                    + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ".")
+            values = apply_overrides(self.values, member.params)
+            target = folder / f"row-{member.index:05d}.yaml"
+            target.write_text(self.scenario_text(text, member.params, values, target))
+            if chosen:
+                (self.out / "best.yaml").write_text(self.scenario_text(
+                    text, member.params, values, self.out / "best.yaml"))
 
     def _front_summary(self, front: np.ndarray, reference: np.ndarray, best: Evaluation
                        ) -> dict[str, Any]:
@@ -186,7 +205,7 @@ class ParetoTuner(Tuner):
                 **{index: record.indices[index] for index in indices},
                 **{f"scaled_{index}": float(value) for index, value in zip(indices, unit,
                                                                               strict=True)},
-                "chosen": chosen}
+                "chosen": chosen, "scenario": f"front/row-{record.index:05d}.yaml"}
 
     def _hypervolume_history(self, result, reference: np.ndarray) -> list[dict[str, Any]]:
         """After every generation, the hypervolume of the feasible front found so far."""

@@ -50,7 +50,7 @@ from ato_nodes.core.config.scenario import (apply_overrides, check_used, load_sc
 from ato_nodes.core.config.schema import SPEC_BY_NAME
 from ato_nodes.core.run.last_stop import planned_steps
 from ato_nodes.core.scoring.catalogue import FITNESS, MAXIMISED, Requirement, objective_index
-from ato_nodes.core.run.scoring import score_series
+from ato_nodes.results.journeys import score_with_journey
 
 DEFAULT_ALGORITHM = "bas-pso"  # tune.py's, and the league's for every kind
 PENALTY = 1e12  # fitness of a candidate that failed, diverged or timed out
@@ -310,7 +310,7 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
         return Evaluation(index, overrides, running.value, "pruned", candidate.elapsed(),
                           message=f"{candidate.objective.fitness} passed {bound:.9g} at t = "
                                   f"{series['t'][-1]:g} s")
-    indices = score_series(series, run_values)
+    indices = tuning_indices(series, run_values)
     elapsed = candidate.elapsed()
     # ended before the step it was to end at (run.duration's, or a journey's at its last
     # stop): it diverged
@@ -351,7 +351,7 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
     indices = {}
     if bag.exists():
         try:
-            indices = score_series(read_series(bag), read_parameters(bag))
+            indices = tuning_indices(read_series(bag), read_parameters(bag))
         except BagError as exc:
             outcome.message += f"; {exc}"
     elapsed = candidate.elapsed()
@@ -360,6 +360,15 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
         return Evaluation(index, overrides, PENALTY, status, elapsed, indices, outcome.message)
     value, status, message = candidate.objective.score(indices)
     return Evaluation(index, overrides, value, status, elapsed, indices, message)
+
+
+def tuning_indices(series: dict[str, np.ndarray], values: dict[str, Any]) -> dict[str, Any]:
+    """A candidate's indices: the run's, and a journey's worst station
+    (catalogue.JOURNEY_INDICES), without its per-station record (a line of the log a
+    candidate)."""
+    indices = score_with_journey(values, series)
+    indices.pop("journey", None)
+    return indices
 
 
 def node_command(external: tuple[str, ...], overrides: dict[str, Any]) -> list[str]:
@@ -730,27 +739,30 @@ class Tuner:
             s.space.overrides(result.best_x), best_values)
 
     def scenario_text(self, header: str, overrides: dict[str, Any],
-                      best_values: dict[str, Any]) -> str:
-        """A scenario run_stack.py accepts: the base scenario by name (or by path relative
-        to OUT) and what `best_values` change in it, the tuned parameters and any --set,
-        under `header` and the command that runs it."""
+                      best_values: dict[str, Any], target: Path | None = None) -> str:
+        """The scenario file `target` (default OUT/best.yaml) run_stack.py accepts: the
+        base scenario by name (or by path relative to the file) and what `best_values`
+        change in it, the tuned parameters and any --set, under `header` and the command
+        that runs it."""
         s = self.settings
+        target = target or self.out / "best.yaml"
         base_path = resolve_scenario(s.scenario)
         base = (s.scenario if base_path.parent == config_dir() / "scenarios"
-                else os.path.relpath(base_path.resolve(), self.out.resolve()))
+                else os.path.relpath(base_path.resolve(), target.parent.resolve()))
         base_values = load_scenario(s.scenario)
         changed = [name for name in SPEC_BY_NAME if best_values[name] != base_values[name]
                    and name not in ("recorder.output", "supervisor.report")]
-        run_best = best_command(self.out, s.external, overrides)
+        run_best = best_command(self.out, s.external, overrides, target)
         document = {"base": base, **ros_parameter_file(best_values, set(changed))}
         return (f"# {header}\n# Run it: {run_best}\n"
                 + yaml.safe_dump(document, sort_keys=False))
 
 
-def best_command(out: Path, external: tuple[str, ...], best: dict[str, Any]) -> str:
-    """The command that runs the best candidate (with an external node: its best own
-    parameters on its command line)."""
-    command = f"python scripts/run_stack.py --scenario {out / 'best.yaml'}"
+def best_command(out: Path, external: tuple[str, ...], best: dict[str, Any],
+                 scenario: Path | None = None) -> str:
+    """The command that runs the best candidate, its `scenario` file (default
+    OUT/best.yaml; with an external node: its best own parameters on its command line)."""
+    command = f"python scripts/run_stack.py --scenario {scenario or out / 'best.yaml'}"
     if not external:
         return command
     return " ".join([command, "--external", "controller", "--",

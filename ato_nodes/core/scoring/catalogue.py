@@ -25,6 +25,12 @@ INDEX_NAMES = (
     "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "overrun", "arrival_time",
     "running_time_error", "neutral_traction_command_time", "neutral_traction_force_time",
     "max_abs_error_outside_steps_kmh", "stepped_time")
+# The worst station of a journey run, as studies and tunings count it
+# (results/journeys.worst_stations; inf: a station missed or not reached, which no bound
+# admits); a TTOBench journey's timing points not kept. A journey run's only.
+WORST_STOP, WORST_ARRIVAL = "journey_worst_stop_m", "journey_worst_arrival_s"
+TIMING_MISSED = "journey_timing_points_missed"
+JOURNEY_INDICES = (WORST_STOP, WORST_ARRIVAL, TIMING_MISSED)
 # Those that only grow along a run (integrals of non-negative terms, maxima, counts):
 # a partial run that breaks a requirement on one of them has broken it for good.
 GROWING_INDICES = (
@@ -45,7 +51,9 @@ NOT_OBJECTIVES = ("steps", "finite", "stopping_error", "overrun", "running_time_
 MAXIMISED = ("regenerated_energy_kwh",)
 OBJECTIVE_NAMES = {**FITNESS, "energy": "traction_energy_kwh", "net_energy": "net_energy_kwh",
                    "jerk": "max_jerk", "comfort": "comfort_index", "stop": "abs_stopping_error",
-                   **{name: name for name in INDEX_NAMES if name not in NOT_OBJECTIVES}}
+                   "worst_stop": WORST_STOP, "worst_arrival": WORST_ARRIVAL,
+                   **{name: name for name in INDEX_NAMES + JOURNEY_INDICES
+                      if name not in NOT_OBJECTIVES}}
 
 
 def objective_index(name: str, source: str = "--objectives") -> str:
@@ -69,8 +77,10 @@ class Requirement:
     limit: float
 
     @classmethod
-    def parse(cls, text: str, source: str = "--require") -> Requirement:
-        """`name<=limit`; anything else is one ScenarioError naming `source`."""
+    def parse(cls, text: str, source: str = "--require",
+              names: tuple[str, ...] = INDEX_NAMES + JOURNEY_INDICES) -> Requirement:
+        """`name<=limit` on one of `names` (a tuning's and a study's: a journey's worst
+        station too); anything else is one ScenarioError naming `source`."""
         name, sep, limit = text.partition("<=")
         try:
             requirement = cls(name.strip(), float(limit)) if sep else cls._bad(text, source)
@@ -79,16 +89,18 @@ class Requirement:
         if not math.isfinite(requirement.limit):
             raise ScenarioError(f"{source}: the limit of {requirement.name} must be a finite "
                                 f"number, not {limit.strip()!r}")
-        if requirement.name not in INDEX_NAMES:
-            close = difflib.get_close_matches(requirement.name, INDEX_NAMES, n=1)
+        if requirement.name not in names:
+            close = difflib.get_close_matches(requirement.name, names, n=1)
             hint = f" (did you mean {close[0]}?)" if close else ""
             raise ScenarioError(f"{source}: unknown index {requirement.name!r}{hint}")
         return requirement
 
     @classmethod
     def parse_list(cls, text: str, source: str) -> tuple[Requirement, ...]:
-        """A comma-separated list (a scenario's report.require)."""
-        return tuple(cls.parse(item, source) for item in text.split(",") if item.strip())
+        """A comma-separated list (a scenario's report.require: the indices a run's
+        report gives)."""
+        return tuple(cls.parse(item, source, INDEX_NAMES) for item in text.split(",")
+                     if item.strip())
 
     @staticmethod
     def _bad(text: str, source: str):
