@@ -277,3 +277,36 @@ def test_a_journey_candidate_is_judged_by_its_worst_station():
     assert list(F) == [record.indices["traction_energy_kwh"],
                        record.indices["journey_worst_arrival_s"]]
     assert G[0] == pytest.approx(record.indices["journey_worst_stop_m"] - 0.1)
+
+
+FRONT_TUNING = ["--scenario", "seed000", "--set", "run.duration=150", "--params",
+                "adrc.mu1=600:60000,adrc.mu2=550:55000", "--objectives", "energy,itae",
+                "--evaluations", "12", "--population", "4", "--quiet"]
+
+
+def tune_front(out, *extra):
+    result = subprocess.run([*invocation("tune"), *FRONT_TUNING, "--out", str(out), *extra],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    return list(csv.DictReader((out / "front.csv").open()))
+
+
+@pytest.mark.integration
+def test_a_front_is_the_same_on_dask_and_through_the_stack(tmp_path):
+    pytest.importorskip("distributed")
+    local = tune_front(tmp_path / "local", "--in-process", "--workers", "2")
+    cluster = tune_front(tmp_path / "cluster", "--in-process", "--cluster", "local:2")
+    assert (tmp_path / "local" / "front.csv").read_text() == \
+        (tmp_path / "cluster" / "front.csv").read_text()
+    assert (tmp_path / "local" / "hypervolume.csv").read_text() == \
+        (tmp_path / "cluster" / "hypervolume.csv").read_text()
+    assert len(local) == len(cluster) > 1
+    stack = tune_front(tmp_path / "stack", "--workers", "2")
+    # the same candidates and front; a bag's ITAE differs in the last digits (its t is
+    # nanosecond stamps)
+    assert [(row["row"], row["adrc.mu1"], row["adrc.mu2"], row["chosen"]) for row in stack] == \
+        [(row["row"], row["adrc.mu1"], row["adrc.mu2"], row["chosen"]) for row in local]
+    for ours, theirs in zip(stack, local, strict=True):
+        assert float(ours["itae"]) == pytest.approx(float(theirs["itae"]), rel=1e-9)
+        assert float(ours["traction_energy_kwh"]) == pytest.approx(
+            float(theirs["traction_energy_kwh"]), rel=1e-9)
