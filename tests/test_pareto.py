@@ -154,6 +154,7 @@ def test_a_tuning_writes_its_front_hypervolume_and_chosen_member(tmp_path):
     assert len(list((tmp_path / "front").iterdir())) == len(rows)
     assert best == yaml.safe_load((tmp_path / chosen[0]["scenario"]).read_text())
     assert (tmp_path / "pareto.png").stat().st_size > 0
+    assert "stop" in summary["energy_bound"]["error"]  # seed 000 runs to no stop: no bound
 
 
 def test_pseudo_weights_and_reference_point_choose_as_stated(tmp_path):
@@ -310,3 +311,21 @@ def test_a_front_is_the_same_on_dask_and_through_the_stack(tmp_path):
         assert float(ours["itae"]) == pytest.approx(float(theirs["itae"]), rel=1e-9)
         assert float(ours["traction_energy_kwh"]) == pytest.approx(
             float(theirs["traction_energy_kwh"]), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_the_least_energy_bounds_every_run_of_the_nominal_train():
+    from ato_nodes.core.run.scoring import score_series
+    from ato_nodes.core.run.loop import simulate
+    from ato_nodes.studies.energy_optimum import least_energy_of_run
+    values = load_scenario("seed004-metro-ato")
+    bound, running_time = least_energy_of_run(values)
+    assert running_time == 165.0
+    for overrides in ({}, {"ladrc.omega_c": 3.0}, {"profile.ato.acceleration": 1.0}):
+        run = apply_overrides(values, overrides)
+        indices = score_series(simulate(run), run)
+        assert indices["running_time_error"] < 1.0  # on time: the bound's time or less
+        assert bound < indices["traction_energy_kwh"]
+    assert bound > 0.5 * indices["traction_energy_kwh"]  # a bound, not zero
+    with pytest.raises(ScenarioError, match="stop"):
+        least_energy_of_run(load_scenario("seed000"))

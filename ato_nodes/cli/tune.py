@@ -251,6 +251,10 @@ def report_front(summary: dict, out: Path) -> None:
         print(f"  {objective['sense']} {objective['index']}: "
               f"{objective['ideal']:.6g} .. {objective['nadir']:.6g} on the front, chosen "
               f"{chosen['objectives'][objective['index']]:.6g}")
+    bound = summary.get("energy_bound", {})
+    if "running_time" in bound:
+        print(f"  no run of the nominal train in {bound['running_time']:g} s takes less than "
+              f"{bound['traction_energy_kwh']:.6g} kWh of traction (the dynamic programme)")
     print(f"chosen: row {chosen['row']} ({chosen['by']})")
     for name, value in chosen["params"].items():
         print(f"  {name} = {value:.6g}")

@@ -1,6 +1,8 @@
 """A multi-objective tuning's figure (pareto.png): its front, the first two objectives
 against each other (the three in 3-D beside them when there are three), the chosen member
-marked, and the hypervolume after every generation against the evaluations."""
+marked, the least energy the train could run on (the dynamic programme's bound) where
+energy is an objective, and the hypervolume after every generation against the
+evaluations."""
 
 from __future__ import annotations
 
@@ -9,6 +11,9 @@ import json
 from pathlib import Path
 
 from ato_nodes.reports.analysis import _pyplot, _save
+from ato_nodes.core.scoring.catalogue import OBJECTIVE_NAMES
+
+ENERGY = OBJECTIVE_NAMES["energy"]  # the objective the least-energy programme bounds
 
 
 def plot_pareto(front_file: Path, history_file: Path, path: Path) -> Path:
@@ -26,6 +31,11 @@ def plot_pareto(front_file: Path, history_file: Path, path: Path) -> Path:
                  label="front")
     axes.scatter([row[names[0]] for row in chosen], [row[names[1]] for row in chosen],
                  marker="*", s=160, color="C3", label=f"chosen ({front['chosen']['by']})")
+    bound = front.get("energy_bound", {}).get(ENERGY)
+    if bound is not None and ENERGY in names[:2]:
+        line = axes.axvline if names[0] == ENERGY else axes.axhline
+        line(bound, color="k", ls="--", lw=1.2, label=f"least energy, nominal train in "
+             f"{front['energy_bound']['running_time']:g} s (DP)")
     axes.set(xlabel=names[0], ylabel=names[1], title=f"Front: {len(rows)} candidates")
     axes.grid(alpha=0.3)
     axes.legend()

@@ -27,8 +27,10 @@ from ato_nodes.core.optimizers.pareto import (DEFAULT_POPULATION, hypervolume, k
                                               minimize_pareto, nondominated,
                                               pseudo_weight_choice, scaled, span)
 from ato_nodes.core.scoring.catalogue import MAXIMISED
+from ato_nodes.reports.pareto import ENERGY, plot_pareto
 from ato_nodes.results import jsontext
 from ato_nodes.studies.backend import ClusterLost
+from ato_nodes.studies.energy_optimum import least_energy_of_run
 from ato_nodes.studies.tuning import Evaluation, Objectives, Tuner, TuningLost
 
 REFERENCE_MARGIN = 0.1  # the default reference point: the front's nadir + this of its span
@@ -139,13 +141,14 @@ class ParetoTuner(Tuner):
                               unit[k], k == chosen) for k in order]
             best = records[on_front[chosen]]
             summary.update(self._front_summary(front, reference, best))
+            if ENERGY in indices:
+                summary["energy_bound"] = self._energy_bound()
             history = self._hypervolume_history(result, reference)
         else:
             history, best = [], None
         self._write_members([records[k] for k in on_front], best, len(result.X))
         self._write_tables(rows, history, summary)
         if rows:
-            from ato_nodes.reports.pareto import plot_pareto
             plot_pareto(self.out / "front.json", self.out / "hypervolume.csv",
                         self.out / "pareto.png")
         summary["wall_time"] = time.monotonic() - self.started
@@ -177,6 +180,16 @@ class ParetoTuner(Tuner):
             if chosen:
                 (self.out / "best.yaml").write_text(self.scenario_text(
                     text, member.params, values, self.out / "best.yaml"))
+
+    def _energy_bound(self) -> dict[str, Any]:
+        """The least traction energy of the scenario's run on its nominal train in its
+        planned time (studies/energy_optimum.py's programme): no candidate can beat it on
+        that train; or why there is none (no stop, no planned time)."""
+        try:
+            energy, running_time = least_energy_of_run(self.values)
+        except (ScenarioError, ValueError) as exc:
+            return {"error": str(exc)}
+        return {ENERGY: energy, "running_time": running_time, "train": "nominal"}
 
     def _front_summary(self, front: np.ndarray, reference: np.ndarray, best: Evaluation
                        ) -> dict[str, Any]:
@@ -229,5 +242,5 @@ class ParetoTuner(Tuner):
                                       for key, value in row.items()} for row in table)
         (self.out / "front.json").write_text(jsontext.dumps(
             {key: summary[key] for key in ("objectives", "reference_point", "hypervolume",
-                                           "chosen") if key in summary}
+                                           "chosen", "energy_bound") if key in summary}
             | {"rows": rows, "hypervolume_history": history}, indent=2))
