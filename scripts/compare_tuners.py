@@ -14,6 +14,17 @@ Each (algorithm, seed) is a tune.py run (in-process; an existing finished one in
 the real stack and the bag's ITAE is set beside the tuner's. Prints and writes
 (comparison.md) a table of ITAE and max |e| per algorithm, with seed 000's
 figures beside them, and a convergence plot of every run.
+
+With --objectives (and --reference, the hypervolume's reference point in the objectives'
+units, the same for every run) the algorithms are multi-objective (nsga2, nsga3) or a
+swarm optimizer on their weighted sum (each objective over its reference value: the
+scalarised baseline), every run judged alike: the hypervolume of the feasible
+non-dominated set of every candidate it evaluated. The table gives its median and spread:
+
+    python scripts/compare_tuners.py --algorithms nsga2 pso --seeds 1 2 3 --evaluations 200 \
+        --scenario seed004-metro-ato --params ladrc.omega_o=1:40,ladrc.omega_c=1:10 \
+        --objectives energy,p95_abs_error_kmh --reference 30,0.5 \
+        --require 'abs_stopping_error<=0.1' --population 20 --out bags/compare-fronts
 """
 
 from __future__ import annotations
@@ -22,6 +33,8 @@ import argparse
 import json
 import statistics
 from pathlib import Path
+
+import numpy as np
 
 import _cli
 
@@ -33,7 +46,12 @@ from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.launcher.launch import Stack
 from ato_nodes.studies.runner import write_outputs
-from ato_nodes.studies.tuning import SearchSpace, Tuner, TuningSettings
+from ato_nodes.core.optimizers.pareto import (PARETO_ALGORITHMS, hypervolume,
+                                              nondominated)
+from ato_nodes.core.scoring.catalogue import MAXIMISED, Requirement
+from ato_nodes.studies.pareto_tuning import Choice, ParetoTuner
+from ato_nodes.studies.tuning import (Evaluation, Objectives, SearchSpace, Tuner,
+                                      TuningSettings)
 
 PAPER_MAX_ERROR = {  # seed 000's reported tracking errors, km/h
     "bas-pso": "±0.05 (body), ±0.4 (abstract)",
@@ -57,6 +75,11 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--options", action="append", default=[],
                         metavar="ALGORITHM:NAME=VALUE,...", help="an algorithm's options "
                         "(repeatable), e.g. pso:c1=2,c2=2,w_start=0.6,w_end=0.6")
+    parser.add_argument("--objectives", metavar="NAME,NAME[,...]", help="several "
+                        "objectives (tune.py's): compare hypervolumes")
+    parser.add_argument("--reference", metavar="V,V[,...]", help="with --objectives: the "
+                        "hypervolume's reference point, the same for every run")
+    parser.add_argument("--require", action="append", default=[], metavar="INDEX<=VALUE")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", type=Path, required=True)
     return parser.parse_args()
@@ -78,7 +101,8 @@ def algorithm_options(args, algorithm: str) -> dict:
             if not sep:
                 _cli.fail(f"--options {text}: expected NAME=NUMBER, got {assignment!r}")
     try:
-        create(algorithm, **options)
+        if algorithm not in PARETO_ALGORITHMS:
+            create(algorithm, **options)
     except (TypeError, ValueError) as exc:
         _cli.fail(f"--options for {algorithm}: {exc}")
     return options
@@ -88,6 +112,8 @@ def budget(args, algorithm: str) -> int:
     """Evaluations of one run: --evaluations, or what --iterations take this algorithm."""
     if args.evaluations is not None:
         return args.evaluations
+    if algorithm in PARETO_ALGORITHMS:
+        return args.iterations * args.population
     optimizer = create(algorithm, **algorithm_options(args, algorithm))
     return optimizer.initial_evaluations() + args.iterations * optimizer.evaluations_per_iteration()
 
@@ -118,6 +144,9 @@ def main() -> None:
     try:
         values = prepare(args.scenario, args.set)
         space = SearchSpace.parse(args.params, values)
+        if args.objectives:
+            compare_fronts(args, values, space)
+            return
     except ScenarioError as exc:
         _cli.fail(str(exc))
     args.out.mkdir(parents=True, exist_ok=True)
@@ -153,6 +182,74 @@ def main() -> None:
         f"{' '.join(args.set)}; options {' '.join(args.options) or 'the defaults'}\n\n{table}"))
     plot_convergence(sorted(p for p in args.out.iterdir() if (p / "history.csv").exists()),
                      args.out / "convergence.png")
+    print(table)
+
+
+def front_tuning(args, values, space, algorithm: str, seed: int, objectives: tuple[str, ...],
+                 reference: tuple[float, ...]) -> Path:
+    """One (algorithm, seed) run of a comparison of fronts (an existing finished one in
+    --out is reused): multi-objective, or a swarm on the objectives' weighted sum (each
+    over its reference value)."""
+    out = args.out / f"{algorithm}-seed{seed}"
+    if (out / "summary.json").exists():
+        return out
+    weights = () if algorithm in PARETO_ALGORITHMS else tuple(
+        1.0 / max(abs(value), 1e-12) for value in reference)
+    settings = TuningSettings(algorithm, args.scenario, space, budget(args, algorithm), seed,
+                              args.workers, True, options=algorithm_options(args, algorithm),
+                              requirements=tuple(map(Requirement.parse, args.require)),
+                              objectives=objectives, weights=weights)
+    if weights:
+        Tuner(values, settings, out, resume=True, progress=False).run()
+    else:
+        ParetoTuner(values, settings, out, Choice(reference=reference), resume=True,
+                    progress=False).run()
+    return out
+
+
+def run_hypervolume(out: Path, objective: Objectives, reference: np.ndarray) -> tuple[float, int]:
+    """The hypervolume (against `reference`, minimised form) of the feasible
+    non-dominated set of every candidate a tuning in `out` evaluated, and its size."""
+    records = [Evaluation(**json.loads(line)) for line in
+               (out / "evaluations.jsonl").read_text().splitlines()]
+    vectors = [objective.vector(record) for record in records]
+    F = np.array([f for f, g in vectors if np.all(g <= 0.0)]).reshape(-1, len(reference))
+    front = F[nondominated(F)]
+    return hypervolume(front, reference), len(front)
+
+
+def compare_fronts(args, values, space) -> None:
+    """The comparison of fronts: every (algorithm, seed), the hypervolume's median, spread
+    and extremes per algorithm."""
+    objectives = tuple(name.strip() for name in args.objectives.split(","))
+    reference = Choice.parse(None, args.reference, len(objectives)).reference
+    if reference is None:
+        raise ScenarioError("--objectives needs --reference: the same point for every run")
+    objective = Objectives("itae", tuple(map(Requirement.parse, args.require)), objectives)
+    sense = np.array([-1.0 if name in MAXIMISED else 1.0 for name in objective.indices])
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = ["| algorithm | runs | evaluations | hypervolume median | p25 .. p75 | min .. max "
+            "| front size median |", "|---|---|---|---|---|---|---|"]
+    for algorithm in args.algorithms:
+        volumes, sizes = [], []
+        for seed in args.seeds:
+            out = front_tuning(args, values, space, algorithm, seed, objectives, reference)
+            volume, size = run_hypervolume(out, objective, np.array(reference) * sense)
+            volumes.append(volume)
+            sizes.append(size)
+            print(f"{algorithm} seed {seed}: hypervolume {volume:.6g}, front {size}", flush=True)
+        low, middle, high = np.quantile(volumes, [0.25, 0.5, 0.75])
+        rows.append(f"| {algorithm} | {len(volumes)} | {budget(args, algorithm)} | "
+                    f"{middle:.6g} | {low:.6g} .. {high:.6g} | {min(volumes):.6g} .. "
+                    f"{max(volumes):.6g} | {statistics.median(sizes):g} |")
+    table = "\n".join(rows)
+    write_outputs(args.out, "comparison", markdown=(
+        f"Objectives {', '.join(objectives)} against the reference point "
+        f"({args.reference}); requirements {', '.join(args.require) or 'none'}; seeds "
+        f"{' '.join(map(str, args.seeds))}, population {args.population}, scenario "
+        f"{args.scenario} {' '.join(args.set)}; a swarm optimizer minimises the objectives' "
+        f"sum, each over its reference value; every run's hypervolume is that of the "
+        f"feasible non-dominated set of every candidate it evaluated\n\n{table}"))
     print(table)
 
 

@@ -5,6 +5,8 @@ import csv
 import json
 import math
 import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +23,8 @@ from ato_nodes.studies.train_spread import TrainSpread, evaluate_over_trains
 from ato_nodes.studies.tuning import (PENALTY, Evaluation, Objectives, SearchSpace,
                                       TuningSettings, evaluate_in_process)
 from commands import invocation
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def constrained(X):
@@ -213,10 +217,12 @@ def test_no_feasible_candidate_means_no_front_and_no_best(tmp_path):
     (["--objectives", "energy,stopping_error"], "not an objective"),
     (["--objectives", "energy,itae", "--fitness", "j"], "name them all"),
     (["--weights", "1,1"], "give --objectives"),
-    (["--objectives", "energy,itae", "--algorithm", "pso"], "multi-objective algorithm"),
     (["--objectives", "energy,itae", "--weights", "1"], "2 finite numbers"),
     (["--objectives", "energy,itae", "--trains", "2", "--statistic", "q2"], "qP"),
     (["--trains", "0"], "at least 1"),
+    (["--objectives", "energy,itae", "--algorithm", "pso"], "minimises one number"),
+    (["--objectives", "energy,itae", "--algorithm", "pso", "--weights", "1,1", "--reference",
+      "1,1"], "gives one best"),
 ])
 def test_tune_refuses_bad_objectives_in_one_line_and_writes_nothing(tmp_path, arguments,
                                                                     message):
@@ -329,3 +335,63 @@ def test_the_least_energy_bounds_every_run_of_the_nominal_train():
     assert bound > 0.5 * indices["traction_energy_kwh"]  # a bound, not zero
     with pytest.raises(ScenarioError, match="stop"):
         least_energy_of_run(load_scenario("seed000"))
+
+
+@pytest.mark.slow
+def test_a_requirement_broken_for_good_prunes_the_run_with_a_lower_bound(tmp_path):
+    values = load_scenario("seed004-metro-ato")
+    space = SearchSpace.parse(["ladrc.omega_o=1:40,ladrc.omega_c=1:10"], values)
+    requirements = (Requirement("max_abs_error_kmh", 0.5), Requirement("abs_stopping_error", 0.1))
+
+    def tuning(out, prune):
+        settings = TuningSettings("nsga2", "seed004-metro-ato", space, 20, seed=1, workers=2,
+                                  in_process=True, options={"population_size": 20},
+                                  requirements=requirements, prune=prune,
+                                  objectives=("energy", "p95_abs_error_kmh"))
+        ParetoTuner(values, settings, tmp_path / out, progress=False).run()
+        return sorted((json.loads(line) for line in (tmp_path / out / "evaluations.jsonl")
+                       .read_text().splitlines()), key=lambda record: record["index"])
+
+    pruned, whole = tuning("pruned", True), tuning("whole", False)
+    broken = [r["index"] for r in whole if r["indices"]["max_abs_error_kmh"] > 0.5]
+    assert broken and len(broken) < 20
+    assert [r["index"] for r in pruned if r["status"] == "pruned"] == broken
+    for ours, theirs in zip(pruned, whole, strict=True):
+        if ours["status"] == "pruned":  # ended early: a lower bound of the whole run's
+            assert 0.5 < ours["fitness"] * 3.6 <= theirs["indices"]["max_abs_error_kmh"]
+            F, G = Objectives("itae", requirements, ("energy", "p95_abs_error_kmh"),
+                              True).vector(Evaluation(**{**ours, "conditions": ""}))
+            assert 0.0 < G[0] <= (theirs["indices"]["max_abs_error_kmh"] - 0.5) / 1.0
+            assert list(G[1:]) == [0.0, 0.0] and np.all(F == PENALTY)
+        else:
+            assert ours["indices"] == theirs["indices"]
+
+
+def test_a_weighted_sum_is_one_fitness_with_requirements_first():
+    from ato_nodes.studies.tuning import INFEASIBLE, WeightedSum
+    summed = WeightedSum("itae", (Requirement("max_jerk", 0.75),),
+                         ("energy", "regenerated_energy_kwh"), weights=(2.0, 0.5))
+    indices = {"traction_energy_kwh": 30.0, "regenerated_energy_kwh": 12.0, "max_jerk": 0.5}
+    assert summed.score(indices) == (2.0 * 30.0 - 0.5 * 12.0, "ok", "")
+    value, status, _ = summed.score({**indices, "max_jerk": 0.9})
+    assert status == "infeasible" and value > INFEASIBLE
+    assert summed.pruned_by(1.0) is None
+
+
+@pytest.mark.slow
+def test_compare_tuners_judges_every_run_by_the_same_reference_point(tmp_path):
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "compare_tuners.py"), "--algorithms", "nsga2",
+         "pso", "--seeds", "1", "--evaluations", "16", "--population", "8", "--scenario",
+         "seed004-metro-ato", "--params", "ladrc.omega_o=1:40,ladrc.omega_c=1:10",
+         "--objectives", "energy,p95_abs_error_kmh", "--reference", "30,0.5", "--require",
+         "abs_stopping_error<=0.1", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, result.stderr
+    table = (tmp_path / "comparison.md").read_text()
+    assert "| nsga2 | 1 | 16 |" in table and "| pso | 1 | 16 |" in table
+    summary = json.loads((tmp_path / "nsga2-seed1" / "summary.json").read_text())
+    assert summary["reference_point"] == [30.0, 0.5]
+    assert f"nsga2 seed 1: hypervolume {summary['hypervolume']:.6g}," in result.stdout
+    baseline = json.loads((tmp_path / "pso-seed1" / "summary.json").read_text())
+    assert baseline["weights"] == pytest.approx([1 / 30, 1 / 0.5])

@@ -39,7 +39,7 @@ from ato_nodes.studies.pareto_tuning import Choice, ParetoTuner
 from ato_nodes.studies.train_spread import TrainSpread
 from ato_nodes.studies.tuning import (DEFAULT_ALGORITHM, FITNESS, PENALTY, Requirement,
                                       SearchSpace, Tuner, TuningLost, TuningSettings,
-                                      best_command, check_external)
+                                      best_command, check_external, fitness_name)
 
 
 def parse_args() -> argparse.Namespace:
@@ -110,7 +110,8 @@ def add_objective_arguments(parser: argparse.ArgumentParser) -> None:
                         "quantile); every requirement must hold for every train")
     parser.add_argument("--weights", metavar="W,W[,...]",
                         help="with --objectives: best.yaml is the front's member whose "
-                        "pseudo-weights are nearest these (default: the knee)")
+                        "pseudo-weights are nearest these (default: the knee); with a swarm "
+                        "--algorithm, the weights of the sum it minimises")
     parser.add_argument("--reference", metavar="V,V[,...]",
                         help="with --objectives: the hypervolume's reference point, in the "
                         "objectives' units (default: the front's nadir plus a tenth of its "
@@ -149,6 +150,10 @@ def tuning_settings(args: argparse.Namespace, space: SearchSpace
                             "--objectives")
     algorithm = args.algorithm or (PARETO_ALGORITHMS[0] if objectives
                                    else DEFAULT_ALGORITHM)
+    choice = Choice.parse(args.weights, args.reference, len(objectives))
+    summed = algorithm not in PARETO_ALGORITHMS  # a swarm's weighted sum of the objectives
+    if objectives and summed and args.reference:
+        raise ScenarioError(f"--reference is a front's: {algorithm} gives one best")
     settings = TuningSettings(algorithm, args.scenario, space, args.evaluations,
                               args.seed, args.workers, args.in_process,
                               args.fitness or "itae", args.timeout, options,
@@ -156,8 +161,9 @@ def tuning_settings(args: argparse.Namespace, space: SearchSpace
                               args.keep_bags, not args.no_prune, args.cluster,
                               tuple(args.command), objectives,
                               TrainSpread(args.trains, args.train_seed, args.statistic)
-                              if args.trains is not None else None)
-    return settings, Choice.parse(args.weights, args.reference, len(objectives))
+                              if args.trains is not None else None,
+                              choice.weights or () if summed else ())
+    return settings, choice
 
 
 def main() -> None:
@@ -190,7 +196,8 @@ def tune() -> None:
         if args.out.exists() and any(args.out.iterdir()) and not args.resume:
             raise ScenarioError(f"{args.out} is not empty; use --resume or another --out")
         tuner = (ParetoTuner(values, settings, args.out, choice, resume=args.resume,
-                             progress=not args.quiet) if objectives else
+                             progress=not args.quiet)
+                 if objectives and settings.algorithm in PARETO_ALGORITHMS else
                  Tuner(values, settings, args.out, resume=args.resume, progress=not args.quiet))
         if tuner.finished:
             print(f"the tuning in {args.out} is finished; nothing to run")
@@ -211,14 +218,14 @@ def tune() -> None:
 def report(summary: dict, out: Path) -> None:
     """What a finished tuning prints, from its summary.json (a resume of a finished
     tuning prints it again)."""
-    if "objectives" in summary or "front_size" in summary:
+    if "front_size" in summary:
         report_front(summary, out)
         return
     if summary["best_fitness"] >= PENALTY:
         cli.fail(f"every one of the {summary['evaluations_used']} candidates failed "
                  f"({summary['failed_evaluations']}), so there is no best.yaml; see "
                  f"{out / 'evaluations.jsonl'}", 1)
-    print(f"best {summary['fitness']} {summary['best_fitness']:.6g} after "
+    print(f"best {fitness_name(summary)} {summary['best_fitness']:.6g} after "
           f"{summary['evaluations_used']} evaluations, {summary['iterations']} iterations "
           f"({summary['stop_reason']})")
     for name, value in summary["best_params"].items():

@@ -83,12 +83,12 @@ class ParetoTuner(Tuner):
 
     def _plan(self, own_evaluator: bool) -> None:
         self.population = self.settings.options.get("population_size", DEFAULT_POPULATION)
-        self.prune = False  # a front has no one bound to prune against
+        # a front has no one bound to prune against; a requirement broken for good has
+        self.prune = own_evaluator and self.objectives.pruning() is not None
         self.initial_evaluations = self.evaluations_per_iteration = self.population
 
     def _standing(self) -> str:
-        records = [record for record in self.log.done.values() if record.status == "ok"]
-        return f"feasible {len(records)}"
+        return f"feasible {sum(r.status == 'ok' for r in self.log.done.values())}"
 
     def run(self):
         s = self.settings

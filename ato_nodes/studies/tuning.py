@@ -45,6 +45,7 @@ from ato_nodes.core.config.components import CONTROLLERS
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.scoring.indices import RunningIndex
 from ato_nodes.core.base.paths import config_dir
+from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.config.scenario import (apply_overrides, check_used, load_scenario,
                                             resolve_scenario, ros_parameter_file)
 from ato_nodes.core.config.schema import SPEC_BY_NAME
@@ -182,6 +183,12 @@ class Objective:
         """The indices it judges a run by."""
         return (FITNESS[self.fitness],)
 
+    def pruned_by(self, bound: float) -> tuple[str, float] | None:
+        """(the running index followed, the value past which the run ends) when a run
+        is pruned against `bound` (the optimizer's), else None (prune_limit)."""
+        limit = prune_limit(self, bound)
+        return None if limit is None else (FITNESS[self.fitness], limit)
+
     @property
     def prunable(self) -> bool:
         """The fitness only grows along a run (ITAE, IAE, max abs(e)), so a partial run
@@ -207,10 +214,28 @@ class Objective:
 class Objectives(Objective):
     """Several objectives at once (tune.py --objectives), each an index of the catalogue
     minimised, or maximised when more of it is better (catalogue.MAXIMISED), and the
-    requirements as hard constraints. A run's fitness in the log is its first objective;
-    nothing is pruned (a front has no one bound to prune against)."""
+    requirements as hard constraints. A run's fitness in the log is its first objective.
+    With `prune`, a run is ended once it has broken for good a requirement on an index a
+    run follows step by step (PRUNABLE_REQUIREMENTS): it is infeasible whatever else it
+    does, and enters with a lower bound on its violation (vector)."""
 
     objectives: tuple[str, ...] = ()  # as given: names or catalogue.OBJECTIVE_NAMES' short
+    prune: bool = False
+
+    def pruning(self) -> tuple[Requirement, str, float] | None:
+        """The requirement a run is pruned on (the first on a running index), the running
+        index and its scale (the requirement's units per the running index's)."""
+        for requirement in self.requirements if self.prune else ():
+            if requirement.name in PRUNABLE_REQUIREMENTS:
+                return (requirement, *PRUNABLE_REQUIREMENTS[requirement.name])
+        return None
+
+    def pruned_by(self, bound: float) -> tuple[str, float] | None:
+        pruning = self.pruning()
+        if pruning is None:
+            return None
+        requirement, running, scale = pruning
+        return running, requirement.limit / scale * (1.0 + PRUNE_MARGIN)
 
     @property
     def indices(self) -> tuple[str, ...]:
@@ -236,6 +261,12 @@ class Objectives(Objective):
         maximised one negated), G each requirement's signed violation (relative to
         max(|limit|, 1): <= 0 met) and last whether the run completed (<= 0: it did). A
         run that failed has every G at FAILED_VIOLATION and F at PENALTY."""
+        if record.status == "pruned":  # broken for good: its violation so far, the rest 0
+            requirement, _, scale = self.pruning()
+            reached = requirement.signed_violation({requirement.name: record.fitness * scale})
+            return (np.full(len(self.objectives), PENALTY),
+                    np.array([reached if r is requirement else 0.0 for r in self.requirements]
+                             + [0.0]))
         if record.status not in ("ok", "infeasible"):
             return (np.full(len(self.objectives), PENALTY),
                     np.full(len(self.requirements) + 1, FAILED_VIOLATION))
@@ -245,7 +276,36 @@ class Objectives(Objective):
         return F, np.array([*G, -1.0])
 
 
+@dataclass(frozen=True)
+class WeightedSum(Objectives):
+    """Several objectives as one fitness for a swarm optimizer: sum of weight x objective
+    (a maximised one negated); the requirements as for one objective (an infeasible run
+    ranks after every feasible one, by how far it misses). Not pruned: a pruned run's
+    value would be a requirement's, not the sum's."""
+
+    weights: tuple[float, ...] = ()
+
+    def pruned_by(self, bound: float) -> tuple[str, float] | None:
+        return None
+
+    def score(self, indices: dict[str, Any]) -> tuple[float, str, str]:
+        first, status, message = super().score(indices)
+        if status == "diverged":
+            return first, status, message
+        total = float(sum(weight * (-indices[name] if name in MAXIMISED else indices[name])
+                          for weight, name in zip(self.weights, self.indices, strict=True)))
+        if status == "ok":
+            return total, status, message
+        miss = min(sum(r.violation(indices) for r in self.requirements), 1e5)
+        return INFEASIBLE + 1e6 * miss, status, message
+
+
 FAILED_VIOLATION = 1e3  # a failed run's every constraint: more than any run that ended
+# Requirements a run can be pruned on: index -> (the running index that follows it step by
+# step, core/scoring/indices.RunningIndex, and its units per the running index's)
+PRUNABLE_REQUIREMENTS = {"itae": ("itae", 1.0), "iae": ("iae", 1.0),
+                         "max_abs_error": ("max_abs_error", 1.0),
+                         "max_abs_error_kmh": ("max_abs_error", MS_TO_KMH)}
 
 
 def objective_of(objective: Objective | str) -> Objective:
@@ -267,8 +327,9 @@ class Candidate:
 
     values: dict[str, Any]  # the base run's values with the candidate's overrides
     objective: Objective
-    limit: float | None     # prune_limit's, None: the run is not pruned
+    limit: float | None     # past this the run ends (pruned); None: it is not pruned
     started: float          # time.perf_counter() as its evaluation began
+    running: str | None     # the running index followed (RunningIndex)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
@@ -284,7 +345,8 @@ def _candidate(values: dict[str, Any], overrides: dict[str, Any], objective: Obj
         run_values = apply_overrides(values, overrides)
     except ScenarioError as exc:
         return Evaluation(index, overrides, PENALTY, "invalid", 0.0, message=str(exc))
-    return Candidate(run_values, objective, prune_limit(objective, bound), started)
+    running, limit = objective.pruned_by(bound) or (None, None)
+    return Candidate(run_values, objective, limit, started, running)
 
 
 def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
@@ -299,7 +361,7 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
     if isinstance(candidate, Evaluation):
         return candidate
     run_values, limit = candidate.values, candidate.limit
-    running = RunningIndex(FITNESS[candidate.objective.fitness]) if limit is not None else None
+    running = RunningIndex(candidate.running) if limit is not None else None
     try:
         series = simulate(run_values, None if timeout is None else time.monotonic() + timeout,
                           (running, limit) if running is not None else None)
@@ -308,7 +370,7 @@ def evaluate_in_process(values: dict[str, Any], overrides: dict[str, Any],
                           message=f"{exc} ({timeout:g} s)")
     if limit is not None and running.value > limit:
         return Evaluation(index, overrides, running.value, "pruned", candidate.elapsed(),
-                          message=f"{candidate.objective.fitness} passed {bound:.9g} at t = "
+                          message=f"{candidate.running} passed {limit:.9g} at t = "
                                   f"{series['t'][-1]:g} s")
     indices = tuning_indices(series, run_values)
     elapsed = candidate.elapsed()
@@ -340,7 +402,7 @@ def evaluate_in_stack(values: dict[str, Any], overrides: dict[str, Any],
         return candidate
     run_values = candidate.values
     if candidate.limit is not None:
-        run_values = {**run_values, "supervisor.fitness": FITNESS[candidate.objective.fitness],
+        run_values = {**run_values, "supervisor.fitness": candidate.running,
                       "supervisor.prune_above": candidate.limit}
     nodes = {"controller": node_command(external, overrides)} if external else None
     outcome = Stack(run_values, bag, quiet=True, timeout=timeout, cancel=cancel,
@@ -490,11 +552,15 @@ class TuningSettings:
     external: tuple[str, ...] = ()  # an external controller's command (its own parameters)
     objectives: tuple[str, ...] = ()  # several at once (ParetoTuner); else the fitness
     spread: TrainSpread | None = None  # each candidate over many trains
+    weights: tuple[float, ...] = ()  # a swarm optimizer's weighted sum of the objectives
 
     @property
     def objective(self) -> Objective:
+        if self.objectives and self.algorithm in ALGORITHMS:
+            return WeightedSum(self.fitness, self.requirements, self.objectives,
+                               weights=self.weights)
         if self.objectives:
-            return Objectives(self.fitness, self.requirements, self.objectives)
+            return Objectives(self.fitness, self.requirements, self.objectives, self.prune)
         return Objective(self.fitness, self.requirements)
 
     def describe(self) -> dict[str, Any]:
@@ -507,7 +573,8 @@ class TuningSettings:
                 "requirements": [f"{r.name}<={r.limit:g}" for r in self.requirements],
                 **({"external": list(self.external)} if self.external else {}),
                 **({"objectives": list(self.objectives)} if self.objectives else {}),
-                **(self.spread.describe() if self.spread else {})}
+                **(self.spread.describe() if self.spread else {}),
+                **({"weights": list(self.weights)} if self.weights else {})}
 
 
 class Tuner:
@@ -733,7 +800,7 @@ class Tuner:
         feasible = "feasible" if result.best_f < INFEASIBLE else "INFEASIBLE"
         return self.scenario_text(
             f"Best of a {s.algorithm} tuning (seed {s.seed}, {result.evaluations} evaluations) "
-            f"on {s.scenario}, {time.strftime('%Y-%m-%d')}: fitness {s.fitness} = "
+            f"on {s.scenario}, {time.strftime('%Y-%m-%d')}: fitness {fitness_name(s.describe())} = "
             f"{result.best_f:.9g} ({feasible}"
             + "".join(f", {r.name}<={r.limit:g}" for r in s.requirements) + ").",
             s.space.overrides(result.best_x), best_values)
@@ -756,6 +823,15 @@ class Tuner:
         document = {"base": base, **ros_parameter_file(best_values, set(changed))}
         return (f"# {header}\n# Run it: {run_best}\n"
                 + yaml.safe_dump(document, sort_keys=False))
+
+
+def fitness_name(described: dict[str, Any]) -> str:
+    """What a tuning (its TuningSettings.describe(), or its summary.json) minimised."""
+    if described.get("weights"):
+        return "the weighted sum " + " + ".join(
+            f"{weight:g} {name}" for weight, name in zip(described["weights"],
+                                                        described["objectives"], strict=True))
+    return described["fitness"]
 
 
 def best_command(out: Path, external: tuple[str, ...], best: dict[str, Any],
@@ -781,11 +857,15 @@ def _check_settings(settings: TuningSettings) -> None:
     """A ScenarioError for an unknown algorithm or fitness, bags kept from a cluster, or
     an external node not run through the stack here."""
     check_external(settings.external, settings.in_process, settings.cluster)
-    known = PARETO_ALGORITHMS if settings.objectives else tuple(ALGORITHMS)
+    known = (*PARETO_ALGORITHMS, *ALGORITHMS) if settings.objectives else tuple(ALGORITHMS)
     if settings.algorithm not in known:
-        what = "multi-objective algorithm" if settings.objectives else "algorithm"
-        raise ScenarioError(f"unknown {what} {settings.algorithm!r}; known: "
+        raise ScenarioError(f"unknown algorithm {settings.algorithm!r}; known: "
                             f"{', '.join(known)}")
+    if settings.objectives and settings.algorithm in ALGORITHMS and \
+            len(settings.weights) != len(settings.objectives):
+        raise ScenarioError(f"{settings.algorithm} minimises one number: give --weights, one "
+                            "per objective (their weighted sum), or a multi-objective "
+                            f"algorithm ({', '.join(PARETO_ALGORITHMS)})")
     for name in settings.objectives:
         objective_index(name)
     if settings.objectives and not all(importlib.util.find_spec(name)
