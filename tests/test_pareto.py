@@ -220,6 +220,8 @@ def test_no_feasible_candidate_means_no_front_and_no_best(tmp_path):
     (["--objectives", "energy,itae", "--weights", "1"], "2 finite numbers"),
     (["--objectives", "energy,itae", "--trains", "2", "--statistic", "q2"], "qP"),
     (["--trains", "0"], "at least 1"),
+    (["--objectives", "energy,itae", "--trains", "2", "--statistic", "mean,worst,worst"],
+     "one per objective"),
     (["--objectives", "energy,itae", "--algorithm", "pso"], "minimises one number"),
     (["--objectives", "energy,itae", "--algorithm", "pso", "--weights", "1,1", "--reference",
       "1,1"], "gives one best"),
@@ -256,6 +258,12 @@ def test_a_candidate_over_trains_is_judged_by_its_statistic_and_its_worst_train(
         assert record.indices["traction_energy_kwh"] == pytest.approx(expected, rel=1e-12)
     assert record.indices["abs_stopping_error"] == max(
         r.indices["abs_stopping_error"] for r in each)  # the requirement's worst train
+    p95 = [record.indices["p95_abs_error_kmh"] for record in each]
+    both = evaluate_over_trains(values, overrides, objective, 4,
+                                spread=TrainSpread(3, 7, "mean,worst"),
+                                evaluate=evaluate_in_process)  # one per objective
+    assert both.indices["traction_energy_kwh"] == pytest.approx(np.mean(energies), rel=1e-12)
+    assert both.indices["p95_abs_error_kmh"] == max(p95)
     strict = Objectives("itae", (Requirement("abs_stopping_error", min(
         r.indices["abs_stopping_error"] for r in each) * 1.0001),), ("energy", "itae"))
     # met by the best train, broken by the others: infeasible

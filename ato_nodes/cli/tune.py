@@ -107,7 +107,8 @@ def add_objective_arguments(parser: argparse.ArgumentParser) -> None:
                         "optimizer's is --seed)")
     parser.add_argument("--statistic", default="mean", metavar="mean|worst|qP",
                         help="with --trains: each objective over the trains (qP: the P "
-                        "quantile); every requirement must hold for every train")
+                        "quantile), one for all or one per objective, comma-separated; "
+                        "every requirement must hold for every train")
     parser.add_argument("--weights", metavar="W,W[,...]",
                         help="with --objectives: best.yaml is the front's member whose "
                         "pseudo-weights are nearest these (default: the knee); with a swarm "

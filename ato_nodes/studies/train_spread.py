@@ -24,7 +24,8 @@ from ato_nodes.studies.robustness import RAIL, RAIL_RANGE, RANGES, draw_train
 @dataclass(frozen=True)
 class TrainSpread:
     """N trains of the seed `seed`, each objective's `statistic` over them: mean, worst,
-    or qP (the P quantile, 0 < P < 1, e.g. q0.9)."""
+    or qP (the P quantile, 0 < P < 1, e.g. q0.9); one for every objective, or one per
+    objective in their order, comma-separated (e.g. mean,worst,q0.95)."""
 
     trains: int
     seed: int = 1
@@ -33,20 +34,36 @@ class TrainSpread:
     def __post_init__(self):
         if self.trains < 1:
             raise ScenarioError("--trains must be at least 1")
-        self.reduce(np.zeros(1), maximised=False)  # the statistic checked before any run
+        for statistic in self.statistics:  # checked before any run
+            _reduce(statistic, np.zeros(1), maximised=False)
 
-    def reduce(self, values: np.ndarray, maximised: bool) -> float:
-        """The statistic over the trains' values of one objective (worst: the largest of
-        one minimised, the smallest of one maximised; a quantile on the worse side)."""
-        if self.statistic == "mean":
-            return float(np.mean(values))
-        if self.statistic == "worst":
-            return float(np.min(values) if maximised else np.max(values))
-        share = _quantile(self.statistic)
-        return float(np.quantile(values, 1.0 - share if maximised else share))
+    @property
+    def statistics(self) -> tuple[str, ...]:
+        return tuple(item.strip() for item in self.statistic.split(","))
+
+    def check(self, objectives: int) -> None:
+        if len(self.statistics) not in (1, objectives):
+            raise ScenarioError(f"--statistic: one for every objective or one per objective "
+                                f"({objectives}), not {len(self.statistics)}")
+
+    def reduce(self, values: np.ndarray, maximised: bool, objective: int = 0) -> float:
+        """The statistic of the `objective`-th objective over the trains' values."""
+        statistics = self.statistics
+        return _reduce(statistics[objective if len(statistics) > 1 else 0], values, maximised)
 
     def describe(self) -> dict[str, Any]:
         return {"trains": self.trains, "train_seed": self.seed, "statistic": self.statistic}
+
+
+def _reduce(statistic: str, values: np.ndarray, maximised: bool) -> float:
+    """mean; worst: the largest of an objective minimised, the smallest of one maximised;
+    qP: a quantile on the worse side."""
+    if statistic == "mean":
+        return float(np.mean(values))
+    if statistic == "worst":
+        return float(np.min(values) if maximised else np.max(values))
+    share = _quantile(statistic)
+    return float(np.quantile(values, 1.0 - share if maximised else share))
 
 
 def _quantile(statistic: str) -> float:
@@ -81,8 +98,8 @@ def evaluate_over_trains(values: dict[str, Any], overrides: dict[str, Any], obje
             return record
         records.append(record)
     indices: dict[str, Any] = {name: spread.reduce(np.array([r.indices[name] for r in records]),
-                                                   name in MAXIMISED)
-                               for name in objective.indices}
+                                                   name in MAXIMISED, number)
+                               for number, name in enumerate(objective.indices)}
     for requirement in objective.requirements:  # it must hold for every train
         worst = max(records, key=lambda record: requirement.signed_violation(record.indices))
         indices[requirement.name] = worst.indices.get(requirement.name, math.nan)

@@ -868,18 +868,20 @@ def _check_settings(settings: TuningSettings) -> None:
                             f"algorithm ({', '.join(PARETO_ALGORITHMS)})")
     for name in settings.objectives:
         objective_index(name)
-    if settings.objectives and not all(importlib.util.find_spec(name)
-                                       for name in ("pymoo", "moocore")):
+    if settings.algorithm in PARETO_ALGORITHMS and not all(
+            importlib.util.find_spec(name) for name in ("pymoo", "moocore")):
         raise ScenarioError("--objectives needs pymoo and moocore: pip install pymoo moocore "
                             "(requirements.txt pins them)")
     if len(settings.objectives) == 1:
         raise ScenarioError("--objectives needs two or more (one is --fitness)")
-    if settings.spread and not settings.in_process:
-        raise ScenarioError("--trains runs each candidate's trains in-process: give "
-                            "--in-process")
     if settings.fitness not in FITNESS:
         raise ScenarioError(f"unknown fitness {settings.fitness!r}; known: "
                             f"{', '.join(FITNESS)}")
+    if settings.spread:
+        settings.spread.check(len(settings.objective.indices))
+    if settings.spread and not settings.in_process:
+        raise ScenarioError("--trains runs each candidate's trains in-process: give "
+                            "--in-process")
     if settings.cluster:
         check_cluster(settings.cluster)
     if settings.cluster and settings.keep_bags:
