@@ -48,7 +48,7 @@ from ato_nodes.launcher.launch import Stack
 from ato_nodes.studies.runner import write_outputs
 from ato_nodes.core.optimizers.pareto import (PARETO_ALGORITHMS, hypervolume,
                                               nondominated)
-from ato_nodes.core.scoring.catalogue import MAXIMISED, Requirement
+from ato_nodes.core.scoring.catalogue import Requirement
 from ato_nodes.studies.pareto_tuning import Choice, ParetoTuner
 from ato_nodes.studies.tuning import (Evaluation, Objectives, SearchSpace, Tuner,
                                       TuningSettings)
@@ -226,7 +226,7 @@ def compare_fronts(args, values, space) -> None:
     if reference is None:
         raise ScenarioError("--objectives needs --reference: the same point for every run")
     objective = Objectives("itae", tuple(map(Requirement.parse, args.require)), objectives)
-    sense = np.array([-1.0 if name in MAXIMISED else 1.0 for name in objective.indices])
+    sense = objective.senses
     args.out.mkdir(parents=True, exist_ok=True)
     rows = ["| algorithm | runs | evaluations | hypervolume median | p25 .. p75 | min .. max "
             "| front size median |", "|---|---|---|---|---|---|---|"]

@@ -26,7 +26,6 @@ from ato_nodes.core.config.scenario import apply_overrides
 from ato_nodes.core.optimizers.pareto import (DEFAULT_POPULATION, hypervolume, knee,
                                               minimize_pareto, nondominated,
                                               pseudo_weight_choice, scaled, span)
-from ato_nodes.core.scoring.catalogue import MAXIMISED
 from ato_nodes.reports.pareto import ENERGY, plot_pareto
 from ato_nodes.results import jsontext
 from ato_nodes.studies.backend import ClusterLost
@@ -118,7 +117,7 @@ class ParetoTuner(Tuner):
     def _write_front(self, result) -> None:
         s, objectives = self.settings, self.objectives
         indices = objectives.indices
-        sense = np.array([-1.0 if name in MAXIMISED else 1.0 for name in indices])
+        sense = objectives.senses
         records = [self.log.done[index] for index in range(len(result.X))]
         feasible = np.flatnonzero(result.feasible)
         on_front = feasible[nondominated(result.F[feasible])]
@@ -196,7 +195,7 @@ class ParetoTuner(Tuner):
         """The objectives with their sense and span on the front, the reference point and
         hypervolume, and the chosen member, each objective as measured."""
         objectives = self.objectives
-        sense = np.array([-1.0 if name in MAXIMISED else 1.0 for name in objectives.indices])
+        sense = objectives.senses
         ideal, nadir = span(front)
         return {
             "objectives": [{"name": name, "index": index, "sense": "max" if sign < 0

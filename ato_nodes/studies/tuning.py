@@ -242,19 +242,23 @@ class Objectives(Objective):
         return tuple(objective_index(name) for name in self.objectives)
 
     @property
+    def senses(self) -> np.ndarray:
+        """+1 for each objective minimised, -1 for each maximised: the minimised form."""
+        return np.array([-1.0 if name in MAXIMISED else 1.0 for name in self.indices])
+
+    @property
     def prunable(self) -> bool:
         return False
 
     def score(self, indices: dict[str, Any]) -> tuple[float, str, str]:
-        first = indices.get(self.indices[0], math.nan)
-        broken = [r for r in self.requirements if r.violation(indices) > 0.0]
-        if not all(math.isfinite(indices.get(name, math.nan)) for name in self.indices):
-            missing = [name for name in self.indices if not math.isfinite(
-                indices.get(name, math.nan))]
+        missing = [name for name in self.indices if not math.isfinite(
+            indices.get(name, math.nan))]
+        if missing:
             return PENALTY, "diverged", f"{', '.join(missing)} not finite"
+        broken = [r for r in self.requirements if r.violation(indices) > 0.0]
         message = "; ".join(f"{r.name} {indices.get(r.name, math.nan):.4g} > {r.limit:g}"
                             for r in broken)
-        return float(first), "infeasible" if broken else "ok", message
+        return float(indices[self.indices[0]]), "infeasible" if broken else "ok", message
 
     def vector(self, record: Evaluation) -> tuple[np.ndarray, np.ndarray]:
         """(F, G) of an evaluation for the optimizer: F every objective minimised (a
@@ -270,8 +274,7 @@ class Objectives(Objective):
         if record.status not in ("ok", "infeasible"):
             return (np.full(len(self.objectives), PENALTY),
                     np.full(len(self.requirements) + 1, FAILED_VIOLATION))
-        F = np.array([-record.indices[name] if name in MAXIMISED else record.indices[name]
-                      for name in self.indices], dtype=float)
+        F = self.senses * np.array([record.indices[name] for name in self.indices], dtype=float)
         G = [r.signed_violation(record.indices) for r in self.requirements]
         return F, np.array([*G, -1.0])
 
@@ -292,8 +295,8 @@ class WeightedSum(Objectives):
         first, status, message = super().score(indices)
         if status == "diverged":
             return first, status, message
-        total = float(sum(weight * (-indices[name] if name in MAXIMISED else indices[name])
-                          for weight, name in zip(self.weights, self.indices, strict=True)))
+        total = float(sum(weight * sense * indices[name] for weight, sense, name in zip(
+            self.weights, self.senses, self.indices, strict=True)))
         if status == "ok":
             return total, status, message
         miss = min(sum(r.violation(indices) for r in self.requirements), 1e5)
