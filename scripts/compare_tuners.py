@@ -19,7 +19,10 @@ With --objectives (and --reference, the hypervolume's reference point in the obj
 units, the same for every run) the algorithms are multi-objective (nsga2, nsga3) or a
 swarm optimizer on their weighted sum (each objective over its reference value: the
 scalarised baseline), every run judged alike: the hypervolume of the feasible
-non-dominated set of every candidate it evaluated. The table gives its median and spread:
+non-dominated set of every candidate it evaluated. The table gives its median and spread,
+and the hypervolume of each algorithm's median attainment surface (what at least half its
+runs reached); attainment.csv holds the best, median and worst surfaces, attainment.png
+draws them with two objectives:
 
     python scripts/compare_tuners.py --algorithms nsga2 pso --seeds 1 2 3 --evaluations 200 \
         --scenario seed004-metro-ato --params ladrc.omega_o=1:40,ladrc.omega_c=1:10 \
@@ -30,6 +33,7 @@ non-dominated set of every candidate it evaluated. The table gives its median an
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import statistics
 from pathlib import Path
@@ -46,8 +50,9 @@ from ato_nodes.core.config.scenario import apply_overrides, prepare
 from ato_nodes.core.run.scoring import score_series
 from ato_nodes.launcher.launch import Stack
 from ato_nodes.studies.runner import write_outputs
-from ato_nodes.core.optimizers.pareto import (PARETO_ALGORITHMS, hypervolume,
-                                              nondominated)
+from ato_nodes.core.optimizers.pareto import (MEDIAN_ATTAINMENT, PARETO_ALGORITHMS,
+                                              attainment, hypervolume, nondominated)
+from ato_nodes.reports.pareto import plot_attainment
 from ato_nodes.core.scoring.catalogue import Requirement
 from ato_nodes.studies.pareto_tuning import Choice, ParetoTuner
 from ato_nodes.studies.tuning import (Evaluation, Objectives, SearchSpace, Tuner,
@@ -207,41 +212,46 @@ def front_tuning(args, values, space, algorithm: str, seed: int, objectives: tup
     return out
 
 
-def run_hypervolume(out: Path, objective: Objectives, reference: np.ndarray) -> tuple[float, int]:
-    """The hypervolume (against `reference`, minimised form) of the feasible
-    non-dominated set of every candidate a tuning in `out` evaluated, and its size."""
+def run_front(out: Path, objective: Objectives) -> np.ndarray:
+    """The feasible non-dominated set (minimised form) of every candidate a tuning in
+    `out` evaluated."""
     records = [Evaluation(**json.loads(line)) for line in
                (out / "evaluations.jsonl").read_text().splitlines()]
     vectors = [objective.vector(record) for record in records]
-    F = np.array([f for f, g in vectors if np.all(g <= 0.0)]).reshape(-1, len(reference))
-    front = F[nondominated(F)]
-    return hypervolume(front, reference), len(front)
+    F = np.array([f for f, g in vectors if np.all(g <= 0.0)]).reshape(
+        -1, len(objective.objectives))
+    return F[nondominated(F)]
 
 
 def compare_fronts(args, values, space) -> None:
     """The comparison of fronts: every (algorithm, seed), the hypervolume's median, spread
-    and extremes per algorithm."""
+    and extremes per algorithm, and each algorithm's attainment surfaces over its seeds."""
     objectives = tuple(name.strip() for name in args.objectives.split(","))
     reference = Choice.parse(None, args.reference, len(objectives)).reference
     if reference is None:
         raise ScenarioError("--objectives needs --reference: the same point for every run")
     objective = Objectives("itae", tuple(map(Requirement.parse, args.require)), objectives)
-    sense = objective.senses
+    sense = np.array(objective.senses)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = ["| algorithm | runs | evaluations | hypervolume median | p25 .. p75 | min .. max "
-            "| front size median |", "|---|---|---|---|---|---|---|"]
+            "| front size median | median attainment's hypervolume |",
+            "|---|---|---|---|---|---|---|---|"]
+    surfaces = {}
     for algorithm in args.algorithms:
-        volumes, sizes = [], []
-        for seed in args.seeds:
-            out = front_tuning(args, values, space, algorithm, seed, objectives, reference)
-            volume, size = run_hypervolume(out, objective, np.array(reference) * sense)
-            volumes.append(volume)
-            sizes.append(size)
-            print(f"{algorithm} seed {seed}: hypervolume {volume:.6g}, front {size}", flush=True)
+        fronts = [run_front(front_tuning(args, values, space, algorithm, seed, objectives,
+                                         reference), objective) for seed in args.seeds]
+        volumes = [hypervolume(front, np.array(reference) * sense) for front in fronts]
+        for seed, volume, front in zip(args.seeds, volumes, fronts, strict=True):
+            print(f"{algorithm} seed {seed}: hypervolume {volume:.6g}, front {len(front)}",
+                  flush=True)
+        surfaces[algorithm] = attainment(fronts, attainment_levels(len(fronts)))
         low, middle, high = np.quantile(volumes, [0.25, 0.5, 0.75])
+        median = hypervolume(surfaces[algorithm][MEDIAN_ATTAINMENT], np.array(reference) * sense)
         rows.append(f"| {algorithm} | {len(volumes)} | {budget(args, algorithm)} | "
                     f"{middle:.6g} | {low:.6g} .. {high:.6g} | {min(volumes):.6g} .. "
-                    f"{max(volumes):.6g} | {statistics.median(sizes):g} |")
+                    f"{max(volumes):.6g} | {statistics.median(map(len, fronts)):g} | "
+                    f"{median:.6g} |")
+    write_attainment(args.out, objective, surfaces)
     table = "\n".join(rows)
     write_outputs(args.out, "comparison", markdown=(
         f"Objectives {', '.join(objectives)} against the reference point "
@@ -249,8 +259,33 @@ def compare_fronts(args, values, space) -> None:
         f"{' '.join(map(str, args.seeds))}, population {args.population}, scenario "
         f"{args.scenario} {' '.join(args.set)}; a swarm optimizer minimises the objectives' "
         f"sum, each over its reference value; every run's hypervolume is that of the "
-        f"feasible non-dominated set of every candidate it evaluated\n\n{table}"))
+        f"feasible non-dominated set of every candidate it evaluated; the median "
+        f"attainment surface is what at least half the runs reached (attainment.csv: "
+        f"the best, median and worst surfaces)\n\n{table}"))
     print(table)
+
+
+def attainment_levels(runs: int) -> tuple[float, ...]:
+    """The attainment percentiles reported: the best any run reached, the median, what
+    every run reached."""
+    return tuple(sorted({100.0 / runs, MEDIAN_ATTAINMENT, 100.0}))
+
+
+def write_attainment(out: Path, objective: Objectives, surfaces: dict) -> None:
+    """attainment.csv (algorithm, percentile, the objectives in their own units and
+    sense) and, with two objectives, attainment.png (each algorithm's surfaces)."""
+    sense = np.array(objective.senses)
+    with (out / "attainment.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["algorithm", "percentile", *objective.indices])
+        for algorithm, levels in surfaces.items():
+            for percentile, points in levels.items():
+                for point in points * sense:
+                    writer.writerow([algorithm, f"{percentile:g}", *map(repr, map(float, point))])
+    if len(objective.indices) == 2:
+        plot_attainment({algorithm: {percentile: points * sense for percentile, points
+                                     in levels.items()} for algorithm, levels in surfaces.items()},
+                        objective.indices, out / "attainment.png")
 
 
 if __name__ == "__main__":

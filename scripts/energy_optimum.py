@@ -40,8 +40,7 @@ from ato_nodes.core.config.scenario import complete, prepare
 from ato_nodes.core.scoring.operation import Regeneration
 from ato_nodes.core.targets import journey
 from ato_nodes.core.targets.profiles import departure_time
-from ato_nodes.core.targets.timetable import (check_minimum_times, load_timetable,
-                                              section_line)
+from ato_nodes.core.targets.timetable import check_minimum_times, load_timetable
 from ato_nodes.core.train.line import load_line
 from ato_nodes.core.train.plant import TrainParameters
 from ato_nodes.studies import energy_optimum as optimum
@@ -150,9 +149,8 @@ def sections_of(line, stops, values, args, ds, dv):
     regeneration = (Regeneration(force=0.0) if args.objective == "traction"
                     else Regeneration.of(values))
     margin = values["profile.ato.margin"] if args.like_planner or args.like_ato else 0.0
-    return [optimum.section_of(section_line(line, a, b), train, values["plant.efficiency"],
-                               regeneration, ds, dv, margin)
-            for a, b in zip(stops, stops[1:], strict=False)]
+    return optimum.sections_between(line, stops, train, values["plant.efficiency"],
+                                    regeneration, ds, dv, margin)
 
 
 def departure(values, args) -> float:

@@ -97,7 +97,7 @@ def test_below_limit_has_no_overspeed():
 def test_missing_optional_inputs_leave_keys_out():
     result = operation_indices(run(T), mass=400.0)
     for key in ("overspeed_time", "max_overspeed_kmh", "stopping_error",
-                "abs_stopping_error", "running_time_error"):
+                "abs_stopping_error", "running_time_error", "abs_running_time_error"):
         assert key not in result
 
 
@@ -118,6 +118,9 @@ def test_arrival_time_and_running_time_error():
     # last moving sample is at 3 s, so the train stands from the next sample at 4 s
     assert result["arrival_time"] == pytest.approx(4.0)
     assert result["running_time_error"] == pytest.approx(0.5)
+    early = operation_indices(run(t, speed=speed), mass=400.0, planned_run_time=4.75)
+    assert early["running_time_error"] == pytest.approx(-0.75)
+    assert early["abs_running_time_error"] == pytest.approx(0.75)  # punctuality either way
 
 
 def test_arrival_is_nan_when_still_moving_or_never_moved():

@@ -14,8 +14,8 @@ import yaml
 
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.config.scenario import apply_overrides, load_scenario
-from ato_nodes.core.optimizers.pareto import (hypervolume, knee, minimize_pareto, nondominated,
-                                              pseudo_weight_choice)
+from ato_nodes.core.optimizers.pareto import (attainment, hypervolume, knee, minimize_pareto,
+                                              nondominated, pseudo_weight_choice)
 from ato_nodes.core.scoring.catalogue import Requirement, objective_index
 from ato_nodes.studies.pareto_tuning import Choice, ParetoTuner
 from ato_nodes.studies.robustness import RANGES, draw_train
@@ -71,6 +71,18 @@ def test_the_front_its_hypervolume_knee_and_pseudo_weights():
     assert list(front[pseudo_weight_choice(front, np.array([1.0, 9.0]))]) == [1.0, 0.0]
 
 
+def test_attainment_surfaces_count_every_run_a_front_or_not():
+    one, other = np.array([[0.0, 1.0], [1.0, 0.0]]), np.array([[0.5, 0.5]])
+    surfaces = attainment([one, other], (50.0, 100.0))
+    # half the runs: every point either reached; both: the corners both dominate
+    assert sorted(map(tuple, surfaces[50.0])) == [(0.0, 1.0), (0.5, 0.5), (1.0, 0.0)]
+    assert sorted(map(tuple, surfaces[100.0])) == [(0.5, 1.0), (1.0, 0.5)]
+    # a third run without a front: half of three runs is two of the two with one
+    with_empty = attainment([one, other, np.zeros((0, 2))], (100.0 / 3, 50.0, 100.0))
+    assert sorted(map(tuple, with_empty[50.0])) == [(0.5, 1.0), (1.0, 0.5)]
+    assert len(with_empty[100.0 / 3]) == 3 and len(with_empty[100.0]) == 0
+
+
 def test_objectives_by_name_their_sense_and_refusals():
     assert objective_index("energy") == "traction_energy_kwh"
     assert objective_index("j") == "j_seed004"
@@ -81,6 +93,7 @@ def test_objectives_by_name_their_sense_and_refusals():
     with pytest.raises(ScenarioError, match="did you mean energy"):
         objective_index("enregy")
     assert objective_index("worst_arrival") == "journey_worst_arrival_s"
+    assert objective_index("punctuality") == "abs_running_time_error"
     assert Requirement.parse("journey_worst_stop_m<=0.1").limit == 0.1
     with pytest.raises(ScenarioError, match="unknown index"):  # a run's report has no such
         Requirement.parse_list("journey_worst_stop_m<=0.1", "report.require")
@@ -159,6 +172,11 @@ def test_a_tuning_writes_its_front_hypervolume_and_chosen_member(tmp_path):
     assert best == yaml.safe_load((tmp_path / chosen[0]["scenario"]).read_text())
     assert (tmp_path / "pareto.png").stat().st_size > 0
     assert "stop" in summary["energy_bound"]["error"]  # seed 000 runs to no stop: no bound
+    pandas = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    table = pandas.read_parquet(tmp_path / "front.parquet")  # the same rows, typed
+    assert list(table["row"]) == [int(row["row"]) for row in rows]
+    assert list(table["itae"]) == [float(row["itae"]) for row in rows]
 
 
 def test_pseudo_weights_and_reference_point_choose_as_stated(tmp_path):
@@ -401,5 +419,12 @@ def test_compare_tuners_judges_every_run_by_the_same_reference_point(tmp_path):
     summary = json.loads((tmp_path / "nsga2-seed1" / "summary.json").read_text())
     assert summary["reference_point"] == [30.0, 0.5]
     assert f"nsga2 seed 1: hypervolume {summary['hypervolume']:.6g}," in result.stdout
+    # one seed: its median attainment surface is its front, of the same hypervolume
+    assert table.split("| nsga2 |")[1].split("\n")[0].rstrip(" |").endswith(
+        f"{summary['hypervolume']:.6g}")
+    with (tmp_path / "attainment.csv").open() as handle:
+        surfaces = list(csv.DictReader(handle))
+    assert {row["algorithm"] for row in surfaces} == {"nsga2", "pso"}
+    assert (tmp_path / "attainment.png").stat().st_size > 0
     baseline = json.loads((tmp_path / "pso-seed1" / "summary.json").read_text())
     assert baseline["weights"] == pytest.approx([1 / 30, 1 / 0.5])

@@ -266,7 +266,8 @@ def report_front(summary: dict, out: Path) -> None:
     print(f"chosen: row {chosen['row']} ({chosen['by']})")
     for name, value in chosen["params"].items():
         print(f"  {name} = {value:.6g}")
-    print(f"outputs: {out}/best.yaml, front.csv, front.json, hypervolume.csv, pareto.png, "
-          "evaluations.jsonl")
+    parquet = ", front.parquet" if (out / "front.parquet").exists() else ""
+    print(f"outputs: {out}/best.yaml, front.csv{parquet}, front.json, hypervolume.csv, "
+          "pareto.png, evaluations.jsonl")
     print("run the chosen: " + best_command(out, tuple(summary.get("external", ())),
                                             chosen["params"]))

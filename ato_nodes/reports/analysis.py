@@ -219,17 +219,17 @@ def label(run: Run) -> str:
     return run.path.name if run.path.name else str(run.path)
 
 
-def _pyplot():
+def pyplot():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
 
 
-def _save(figure, path: Path) -> Path:
+def save_figure(figure, path: Path) -> Path:
     figure.tight_layout()
     figure.savefig(path, dpi=110)
-    _pyplot().close(figure)
+    pyplot().close(figure)
     return path
 
 
@@ -247,7 +247,7 @@ def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
     """One line per run of y(series) against x(series); optionally the first run's
     target as a dashed line, its speed limit, and reference bands +-band; against
     time, each run's live parameter changes marked."""
-    plt = _pyplot()
+    plt = pyplot()
     figure, axes = plt.subplots(figsize=(9, 4.5))
     if target is not None:
         axes.plot(x(runs[0].series), target(runs[0].series), "k--", lw=1, label="target")
@@ -265,7 +265,7 @@ def _overlay(runs: list[Run], x, y, labels: tuple[str, str, str], path: Path,
     axes.set(xlabel=labels[0], ylabel=labels[1], title=labels[2])
     axes.grid(alpha=0.3)
     axes.legend()
-    return _save(figure, path)
+    return save_figure(figure, path)
 
 
 def plot_runs(runs: list[Run], out: Path) -> list[Figure]:
@@ -332,7 +332,7 @@ def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure |
     whose, outputs = named_outputs(run)
     if not outputs:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     figure, axes = plt.subplots(len(outputs), 1, figsize=(9, 1.9 * len(outputs) + 0.8),
                                 sharex=True, squeeze=False)
     for axis, output in zip(axes[:, 0], outputs, strict=True):
@@ -345,7 +345,7 @@ def plot_outputs(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure |
         axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[-1, 0].set_xlabel("time (s)")
     figure.suptitle(f"Controller outputs ({whose}): {label(run)}")
-    return Figure(f"Controller outputs: {label(run)}", _save(figure, path))
+    return Figure(f"Controller outputs: {label(run)}", save_figure(figure, path))
 
 
 def external_outputs(run: Run) -> list[Output]:
@@ -363,7 +363,7 @@ def plot_observer(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure 
     s = run.series
     if not {"z1", "z2", "z3", "speed", "acceleration"} <= s.keys():
         return None
-    plt = _pyplot()
+    plt = pyplot()
     figure, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     axes[0].plot(s["t"], s["speed"] * MS_TO_KMH, "k", lw=1, label="speed")
     axes[0].plot(s["t"], s["z1"] * MS_TO_KMH, "r--", lw=0.8, label="z1")
@@ -381,7 +381,7 @@ def plot_observer(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure 
         axis.grid(alpha=0.3)
         axis.legend(loc="upper right")
     axes[0].set_title(f"Extended state observer: {label(run)}")
-    return Figure(f"Observer: {label(run)}", _save(figure, path))
+    return Figure(f"Observer: {label(run)}", save_figure(figure, path))
 
 
 def plot_localisation(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Figure | None:
@@ -391,7 +391,7 @@ def plot_localisation(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Fig
     s = run.series
     if not {"located_position", "position", "position_sigma", "speed"} <= s.keys():
         return None
-    plt = _pyplot()
+    plt = pyplot()
     figure, axes = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
     error, band = s["located_position"] - s["position"], 3.0 * s["position_sigma"]
     axes[0].fill_between(s["t"], -band, band, color="0.85", label="+-3 sigma")
@@ -411,7 +411,7 @@ def plot_localisation(run: Run, path: Path, colour: str = RUN_COLOURS[0]) -> Fig
         axis.grid(alpha=0.3)
         axis.legend(loc="upper right", fontsize=8)
     axes[0].set_title(f"On-board localisation: {label(run)}")
-    return Figure(f"Localisation: {label(run)}", _save(figure, path))
+    return Figure(f"Localisation: {label(run)}", save_figure(figure, path))
 
 
 def convergence_axis(tunings: list[Tuning]) -> str:
@@ -423,7 +423,7 @@ def convergence_axis(tunings: list[Tuning]) -> str:
 def plot_convergence(tunings: list[Path | Tuning], path: Path) -> Figure:
     """Seed 000 figure 9: best fitness against evaluations, one line per tuning."""
     tunings = [t if isinstance(t, Tuning) else read_tuning(t) for t in tunings]
-    plt = _pyplot()
+    plt = pyplot()
     figure, axes = plt.subplots(figsize=(9, 4.5))
     for tuning in tunings:
         axes.step(tuning.evaluations, tuning.best, where="post", marker="o", markersize=3,
@@ -432,7 +432,7 @@ def plot_convergence(tunings: list[Path | Tuning], path: Path) -> Figure:
              title="Tuning convergence (infeasible candidates score above 1e9)")
     axes.grid(alpha=0.3, which="both")
     axes.legend()
-    return Figure("Tuning convergence", _save(figure, path))
+    return Figure("Tuning convergence", save_figure(figure, path))
 
 
 PASS, FAIL, UNMEASURED = "pass", "fail", "not judged"

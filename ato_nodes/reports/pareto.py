@@ -2,7 +2,7 @@
 against each other (the three in 3-D beside them when there are three), the chosen member
 marked, the least energy the train could run on (the dynamic programme's bound) where
 energy is an objective, and the hypervolume after every generation against the
-evaluations."""
+evaluations; and a comparison's attainment surfaces (attainment.png)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,10 @@ import csv
 import json
 from pathlib import Path
 
-from ato_nodes.reports.analysis import _pyplot, _save
+import numpy as np
+
+from ato_nodes.core.optimizers.pareto import MEDIAN_ATTAINMENT
+from ato_nodes.reports.analysis import pyplot, save_figure
 from ato_nodes.core.scoring.catalogue import OBJECTIVE_NAMES
 
 ENERGY = OBJECTIVE_NAMES["energy"]  # the objective the least-energy programme bounds
@@ -22,7 +25,7 @@ def plot_pareto(front_file: Path, history_file: Path, path: Path) -> Path:
         history = list(csv.DictReader(handle))
     names = [objective["index"] for objective in front["objectives"]]
     rows, chosen = front["rows"], [row for row in front["rows"] if row["chosen"]]
-    plt = _pyplot()
+    plt = pyplot()
     three = len(names) >= 3
     figure = plt.figure(figsize=(14 if three else 10, 4.5))
     panels = 3 if three else 2
@@ -52,4 +55,26 @@ def plot_pareto(front_file: Path, history_file: Path, path: Path) -> Path:
     volume.set(xlabel="evaluations", ylabel="hypervolume",
                title=f"Hypervolume against ({reference})")
     volume.grid(alpha=0.3)
-    return _save(figure, path)
+    return save_figure(figure, path)
+
+
+def plot_attainment(surfaces: dict, names: tuple[str, ...], path: Path) -> Path:
+    """attainment.png: each algorithm's attainment surfaces over its runs in two
+    objectives (`surfaces`: algorithm -> percentile -> points, in the objectives' own
+    units), the median solid, the best and the worst any and every run reached dotted."""
+    plt = pyplot()
+    figure, axes = plt.subplots(figsize=(8, 5))
+    for colour, (algorithm, levels) in enumerate(surfaces.items()):
+        for percentile, points in sorted(levels.items()):
+            if not len(points):
+                continue
+            ordered = points[np.argsort(points[:, 0])]
+            median = percentile == MEDIAN_ATTAINMENT
+            axes.step(ordered[:, 0], ordered[:, 1], where="post", color=f"C{colour}",
+                      lw=1.8 if median else 0.9, ls="-" if median else ":",
+                      label=f"{algorithm} {percentile:g} %")
+    axes.set(xlabel=names[0], ylabel=names[1],
+             title="Attainment over the runs (at least the percentile of them reach it)")
+    axes.grid(alpha=0.3)
+    axes.legend(fontsize=8)
+    return save_figure(figure, path)

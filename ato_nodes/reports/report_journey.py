@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ato_nodes.reports.analysis import (LIMIT_COLOUR, MARK, RUN_COLOURS, Figure, Markup, RunReport,
-                                        _markdown_rows, _pyplot, _save, md_text)
+                                        _markdown_rows, md_text, pyplot, save_figure)
 from ato_nodes.core.base.errors import ScenarioError
 from ato_nodes.core.base.units import MS_TO_KMH
 from ato_nodes.core.scoring.journey import REQUIRED, JourneyIndices, summary_line
@@ -211,7 +211,7 @@ def marks(journey: JourneyReport) -> list[tuple[str, float, str]]:
 
 def plot_journey(journey: JourneyReport, path: Path) -> Figure:
     """report.md's speed against position over the line."""
-    plt = _pyplot()
+    plt = pyplot()
     figure, axes = plt.subplots(figsize=(11, 4.8))
     for number, section in enumerate(journey.line.neutral_sections):
         axes.axvspan(section.start / 1000, section.end / 1000, color="orange", alpha=0.3,
@@ -229,7 +229,7 @@ def plot_journey(journey: JourneyReport, path: Path) -> Figure:
     axes.set_title(f"Journey: {journey.label}", pad=40)
     axes.grid(alpha=0.3)
     axes.legend(loc="lower right", fontsize=8)
-    return Figure(f"Journey, speed against position: {journey.label}", _save(figure, path))
+    return Figure(f"Journey, speed against position: {journey.label}", save_figure(figure, path))
 
 
 def journey_figure(journey: JourneyReport):

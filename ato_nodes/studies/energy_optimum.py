@@ -389,6 +389,14 @@ def section_of(line: Line, train: TrainParameters, efficiency: float,
     return Section(stages._replace(top=braking_tops(stages, drive)), drive, dv)
 
 
+def sections_between(line: Line, stops: list[float], train: TrainParameters,
+                     efficiency: float, regeneration: Regeneration, ds: float, dv: float,
+                     margin: float = 0.0) -> list[Section]:
+    """section_of for each section of `line` between consecutive `stops` (m)."""
+    return [section_of(section_line(line, start, end), train, efficiency, regeneration, ds,
+                       dv, margin) for start, end in zip(stops, stops[1:], strict=False)]
+
+
 def run_at(section: Section, price: float) -> Run:
     """The least-cost run at `price` (kW per s), rolled out from standstill with every
     arrival speed exact; ValueError if the stop cannot be reached."""
@@ -505,7 +513,6 @@ def least_energy_of_run(values: dict) -> tuple[float, float]:
         running_time = line.planned_run_time
     train = TrainParameters.from_values(values)
     stage = max(BOUND_STAGE, (stops[-1] - stops[0]) / BOUND_STAGES)
-    sections = [section_of(section_line(line, start, end), train, values["plant.efficiency"],
-                           Regeneration(force=0.0), stage, BOUND_SPEED_STEP)
-                for start, end in zip(stops, stops[1:], strict=False)]
+    sections = sections_between(line, stops, train, values["plant.efficiency"],
+                                Regeneration(force=0.0), stage, BOUND_SPEED_STEP)
     return journey_optimum(sections, running_time).traction_kwh, running_time

@@ -5,7 +5,8 @@ generation at a time (core/optimizers/pareto.py), the requirements as hard const
 
 Outputs in OUT beside evaluations.jsonl and tuning.json: front.csv and front.json (every
 feasible non-dominated candidate, its row id the evaluation's index, its parameters and
-objectives as measured and scaled), hypervolume.csv (after every generation, against
+objectives as measured and scaled; front.parquet too where pandas and pyarrow are, the
+`tables` extra), hypervolume.csv (after every generation, against
 the stated reference point), pareto.png, best.yaml (the chosen member: the knee, or
 the one nearest --weights) and summary.json (last: the tuning finished).
 """
@@ -239,7 +240,20 @@ class ParetoTuner(Tuner):
                     writer.writeheader()
                     writer.writerows({key: repr(value) if isinstance(value, float) else value
                                       for key, value in row.items()} for row in table)
+        write_parquet(rows, self.out / "front.parquet")
         (self.out / "front.json").write_text(jsontext.dumps(
             {key: summary[key] for key in ("objectives", "reference_point", "hypervolume",
                                            "chosen", "energy_bound") if key in summary}
             | {"rows": rows, "hypervolume_history": history}, indent=2))
+
+
+def write_parquet(rows: list[dict], path: Path) -> bool:
+    """`rows` as a Parquet table at `path` where pandas and pyarrow are installed (the
+    `tables` extra); False, nothing written, where they are not."""
+    try:
+        import pandas
+        import pyarrow  # noqa: F401  (pandas' Parquet engine: its absence is the answer)
+    except ImportError:
+        return False
+    pandas.DataFrame(rows).to_parquet(path, index=False)
+    return True

@@ -153,7 +153,7 @@ def sample_result(draw: dict, indices: dict) -> dict:
         result["overrun"] = float(indices["overrun"])
     if "running_time_error" in indices:
         result["running_time_error"] = float(indices["running_time_error"])
-        result["abs_running_time_error"] = abs(result["running_time_error"])
+        result["abs_running_time_error"] = float(indices["abs_running_time_error"])
     return result
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 PARETO_ALGORITHMS = ("nsga2", "nsga3")
 DEFAULT_POPULATION = 20  # candidates a generation (tune.py --population)
+MEDIAN_ATTAINMENT = 50.0  # percent of the runs: the attainment surface comparisons measure
 
 Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
@@ -116,6 +117,29 @@ def hypervolume(F: np.ndarray, reference: np.ndarray) -> float:
     import moocore
     inside = F[np.all(F < reference, axis=1)] if len(F) else F
     return float(moocore.hypervolume(inside, ref=reference)) if len(inside) else 0.0
+
+
+def attainment(fronts: list[np.ndarray], percentiles: tuple[float, ...]
+               ) -> dict[float, np.ndarray]:
+    """The empirical attainment surfaces of several runs' fronts (each minimised, a point
+    a row): for each percentile p, the surface of the points at least p % of the runs
+    attain (reach or dominate): 100 / runs the best any run reached, 50 the median
+    run's, 100 what every run reached (moocore's eaf). A run without a front attains
+    nothing, so counts against every percentile."""
+    import moocore
+    present = [front for front in fronts if len(front)]
+    surfaces = {percentile: np.zeros((0, fronts[0].shape[1])) for percentile in percentiles}
+    # moocore counts the runs it is given: a percentile of all runs is more of those
+    share = len(fronts) / max(len(present), 1)
+    wanted = {percentile: min(percentile * share, 100.0) for percentile in percentiles
+              if present and percentile * share <= 100.0 + 1e-9}
+    if not wanted:
+        return surfaces
+    sets = np.repeat(np.arange(1, len(present) + 1), [len(front) for front in present])
+    surface = moocore.eaf(np.vstack(present), sets, percentiles=sorted(set(wanted.values())))
+    for percentile, level in wanted.items():
+        surfaces[percentile] = surface[np.isclose(surface[:, -1], level), :-1]
+    return surfaces
 
 
 def knee(front: np.ndarray) -> int:

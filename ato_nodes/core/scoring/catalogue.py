@@ -23,8 +23,8 @@ INDEX_NAMES = (
     "overshoot_percent", "traction_energy_kwh", "regenerated_energy_kwh", "net_energy_kwh",
     "max_jerk", "max_jerk_sampled", "comfort_index", "switch_count", "overspeed_time",
     "max_overspeed_kmh", "stopping_error", "abs_stopping_error", "overrun", "arrival_time",
-    "running_time_error", "neutral_traction_command_time", "neutral_traction_force_time",
-    "max_abs_error_outside_steps_kmh", "stepped_time")
+    "running_time_error", "abs_running_time_error", "neutral_traction_command_time",
+    "neutral_traction_force_time", "max_abs_error_outside_steps_kmh", "stepped_time")
 # The worst station of a journey run, as studies and tunings count it
 # (results/journeys.worst_stations; inf: a station missed or not reached, which no bound
 # admits); a TTOBench journey's timing points not kept. A journey run's only.
@@ -40,7 +40,7 @@ GROWING_INDICES = (
     "neutral_traction_force_time", "max_abs_error_outside_steps_kmh", "stepped_time")
 # Those that judge the run's stop: they say nothing of a run that ended short of it.
 STOP_INDICES = ("stopping_error", "abs_stopping_error", "overrun", "arrival_time",
-                "running_time_error")
+                "running_time_error", "abs_running_time_error")
 # A tuning's fitness (tune.py --fitness) -> the index it minimises.
 FITNESS = {"itae": "itae", "j": "j_seed004", "iae": "iae", "max_abs_error": "max_abs_error",
            "p95_abs_error_kmh": "p95_abs_error_kmh"}
@@ -51,6 +51,7 @@ NOT_OBJECTIVES = ("steps", "finite", "stopping_error", "overrun", "running_time_
 MAXIMISED = ("regenerated_energy_kwh",)
 OBJECTIVE_NAMES = {**FITNESS, "energy": "traction_energy_kwh", "net_energy": "net_energy_kwh",
                    "jerk": "max_jerk", "comfort": "comfort_index", "stop": "abs_stopping_error",
+                   "punctuality": "abs_running_time_error",
                    "worst_stop": WORST_STOP, "worst_arrival": WORST_ARRIVAL,
                    **{name: name for name in INDEX_NAMES + JOURNEY_INDICES
                       if name not in NOT_OBJECTIVES}}

@@ -463,6 +463,7 @@ def last_stop_indices(indices: JourneyIndices, planned_run_time: float | None
             if math.isfinite(last.stop_error) else math.nan, "arrival_time": last.arrival}
     if planned_run_time is not None:
         stop["running_time_error"] = last.arrival - planned_run_time
+        stop["abs_running_time_error"] = abs(stop["running_time_error"])
     return stop
 
 

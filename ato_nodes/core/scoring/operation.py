@@ -29,7 +29,8 @@ kN is force * mass * gravity / 1000 with the mass in t.
   operator names and acts on), else 0.
 - arrival_time (s): t of the first sample of the final standstill (speed <= 0.01
   m/s); NaN if the train is still moving at the end or never moved.
-- running_time_error (s, + late): arrival_time - planned_run_time, when planned.
+- running_time_error (s, + late): arrival_time - planned_run_time, when planned;
+  abs_running_time_error (s): its size, punctuality either way.
 - neutral_traction_command_time, neutral_traction_force_time (s): time the command,
   and the force applied, is traction (> 0) with the pantograph inside a neutral section
   (a real ATO commands none across a phase break: it opens the main circuit breaker),
@@ -183,6 +184,7 @@ def operation_indices(series: dict[str, np.ndarray], mass: float, gravity: float
         result["overrun"] = float(result["stopping_error"] > BERTHING_TOLERANCE)
     if planned_run_time is not None:
         result["running_time_error"] = arrival - planned_run_time
+        result["abs_running_time_error"] = abs(result["running_time_error"])
     if neutral is not None:
         if "command" in series:
             result["neutral_traction_command_time"] = neutral_traction_time(
