@@ -243,7 +243,7 @@ def test_a_candidate_the_supervisor_prunes_ends_where_the_in_process_one_does(tm
     in_process = evaluate_in_process(values, {}, "itae", 0, bound=20.0)
     through_stack = evaluate_in_stack(values, {}, "itae", 0, tmp_path / "bag", 120.0,
                                       bound=20.0)
-    assert in_process.status == through_stack.status == "pruned"
+    assert in_process.status == through_stack.status == "pruned", through_stack.message
     assert in_process.fitness == through_stack.fitness > 20.0
 
 
