@@ -232,6 +232,7 @@ def compare_fronts(args, values, space) -> None:
         raise ScenarioError("--objectives needs --reference: the same point for every run")
     objective = Objectives("itae", tuple(map(Requirement.parse, args.require)), objectives)
     sense = np.array(objective.senses)
+    limit = np.array(reference) * sense  # the reference point, minimised form
     args.out.mkdir(parents=True, exist_ok=True)
     rows = ["| algorithm | runs | evaluations | hypervolume median | p25 .. p75 | min .. max "
             "| front size median | median attainment's hypervolume |",
@@ -240,13 +241,13 @@ def compare_fronts(args, values, space) -> None:
     for algorithm in args.algorithms:
         fronts = [run_front(front_tuning(args, values, space, algorithm, seed, objectives,
                                          reference), objective) for seed in args.seeds]
-        volumes = [hypervolume(front, np.array(reference) * sense) for front in fronts]
+        volumes = [hypervolume(front, limit) for front in fronts]
         for seed, volume, front in zip(args.seeds, volumes, fronts, strict=True):
             print(f"{algorithm} seed {seed}: hypervolume {volume:.6g}, front {len(front)}",
                   flush=True)
         surfaces[algorithm] = attainment(fronts, attainment_levels(len(fronts)))
         low, middle, high = np.quantile(volumes, [0.25, 0.5, 0.75])
-        median = hypervolume(surfaces[algorithm][MEDIAN_ATTAINMENT], np.array(reference) * sense)
+        median = hypervolume(surfaces[algorithm][MEDIAN_ATTAINMENT], limit)
         rows.append(f"| {algorithm} | {len(volumes)} | {budget(args, algorithm)} | "
                     f"{middle:.6g} | {low:.6g} .. {high:.6g} | {min(volumes):.6g} .. "
                     f"{max(volumes):.6g} | {statistics.median(map(len, fronts)):g} | "

@@ -247,13 +247,12 @@ class ParetoTuner(Tuner):
             | {"rows": rows, "hypervolume_history": history}, indent=2))
 
 
-def write_parquet(rows: list[dict], path: Path) -> bool:
+def write_parquet(rows: list[dict], path: Path) -> None:
     """`rows` as a Parquet table at `path` where pandas and pyarrow are installed (the
-    `tables` extra); False, nothing written, where they are not."""
+    `tables` extra); nothing where they are not."""
     try:
         import pandas
         import pyarrow  # noqa: F401  (pandas' Parquet engine: its absence is the answer)
     except ImportError:
-        return False
+        return
     pandas.DataFrame(rows).to_parquet(path, index=False)
-    return True
