@@ -148,8 +148,7 @@ def run_sample_in_stack(base: dict[str, Any], ranges: Mapping[str, tuple[float, 
 def sample_result(draw: dict, indices: dict) -> dict:
     """The sample's draw and the indices of INDICES it has."""
     result = {**draw, **{key: float(indices[key]) for key, _ in INDICES if key in indices}}
-    if "stopping_error" in indices:
-        result["abs_stopping_error"] = abs(float(indices["stopping_error"]))
+    if "stopping_error" in indices:  # abs_stopping_error is among INDICES
         result["overrun"] = float(indices["overrun"])
     if "running_time_error" in indices:
         result["running_time_error"] = float(indices["running_time_error"])
